@@ -1,0 +1,1 @@
+"""cdpr_tools: the cdpr command, bags, launcher and identification."""
