@@ -1,0 +1,24 @@
+# The README's two commands: `make demo` (set-up, then the main job) and `make test` (set-up, then
+# the tests). Set-up is idempotent; see scripts/setup.sh.
+# ROS 2 discovery stays on this machine unless the caller says otherwise.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: setup demo test bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	@$(VENV)/bin/cdpr demo
+
+test: setup
+	@$(PY) -m pytest -q tests
+
+bench: setup
+	@$(VENV)/bin/cdpr bench
+
+clean:
+	rm -rf $(VENV) build

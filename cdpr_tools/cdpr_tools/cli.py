@@ -1,0 +1,41 @@
+"""The ``cdpr`` command: one entry point for the project's tools.
+
+Each sub-command lives in its own module and registers itself through ``add_parser(subparsers)``;
+this file only assembles them, so ``cdpr --help`` lists what exists.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
+COMMANDS = ("demo", "robot", "bench")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cdpr",
+        description="Tools for the cdpr cable robot stack (ROS 2 Jazzy).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"cdpr_tools.{name}_cmd").add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # a tool error is a message, not a traceback
+        if getattr(args, "debug", False):
+            raise
+        print(f"cdpr {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
