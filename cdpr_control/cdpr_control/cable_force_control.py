@@ -1,0 +1,104 @@
+"""Joint-space cable force control (CFC), thesis section 3.5.2, Fig. 3.12.
+
+Per cable: the measured force f is low-pass filtered (3.20), the error e_f = f_d - f (3.2) drives
+a PI controller (3.19) with saturation F_sat,n / F_sat,p and anti-windup, the feed-forward
+f_ff = f_d (3.22) is added, and the controller output f_c,out becomes a cable length through the
+linear stiffness estimate K_l = k_spec / l_t (2.15), minus the pre-tension Δq_0 (3.23):
+
+    Δq_CFC = K_l^-1(l_t) f_c,out - Δq_0 .
+
+Δq_CFC is the elongation commanded beyond the encoder calibration's pre-tension; the joint command
+shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.joint_command`).
+
+Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
+much softer than modelled) may pull harder, a cable close to f_max may release harder.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .pi_control import PIController
+
+
+@dataclass
+class CFCParams:
+    """Parameters of the cable force controller (defaults: table 3.1 where given)."""
+
+    K_p: float = 0.85            # -, proportional gain, table 3.1
+    T_i: float = 0.1             # s, integrator reset time, table 3.1
+    T_filter: float = 0.08       # s, PT1 of the force feedback (3.20), table 3.1 (T_1,r)
+    F_sat_n: float = 200.0       # N, negative saturation of the PI part (ASSUMPTION per robot)
+    F_sat_p: float = 200.0       # N, positive saturation of the PI part (ASSUMPTION per robot)
+    widen_band: float = 50.0     # N, distance to a force limit where widening starts
+    widen_factor: float = 3.0    # -, saturation multiplier reached at the limit
+
+    def validate(self) -> None:
+        checks = {
+            "K_p": self.K_p >= 0.0,
+            "T_i": self.T_i > 0.0,
+            "T_filter": self.T_filter >= 0.0,
+            "F_sat_n": self.F_sat_n >= 0.0,
+            "F_sat_p": self.F_sat_p >= 0.0,
+            "widen_band": self.widen_band > 0.0,
+            "widen_factor": self.widen_factor >= 1.0,
+        }
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"invalid CFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
+
+
+def widened_saturation(params: CFCParams, f, f_min, f_max) -> tuple[np.ndarray, np.ndarray]:
+    """Saturation magnitudes (F_sat,n, F_sat,p) raised linearly as f enters the band at a limit."""
+    near_min = np.clip((f_min + params.widen_band - f) / params.widen_band, 0.0, 1.0)
+    near_max = np.clip((f - (f_max - params.widen_band)) / params.widen_band, 0.0, 1.0)
+    gain = params.widen_factor - 1.0
+    return params.F_sat_n * (1.0 + gain * near_max), params.F_sat_p * (1.0 + gain * near_min)
+
+
+class CableForceController:
+    """Per-cable PI with feed-forward, widened saturation, anti-windup and pre-tension (3.19)-(3.23)."""
+
+    def __init__(self, m: int, params: CFCParams, dt: float):
+        params.validate()
+        self.m = m
+        self.params = params
+        self.dt = dt
+        self.pi = PIController(m, params.K_p, params.T_i, params.F_sat_n, params.F_sat_p, dt)
+        self.dq_0 = np.zeros(m)
+        self.f_filtered = None
+        self.f_out = np.zeros(m)
+        self.dq_cfc = np.zeros(m)
+
+    def set_params(self, params: CFCParams) -> None:
+        """Apply new parameters live; the integrator state is kept."""
+        params.validate()
+        self.params = params
+        self.pi.set_gains(params.K_p, params.T_i)
+        self.pi.set_limits(params.F_sat_n, params.F_sat_p)
+
+    def reset(self, dq_0, f=None) -> None:
+        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration."""
+        self.dq_0 = np.asarray(dq_0, dtype=float).copy()
+        self.pi.reset()
+        self.f_filtered = None if f is None else np.asarray(f, dtype=float).copy()
+
+    def filter(self, f: np.ndarray) -> np.ndarray:
+        """PT1 feedback filter (3.20), exact discretisation."""
+        if self.f_filtered is None or self.params.T_filter == 0.0:
+            self.f_filtered = np.array(f, dtype=float)
+        else:
+            alpha = 1.0 - np.exp(-self.dt / self.params.T_filter)
+            self.f_filtered += alpha * (f - self.f_filtered)
+        return self.f_filtered
+
+    def update(self, f_d, f, k_l, f_min, f_max) -> np.ndarray:
+        """One period: desired and measured forces [N], linear stiffness K_l [N/m] -> Δq_CFC [m]."""
+        f_fb = self.filter(f)
+        e_f = f_d - f_fb                                            # (3.2)
+        sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
+        u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
+        self.f_out = f_d + u                                        # feed-forward (3.22)
+        self.dq_cfc = self.f_out / k_l - self.dq_0                  # (3.23)
+        return self.dq_cfc

@@ -1,0 +1,46 @@
+"""Wrench set-point generation with the Smith predictor of section 3.6.1.
+
+The measured wrench w = -A^T f (2.11) contains the platform's inertia forces only after the
+transfer delay T_d,w (3.25). The desired wrench anticipates them (3.26):
+
+    w_d = w + (I - G_w(s)) w_dyn = w + w_dyn(t) - w_dyn(t - T_d,w) ,
+
+where w_dyn is the inverse-dynamics wrench (2.33) of the desired motion.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class WrenchSetpoint:
+    """Discrete (3.26): a ring buffer delays w_dyn by round(T_d,w / dt) periods."""
+
+    def __init__(self, T_d_w: float, dt: float, n: int = 6):
+        if not dt > 0.0 or not T_d_w >= 0.0:
+            raise ValueError(f"need dt > 0 s and T_d_w >= 0 s, got dt={dt}, T_d_w={T_d_w}")
+        self.dt = dt
+        self.n = n
+        self.set_delay(T_d_w)
+
+    def set_delay(self, T_d_w: float) -> None:
+        """Change T_d,w; the buffer restarts filled with the latest w_dyn (no jump in w_d)."""
+        self.T_d_w = T_d_w
+        self.delay = int(round(T_d_w / self.dt))
+        last = getattr(self, "_last", None)
+        self._buffer = np.zeros((self.delay + 1, self.n)) if last is None else np.tile(last, (self.delay + 1, 1))
+        self._index = 0
+
+    def reset(self, w_dyn=None) -> None:
+        """Fill the delay line with w_dyn (e.g. the static wrench at start-up)."""
+        fill = np.zeros(self.n) if w_dyn is None else np.asarray(w_dyn, dtype=float)
+        self._buffer[:] = fill
+        self._last = fill.copy()
+
+    def update(self, w, w_dyn) -> np.ndarray:
+        """One period: measured wrench w and model wrench w_dyn -> w_d (3.26)."""
+        w_dyn = np.asarray(w_dyn, dtype=float)
+        self._buffer[self._index] = w_dyn
+        self._index = (self._index + 1) % (self.delay + 1)
+        delayed = self._buffer[self._index]        # written `delay` periods ago
+        self._last = w_dyn.copy()
+        return np.asarray(w, dtype=float) + w_dyn - delayed
