@@ -66,7 +66,7 @@ class CableForceController:
         self.params = params
         self.dt = dt
         self.pi = PIController(m, params.K_p, params.T_i, params.F_sat_n, params.F_sat_p, dt)
-        self.dq_0 = np.zeros(m)
+        self.dq_0: np.ndarray | None = None       # set by reset() before the first update
         self.f_filtered = None
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
@@ -95,6 +95,8 @@ class CableForceController:
 
     def update(self, f_d, f, k_l, f_min, f_max) -> np.ndarray:
         """One period: desired and measured forces [N], linear stiffness K_l [N/m] -> Δq_CFC [m]."""
+        if self.dq_0 is None:
+            raise RuntimeError("CableForceController.update before reset(dq_0)")
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
         sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)

@@ -1,0 +1,52 @@
+"""Joint command: the drive set-point of Fig. 3.4 and (5.10).
+
+    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC + x_Adm} - Δq_CFC
+
+Δq_CFC (3.23) is the elongation the cable force controller commands beyond the encoder
+calibration's pre-tension, so the winch is shortened by it. The IK-only reference control of
+section 2.3.2 is the same with every offset and Δq_CFC zero.
+
+The command is never NaN: a non-finite result, or a holding fault from the safety monitor, keeps
+the last safe θ_d; and θ_d moves at most v_max per second per cable (the drives' rated cable
+velocity), so switching controllers or a jump in an input never commands a step.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .kinematics import inverse_kinematics
+
+
+class JointCommand:
+    def __init__(self, robot, dt: float, v_max: float | None = None):
+        self.robot = robot
+        self.dt = dt
+        self.v_max = robot.drive.v_max if v_max is None else v_max
+        self.theta_d: np.ndarray | None = None
+        self.held = False
+
+    def reset(self, theta) -> None:
+        """Start from the measured cable lengths θ, so that enabling the command does not jump."""
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape != (self.robot.m,) or not np.all(np.isfinite(theta)):
+            raise ValueError(f"reset needs {self.robot.m} finite cable lengths, got {theta}")
+        self.theta_d = theta.copy()
+
+    def target(self, x_d, offsets=(), dq_cfc=None) -> np.ndarray:
+        """θ_d before rate limiting: IK of the offset set-point minus Δq_CFC (5.10)."""
+        x = np.array(x_d, dtype=float)
+        for offset in offsets:
+            x += offset
+        q = inverse_kinematics(self.robot, x).q
+        return q if dq_cfc is None else q - dq_cfc
+
+    def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False) -> np.ndarray:
+        """One period: the rate-limited θ_d, or the last one when holding or the target is invalid."""
+        if self.theta_d is None:
+            raise RuntimeError("JointCommand.update before reset(theta)")
+        target = None if hold else self.target(x_d, offsets, dq_cfc)
+        self.held = target is None or not np.all(np.isfinite(target))
+        if not self.held:
+            step = self.v_max * self.dt
+            self.theta_d = self.theta_d + np.clip(target - self.theta_d, -step, step)
+        return self.theta_d.copy()

@@ -1,0 +1,323 @@
+"""Node ``gcode_interpreter``: runs G-code programs (docs/gcode.md) through the jerk-limited
+interpolator, thesis sections 2.3.2 and 5.1.2.
+
+- action ``run_program`` (cdpr_msgs/RunProgram): one program at a time; feedback line, progress,
+  state; result success or the first error as ``line:col: message ('text')`` with its line/column.
+  Cancelling brakes jerk-limited on the path. A program starts at the current set-point.
+- publishes ``setpoint`` (cdpr_msgs/OperationalSetpoint: x_d, xdot_d, xddot_d, F_d,0, line) every
+  control period on the node clock (use_sim_time works), stamped on the period grid; between
+  programs it holds the last set-point (the robot's home at start-up).
+- publishes ``program_status`` (cdpr_msgs/ProgramStatus) on change of state or line and every
+  ``status_period``.
+- services ``~/pause`` and ``~/resume`` (std_srvs/Trigger): jerk-limited stop on the path and
+  continue; M0 (and M1 with ``optional_stop``) pause the same way.
+- parameter M-codes and ``#<node.param> = value`` set a parameter of another node through its
+  standard ``<node>/set_parameters`` service; the program waits for the answer (at most
+  ``command_timeout``) and fails if it is refused. Numbers are converted to the remote parameter's
+  type (integer <-> double) first, via ``<node>/get_parameter_types``.
+
+Limit parameters apply to the next program, not to one that is running.
+"""
+from __future__ import annotations
+
+import numpy as np
+from cdpr_msgs.action import RunProgram
+from cdpr_msgs.msg import OperationalSetpoint, ProgramStatus
+from diagnostic_msgs.msg import DiagnosticStatus
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import GetParameterTypes, SetParameters
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from std_srvs.srv import Trigger
+
+from cdpr_control.gcode import parse_gcode
+from cdpr_control.gcode_program import GCodeError, ParameterCommand
+from cdpr_control.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
+from cdpr_control.kinematics import twist_from_pose_rates
+
+from .base import CdprNode, spin_node
+from .conversions import accel_to_msg, pose_to_msg, twist_to_msg, vector3
+from .parameters import ParameterSet, ParamSpec
+from .qos import CONTROL, STATUS
+
+PARAMS = [
+    ParamSpec("v_max", 0.5, "translational path velocity limit |xdot[0:3]| [m/s]", range=(1e-4, 10.0)),
+    ParamSpec("a_max", 2.0, "translational acceleration limit |xddot[0:3]| [m/s^2]", range=(1e-3, 1e3)),
+    ParamSpec("j_max", 20.0, "translational jerk limit [m/s^3]", range=(1e-2, 1e5)),
+    ParamSpec("omega_max", 1.0, "limit of the Kardan angle rates |d(a,b,c)/dt| [rad/s]", range=(1e-4, 100.0)),
+    ParamSpec("alpha_max", 5.0, "limit of the Kardan angle accelerations [rad/s^2]", range=(1e-3, 1e4)),
+    ParamSpec("rot_jerk_max", 50.0, "limit of the Kardan angle jerks [rad/s^3]", range=(1e-2, 1e6)),
+    ParamSpec("force_rate_max", 200.0, "rate limit of the force axes F_d,0 (U V W) [N/s]", range=(1e-3, 1e6)),
+    ParamSpec("force_accel_max", 2000.0, "2nd-derivative limit of the force axes [N/s^2]", range=(1e-2, 1e8)),
+    ParamSpec("force_jerk_max", 20000.0, "3rd-derivative limit of the force axes [N/s^3]", range=(1e-1, 1e10)),
+    ParamSpec("optional_stop", False, "M1 pauses the program (else M1 is skipped)"),
+    ParamSpec("command_timeout", 2.0, "wait for a parameter service of another node at most this long [s]",
+              range=(0.0, 60.0)),
+    ParamSpec("status_period", 0.1, "period of program_status and action feedback while running [s]",
+              range=(1e-3, 10.0)),
+    ParamSpec("frame_id", "base", "frame_id of the set-points", read_only=True),
+]
+
+_STATUS = {
+    ProgramState.RUNNING: ProgramStatus.RUNNING,
+    ProgramState.WAITING: ProgramStatus.RUNNING,
+    ProgramState.PAUSING: ProgramStatus.STOPPING,
+    ProgramState.CANCELLING: ProgramStatus.STOPPING,
+    ProgramState.PAUSED: ProgramStatus.PAUSED,
+    ProgramState.DONE: ProgramStatus.SUCCEEDED,
+    ProgramState.CANCELLED: ProgramStatus.CANCELLED,
+    ProgramState.FAILED: ProgramStatus.FAILED,
+}
+
+
+def limits_from(values: dict) -> Limits:
+    """Interpolator limits from the node parameters; raises ValueError for non-positive ones."""
+    return Limits(
+        AxisLimits(values["v_max"], values["a_max"], values["j_max"]),
+        AxisLimits(values["omega_max"], values["alpha_max"], values["rot_jerk_max"]),
+        AxisLimits(values["force_rate_max"], values["force_accel_max"], values["force_jerk_max"]),
+    )
+
+
+class ParameterForwarder:
+    """Sets one parameter of another node via get_parameter_types + set_parameters, asynchronously."""
+
+    def __init__(self, node: CdprNode):
+        self.node = node
+        self._clients: dict[tuple[type, str], object] = {}
+        self._pending: tuple[ParameterCommand, int, object] | None = None  # command, deadline ns, on_done
+
+    def _client(self, srv_type, node_name: str, service: str):
+        key = (srv_type, f"{node_name.rstrip('/')}/{service}")
+        if key not in self._clients:
+            self._clients[key] = self.node.create_client(srv_type, key[1])
+        return self._clients[key]
+
+    def send(self, command: ParameterCommand, timeout: float, on_done) -> None:
+        """Start setting `command`; on_done(success, message) is called once, from the executor."""
+        deadline = self.node.get_clock().now().nanoseconds + int(timeout * 1e9)
+        self._pending = (command, deadline, on_done)
+        self.poll()
+
+    def poll(self) -> None:
+        """Call every cycle: starts the request once the service is there, or gives up at the deadline."""
+        if self._pending is None:
+            return
+        command, deadline, on_done = self._pending
+        types = self._client(GetParameterTypes, command.node, "get_parameter_types")
+        setter = self._client(SetParameters, command.node, "set_parameters")
+        if types.service_is_ready() and setter.service_is_ready():
+            self._pending = None
+            if isinstance(command.value, (bool, str)):
+                self._set(setter, command, command.value, on_done)
+            else:
+                future = types.call_async(GetParameterTypes.Request(names=[command.parameter]))
+                future.add_done_callback(lambda f: self._set(setter, command, self._coerce(command.value, f), on_done))
+        elif self.node.get_clock().now().nanoseconds >= deadline:
+            self._pending = None
+            on_done(False, f"no parameter service of node {command.node!r}")
+
+    @staticmethod
+    def _coerce(value, types_future):
+        """An integer literal for a double parameter (and back) would be refused as a type change."""
+        response = types_future.result()
+        remote = response.types[0] if response is not None and response.types else ParameterType.PARAMETER_NOT_SET
+        if remote == ParameterType.PARAMETER_DOUBLE:
+            return float(value)
+        if remote == ParameterType.PARAMETER_INTEGER and float(value).is_integer():
+            return int(value)
+        return value
+
+    @staticmethod
+    def _set(setter, command: ParameterCommand, value, on_done) -> None:
+        request = SetParameters.Request(parameters=[Parameter(command.parameter, value=value).to_parameter_msg()])
+
+        def answered(future):
+            response = future.result()
+            if response is None or not response.results:
+                on_done(False, "no answer")
+            else:
+                on_done(response.results[0].successful, response.results[0].reason)
+
+        setter.call_async(request).add_done_callback(answered)
+
+
+class _ActiveProgram:
+    """The program being executed and the action goal it belongs to."""
+
+    def __init__(self, goal_handle, name: str, text: str, interp: Interpolator):
+        self.goal_handle = goal_handle
+        self.name = name
+        self.line_count = text.count("\n") + 1
+        self.interp = interp
+        self.finished = Future()
+
+
+class GCodeInterpreterNode(CdprNode):
+    def __init__(self, **kwargs):
+        super().__init__("gcode_interpreter", **kwargs)
+        self.limits = Limits()
+        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.frame_id = self.params.values["frame_id"]
+        self.q = np.r_[self.robot.home, np.zeros(3)]  # held set-point [x (6), F_d,0 (3)]
+        self.xd = np.zeros(6)
+        self.xdd = np.zeros(6)
+        self.line = 0
+        self.active: _ActiveProgram | None = None
+        self.last_status = ProgramStatus(state=ProgramStatus.IDLE)
+        self._last_status_key = None
+        self._last_status_ns = 0
+        self.forwarder = ParameterForwarder(self)
+        self.setpoint_pub = self.create_publisher(OperationalSetpoint, "setpoint", CONTROL)
+        self.status_pub = self.create_publisher(ProgramStatus, "program_status", STATUS)
+        self.action_server = ActionServer(self, RunProgram, "run_program", execute_callback=self._execute,
+                                          goal_callback=self._on_goal, cancel_callback=self._on_cancel)
+        self.create_service(Trigger, "~/pause", self._on_pause)
+        self.create_service(Trigger, "~/resume", self._on_resume)
+        self.timer = self.create_timer(self.dt, self._tick)  # node clock: sim time when use_sim_time
+        self._publish_status(self._stamp_ns(), force=True)
+
+    # ---- parameters --------------------------------------------------------------------------
+
+    def _validate(self, values: dict) -> None:
+        limits_from(values)
+
+    def _apply(self, values: dict) -> None:
+        self.limits = limits_from(values)
+        self.values = values
+
+    # ---- action ------------------------------------------------------------------------------
+
+    def _on_goal(self, goal) -> GoalResponse:
+        if goal.dry_run or self.active is None:
+            return GoalResponse.ACCEPT
+        self.get_logger().warn(f"program {goal.name!r} refused: {self.active.name!r} is running")
+        return GoalResponse.REJECT
+
+    def _on_cancel(self, goal_handle) -> CancelResponse:
+        if self.active is not None and self.active.goal_handle is goal_handle:
+            self.active.interp.cancel()
+        return CancelResponse.ACCEPT
+
+    def _plan(self, goal) -> Interpolator:
+        program = parse_gcode(goal.program, start_pose=self.q[:6], start_force=self.q[6:])
+        return Interpolator(program, self.limits, self.dt, wait_for_commands=True,
+                            optional_stop=self.values["optional_stop"])
+
+    async def _execute(self, goal_handle):
+        goal = goal_handle.request
+        result = RunProgram.Result()
+        if not goal.dry_run and self.active is not None:  # a second goal accepted in the same cycle
+            goal_handle.abort()
+            result.message = f"{self.active.name!r} is running"
+            return result
+        try:
+            interp = self._plan(goal)
+        except GCodeError as err:
+            first = err.diagnostics[0]
+            goal_handle.abort()
+            result.message, result.error_line, result.error_column = str(err), first.line, first.column
+            return result
+        if goal.dry_run:
+            goal_handle.succeed()
+            result.success, result.duration = True, interp.duration
+            return result
+        self.active = active = _ActiveProgram(goal_handle, goal.name, goal.program, interp)
+        self.get_logger().info(f"program {goal.name!r} started ({interp.duration:.3f} s planned)")
+        await active.finished
+        state = interp.state
+        result.duration = interp.t
+        result.success = state is ProgramState.DONE
+        if state is ProgramState.DONE:
+            goal_handle.succeed()
+        elif state is ProgramState.CANCELLED:
+            goal_handle.canceled()
+            result.message = "cancelled"
+        else:
+            goal_handle.abort()
+            result.message = interp.error
+            result.error_line = interp.line
+        self.get_logger().info(f"program {goal.name!r} ended: {state.value}")
+        return result
+
+    # ---- pause / resume ----------------------------------------------------------------------
+
+    def _on_pause(self, request, response):
+        response.success = self.active is not None and self.active.interp.pause()
+        response.message = "pausing" if response.success else "no running program to pause"
+        return response
+
+    def _on_resume(self, request, response):
+        response.success = self.active is not None and self.active.interp.resume()
+        response.message = "resumed" if response.success else "no paused program to resume"
+        return response
+
+    # ---- the cycle ---------------------------------------------------------------------------
+
+    def _stamp_ns(self) -> int:
+        """Now on the control-period grid, so that lockstep nodes see the stamps they expect."""
+        dt_ns = int(round(self.dt * 1e9))
+        return int(round(self.get_clock().now().nanoseconds / dt_ns)) * dt_ns
+
+    def _tick(self) -> None:
+        stamp = self._stamp_ns()
+        active = self.active
+        if active is not None:
+            self._step(active)
+        self._publish_setpoint(stamp)
+        self._publish_status(stamp)
+        if active is not None and active.interp.state in TERMINAL_STATES:
+            self.active = None
+            active.finished.set_result(active.interp.state)
+
+    def _step(self, active: _ActiveProgram) -> None:
+        sp = active.interp.step()
+        self.q = np.r_[sp.x, sp.force]
+        self.xd, self.xdd, self.line = sp.xd, sp.xdd, sp.line
+        for command in sp.commands:
+            self.get_logger().info(f"line {command.line}: {command.node}.{command.parameter} = {command.value!r}")
+            self.forwarder.send(command, self.values["command_timeout"], active.interp.command_done)
+        self.forwarder.poll()
+
+    def _publish_setpoint(self, stamp: int) -> None:
+        twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
+        self.setpoint_pub.publish(OperationalSetpoint(
+            header=self.header(stamp, self.frame_id), pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
+            acceleration=accel_to_msg(accel), force=vector3(self.q[6:]), line=int(self.line)))
+
+    def _publish_status(self, stamp: int, force: bool = False) -> None:
+        active = self.active
+        if active is not None:
+            interp = active.interp
+            status = ProgramStatus(state=_STATUS[interp.state], program=active.name, line=int(interp.line),
+                                   line_count=active.line_count, progress=float(interp.progress),
+                                   elapsed=float(interp.t), remaining=float(interp.duration * (1.0 - interp.progress)),
+                                   message=interp.error)
+        else:
+            status = self.last_status
+        key = (status.state, status.line, status.message)
+        period_ns = int(self.values["status_period"] * 1e9)
+        if not force and key == self._last_status_key and stamp - self._last_status_ns < period_ns:
+            return
+        self._last_status_key, self._last_status_ns = key, stamp
+        status.header = self.header(stamp, self.frame_id)
+        self.last_status = status
+        self.status_pub.publish(status)
+        if active is not None:
+            active.goal_handle.publish_feedback(
+                RunProgram.Feedback(state=status.state, line=status.line, progress=status.progress))
+        level = DiagnosticStatus.ERROR if status.state == ProgramStatus.FAILED else DiagnosticStatus.OK
+        self.report(level, status.message or f"program {status.program!r}: state {status.state}", stamp_ns=stamp)
+
+    def destroy_node(self):
+        self.action_server.destroy()
+        return super().destroy_node()
+
+
+def main(args=None):
+    spin_node(GCodeInterpreterNode, args)
+
+
+if __name__ == "__main__":
+    main()

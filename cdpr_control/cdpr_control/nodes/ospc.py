@@ -1,0 +1,80 @@
+"""Node ``ospc``: operational-space position control, one PI per DOF (3.16).
+
+Subscribes ``setpoint`` (x_d) and ``platform/pose`` (x from the forward kinematics); publishes
+``ospc/state`` (cdpr_msgs/ControllerState, ``output`` = x_OSPC [m, m, m, rad, rad, rad]).
+Disabled, the output is zero (IK-only reference control).
+"""
+from __future__ import annotations
+
+import numpy as np
+from cdpr_msgs.msg import ControllerState, OperationalSetpoint
+from geometry_msgs.msg import PoseStamped
+
+from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+
+from .base import CdprNode, spin_node
+from .conversions import pose_from_msg
+from .parameters import ParameterSet, ParamSpec
+from .qos import CONTROL
+from .sync import StampSync
+
+PARAMS = [
+    ParamSpec("enabled", True, "operational-space position control on; off = x_OSPC held at 0"),
+    ParamSpec("K_p", [0.07] * 6, "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
+    ParamSpec("T_i", [0.18] * 6, "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
+    ParamSpec("x_sat", [0.02, 0.02, 0.02, 0.02, 0.02, 0.02], "output saturation per DOF [m, m, m, rad, rad, rad]"),
+]
+
+
+class OSPCNode(CdprNode):
+    def __init__(self, **kwargs):
+        super().__init__("ospc", **kwargs)
+        self.controller: OperationalSpacePositionController | None = None
+        self.enabled = True
+        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
+        self.sync = StampSync(self, {
+            "setpoint": (OperationalSetpoint, "setpoint"),
+            "pose": (PoseStamped, "platform/pose"),
+        }, primary="pose", callback=self._cycle, mode=self.sync_mode)
+
+    @staticmethod
+    def _ospc_params(v: dict) -> OSPCParams:
+        return OSPCParams(K_p=np.array(v["K_p"], dtype=float), T_i=np.array(v["T_i"], dtype=float),
+                          x_sat=np.array(v["x_sat"], dtype=float))
+
+    def _validate(self, v: dict) -> None:
+        self._ospc_params(v).validate()
+
+    def _apply(self, v: dict) -> None:
+        params = self._ospc_params(v)
+        if self.controller is None:
+            self.controller = OperationalSpacePositionController(params, self.dt)
+        else:
+            self.controller.set_params(params)
+        if v["enabled"] != self.enabled:
+            self.controller.reset()
+        self.enabled = v["enabled"]
+
+    def _cycle(self, msgs: dict, t_ns: int) -> None:
+        x_d = pose_from_msg(msgs["setpoint"].pose)
+        x = pose_from_msg(msgs["pose"].pose)
+        state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
+                                names=list(AXES), reference=x_d.tolist(), feedback=x.tolist(),
+                                error=(x_d - x).tolist())
+        if self.enabled and np.all(np.isfinite(x)) and np.all(np.isfinite(x_d)):
+            out = self.controller.update(x_d, x)
+            state.integrator = self.controller.pi.integrator.tolist()
+            state.saturated = self.controller.pi.saturated.tolist()
+        else:
+            out = np.zeros(6)
+        state.output = out.tolist()
+        self.publisher.publish(state)
+
+
+def main(args=None):
+    spin_node(OSPCNode, args)
+
+
+if __name__ == "__main__":
+    main()

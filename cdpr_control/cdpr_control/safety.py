@@ -1,0 +1,73 @@
+"""Safety checks of the command path (issue: "safety in the loop").
+
+The monitor looks at one control period's inputs and reports faults; the joint command
+(:mod:`cdpr_control.joint_command`) holds its last safe set-point while a holding fault is present.
+Faults: cable force beyond its limits, position lag error beyond a bound, forward kinematics not
+converged, a stale input, and non-finite input values.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+FORCE_LIMIT = "force_limit"
+POSITION_LAG = "position_lag"
+FK_NOT_CONVERGED = "fk_not_converged"
+STALE_INPUT = "stale_input"
+NON_FINITE = "non_finite"
+
+
+@dataclass
+class SafetyConfig:
+    force_tolerance: float = 0.0        # N beyond [f_min, f_max] tolerated before a fault
+    max_position_lag: float = 0.05      # m, |r_d - r|
+    max_orientation_lag: float = 0.1    # rad, |phi_d - phi|
+    stale_timeout: float = 0.05         # s without a new input
+    hold_on_force_limit: bool = False   # a force fault holds the command (else it is reported only)
+
+    def validate(self) -> None:
+        if min(self.force_tolerance, self.max_position_lag, self.max_orientation_lag, self.stale_timeout) < 0:
+            raise ValueError("safety bounds must be >= 0")
+
+
+@dataclass
+class Fault:
+    code: str
+    message: str
+    holds: bool
+
+
+class SafetyMonitor:
+    def __init__(self, config: SafetyConfig | None = None):
+        self.config = config or SafetyConfig()
+        self.config.validate()
+
+    def check(self, now: float, *, f=None, f_min=None, f_max=None, x_d=None, x=None,
+              fk_converged: bool = True, input_times: dict[str, float] | None = None) -> list[Fault]:
+        """Faults of one period; inputs that are None are not checked."""
+        c = self.config
+        faults: list[Fault] = []
+        for name, value in (("f", f), ("x_d", x_d), ("x", x)):
+            if value is not None and not np.all(np.isfinite(value)):
+                faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
+        if f is not None and np.all(np.isfinite(f)):
+            low = np.flatnonzero(f < f_min - c.force_tolerance)
+            high = np.flatnonzero(f > f_max + c.force_tolerance)
+            for i in low:
+                faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N below f_min {f_min[i]:.1f} N", c.hold_on_force_limit))
+            for i in high:
+                faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N above f_max {f_max[i]:.1f} N", c.hold_on_force_limit))
+        if x_d is not None and x is not None and np.all(np.isfinite(x_d)) and np.all(np.isfinite(x)):
+            dr = float(np.linalg.norm(np.subtract(x_d[:3], x[:3])))
+            dphi = float(np.linalg.norm(np.subtract(x_d[3:], x[3:])))
+            if dr > c.max_position_lag:
+                faults.append(Fault(POSITION_LAG, f"position lag {dr * 1e3:.1f} mm > {c.max_position_lag * 1e3:.1f} mm", True))
+            if dphi > c.max_orientation_lag:
+                faults.append(Fault(POSITION_LAG, f"orientation lag {np.rad2deg(dphi):.2f} deg > {np.rad2deg(c.max_orientation_lag):.2f} deg", True))
+        if not fk_converged:
+            faults.append(Fault(FK_NOT_CONVERGED, "forward kinematics did not converge", True))
+        for name, t in (input_times or {}).items():
+            if now - t > c.stale_timeout:
+                faults.append(Fault(STALE_INPUT, f"{name} is {1e3 * (now - t):.0f} ms old", True))
+        return faults

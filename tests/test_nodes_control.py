@@ -1,0 +1,114 @@
+"""CFC, OSPC and joint-command nodes on typed topics: one lockstep period end to end, live
+parameter changes, and rejected parameters leaving the node running with its old value."""
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from cdpr_control import cable  # noqa: E402
+from cdpr_control.kinematics import inverse_kinematics  # noqa: E402
+from cdpr_control.nodes.base import CdprNode  # noqa: E402
+from cdpr_control.nodes.cable_force_controller import CableForceControllerNode  # noqa: E402
+from cdpr_control.nodes.conversions import pose_to_msg  # noqa: E402
+from cdpr_control.nodes.joint_command import JointCommandNode  # noqa: E402
+from cdpr_control.nodes.ospc import OSPCNode  # noqa: E402
+from cdpr_control.nodes.qos import CONTROL  # noqa: E402
+from cdpr_control.robot import load_robot  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def graph():
+    rclpy.init()
+    overrides = [Parameter("robot", value="ipanema3_mini")]
+    nodes = [CableForceControllerNode(parameter_overrides=overrides), OSPCNode(parameter_overrides=overrides),
+             JointCommandNode(parameter_overrides=overrides + [Parameter("v_max", value=100.0)])]
+    probe = rclpy.create_node("probe")
+    executor = SingleThreadedExecutor()
+    for n in nodes + [probe]:
+        executor.add_node(n)
+    yield nodes, probe, executor
+    for n in nodes + [probe]:
+        n.destroy_node()
+    rclpy.shutdown()
+
+
+def _spin_until(executor, done, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.02)
+    return done()
+
+
+def test_one_period_through_cfc_ospc_and_joint_command(graph):
+    nodes, probe, executor = graph
+    robot = load_robot("ipanema3_mini")
+    m = robot.m
+    pubs = {name: probe.create_publisher(t, topic, CONTROL) for name, t, topic in (
+        ("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
+        ("fd", ForceDistribution, "force_distribution"), ("sp", OperationalSetpoint, "setpoint"),
+        ("pose", PoseStamped, "platform/pose"))}
+    commands, cfc_states = [], []
+    probe.create_subscription(JointState, "winch/command", commands.append, CONTROL)
+    probe.create_subscription(ControllerState, "cable_force_controller/state", cfc_states.append, CONTROL)
+    assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+
+    x_d = np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0])
+    x = x_d + np.array([0.0, 0.0, -0.002, 0.0, 0.0, 0.0])      # sagged estimate
+    q = inverse_kinematics(robot, x_d).q
+    f = np.full(m, 10.0)
+    f_d = np.full(m, 12.0)
+    for k in range(1, 4):
+        header = CdprNode.header(k * 1_000_000)
+        pubs["theta"].publish(JointState(header=header, position=q.tolist(), velocity=[0.0] * m, effort=f.tolist()))
+        pubs["f"].publish(CableForces(header=header, f=f.tolist(), f_min=robot.cable.f_min.tolist(), f_max=robot.cable.f_max.tolist()))
+        pubs["fd"].publish(ForceDistribution(header=header, f_d=f_d.tolist(), f_min=robot.cable.f_min.tolist(), f_max=robot.cable.f_max.tolist()))
+        pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(x_d)))
+        pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
+        assert _spin_until(executor, lambda: len(commands) >= k), f"no command for period {k}"
+    last = commands[-1]
+    assert last.header.stamp.nanosec == 3_000_000
+    theta_d = np.asarray(last.position)
+    assert np.all(np.isfinite(theta_d))
+    # the command is IK of the OSPC-corrected set-point minus the CFC elongation (5.10)
+    ospc = nodes[1].controller.pi.output
+    dq = np.asarray(cfc_states[-1].output)
+    np.testing.assert_allclose(theta_d, inverse_kinematics(robot, x_d + ospc).q - dq, atol=1e-12)
+    assert ospc[2] > 0.0                                        # pushes up against the sag
+    # Δq_CFC (3.23) with Δq_0 = f_0 / K_l from the first measured force; after three periods of a
+    # constant error e = f_d - f: f_c,out = f_d + K_p e + 3 K_p dt / T_i e  (3.19), (3.22)
+    k_l = robot.cable.k_spec_nominal / cable.total_free_length(robot, q)
+    e = f_d - f
+    f_out = f_d + 0.85 * e + 3 * 0.85 * 0.001 / 0.1 * e
+    np.testing.assert_allclose(dq, f_out / k_l - f / k_l, rtol=1e-9)
+
+
+def test_rejected_parameter_keeps_old_value_and_says_why(graph):
+    nodes, _, _ = graph
+    cfc, ospc, jc = nodes
+    result = cfc.set_parameters([Parameter("K_p", value=-1.0)])[0]
+    assert not result.successful and result.reason
+    assert cfc.get_parameter("K_p").value == 0.85 and cfc.controller.params.K_p == 0.85
+    result = ospc.set_parameters([Parameter("T_i", value=[0.18] * 5)])[0]
+    assert not result.successful and "T_i" in result.reason
+    assert len(ospc.get_parameter("T_i").value) == 6
+    result = jc.set_parameters([Parameter("mode", value="torque")])[0]
+    assert not result.successful and "force_control" in result.reason
+    assert jc.mode == "force_control"
+
+
+def test_parameters_apply_live(graph):
+    nodes, _, _ = graph
+    cfc, ospc, jc = nodes
+    assert cfc.set_parameters([Parameter("K_p", value=0.5)])[0].successful
+    assert cfc.controller.params.K_p == 0.5 and cfc.controller.pi.K_p[0] == 0.5
+    assert jc.set_parameters([Parameter("mode", value="ik_only")])[0].successful and jc.mode == "ik_only"
+    assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
+    assert ospc.set_parameters([Parameter("x_sat", value=[0.01] * 6)])[0].successful
+    np.testing.assert_allclose(ospc.controller.pi.u_pos, 0.01)
