@@ -14,6 +14,8 @@ from rclpy.action import ActionClient  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Header  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from cdpr_control.nodes.gcode_interpreter import GCodeInterpreterNode  # noqa: E402
@@ -24,7 +26,8 @@ from cdpr_control.nodes.qos import CONTROL, STATUS  # noqa: E402
 def graph():
     rclpy.init()
     node = GCodeInterpreterNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini"),
-                                                     Parameter("command_timeout", value=0.3)])
+                                                     Parameter("command_timeout", value=0.3),
+                                                     Parameter("sync_mode", value="latest")])
     target = rclpy.create_node("cable_force_controller")  # stands in for the node an M-code names
     target.declare_parameter("enabled", False)
     target.declare_parameter("f_ref", 10.0)
@@ -171,7 +174,8 @@ def test_set_points_follow_sim_time(graph):
     """With use_sim_time the cycle runs on /clock: one set-point per period, stamped in sim time."""
     _, _, probe, executor, _, _, _ = graph
     sim = GCodeInterpreterNode(namespace="sim", parameter_overrides=[
-        Parameter("robot", value="ipanema3_mini"), Parameter("use_sim_time", value=True)])
+        Parameter("robot", value="ipanema3_mini"), Parameter("use_sim_time", value=True),
+        Parameter("sync_mode", value="latest")])
     executor.add_node(sim)
     clock = probe.create_publisher(Clock, "/clock", 10)
     got = []
@@ -185,3 +189,22 @@ def test_set_points_follow_sim_time(graph):
     assert got and all(m.header.stamp.sec == 7 and m.header.stamp.nanosec % 1_000_000 == 0 for m in got)
     stamps = [m.header.stamp.nanosec for m in got]
     assert stamps == sorted(set(stamps))  # one set-point per period, in order
+
+
+def test_lockstep_set_points_follow_the_winch_state(graph):
+    """sync_mode exact: one set-point per new winch state, with its stamp (also for t = 0)."""
+    _, _, probe, executor, _, _, _ = graph
+    node = GCodeInterpreterNode(namespace="lockstep", parameter_overrides=[
+        Parameter("robot", value="ipanema3_mini"), Parameter("sync_mode", value="exact")])
+    executor.add_node(node)
+    state = probe.create_publisher(JointState, "/lockstep/winch/state", CONTROL)
+    got = []
+    probe.create_subscription(OperationalSetpoint, "/lockstep/setpoint", got.append, CONTROL)
+    assert spin_until(executor, lambda: state.get_subscription_count() > 0)
+    for k in (0, 0, 1, 2, 2, 3):                    # repeated states (the simulator's handshake)
+        state.publish(JointState(header=Header(stamp=Time(sec=0, nanosec=k * 1_000_000))))
+        spin_until(executor, lambda: False, timeout=0.02)
+    assert spin_until(executor, lambda: len(got) >= 4)
+    executor.remove_node(node)
+    node.destroy_node()
+    assert [m.header.stamp.nanosec for m in got] == [0, 1_000_000, 2_000_000, 3_000_000]

@@ -27,7 +27,8 @@ from cdpr_control.robot import load_robot  # noqa: E402
 def graph():
     rclpy.init()
     overrides = [Parameter("robot", value="ipanema3_mini")]
-    nodes = [CableForceControllerNode(parameter_overrides=overrides), OSPCNode(parameter_overrides=overrides),
+    cfc_linear = overrides + [Parameter("stiffness_model", value="linear")]     # the thesis' K_l (2.15)
+    nodes = [CableForceControllerNode(parameter_overrides=cfc_linear), OSPCNode(parameter_overrides=overrides),
              JointCommandNode(parameter_overrides=overrides + [Parameter("v_max", value=100.0)])]
     probe = rclpy.create_node("probe")
     executor = SingleThreadedExecutor()
@@ -98,6 +99,8 @@ def test_rejected_parameter_keeps_old_value_and_says_why(graph):
     result = ospc.set_parameters([Parameter("T_i", value=[0.18] * 5)])[0]
     assert not result.successful and "T_i" in result.reason
     assert len(ospc.get_parameter("T_i").value) == 6
+    result = cfc.set_parameters([Parameter("stiffness_model", value="cubic")])[0]
+    assert not result.successful and "linear" in result.reason
     result = jc.set_parameters([Parameter("mode", value="torque")])[0]
     assert not result.successful and "force_control" in result.reason
     assert jc.mode == "force_control"

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .filters import LowPass
 from .pi_control import PIController
 
 
@@ -67,7 +68,7 @@ class CableForceController:
         self.dt = dt
         self.pi = PIController(m, params.K_p, params.T_i, params.F_sat_n, params.F_sat_p, dt)
         self.dq_0: np.ndarray | None = None       # set by reset() before the first update
-        self.f_filtered = None
+        self.feedback_filter = LowPass(params.T_filter, dt)      # (3.20)
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
 
@@ -77,24 +78,28 @@ class CableForceController:
         self.params = params
         self.pi.set_gains(params.K_p, params.T_i)
         self.pi.set_limits(params.F_sat_n, params.F_sat_p)
+        self.feedback_filter.set_time_constant(params.T_filter)
 
     def reset(self, dq_0, f=None) -> None:
         """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration."""
         self.dq_0 = np.asarray(dq_0, dtype=float).copy()
         self.pi.reset()
-        self.f_filtered = None if f is None else np.asarray(f, dtype=float).copy()
+        self.feedback_filter.reset(f)
+
+    @property
+    def f_filtered(self) -> np.ndarray | None:
+        return self.feedback_filter.y
 
     def filter(self, f: np.ndarray) -> np.ndarray:
-        """PT1 feedback filter (3.20), exact discretisation."""
-        if self.f_filtered is None or self.params.T_filter == 0.0:
-            self.f_filtered = np.array(f, dtype=float)
-        else:
-            alpha = 1.0 - np.exp(-self.dt / self.params.T_filter)
-            self.f_filtered += alpha * (f - self.f_filtered)
-        return self.f_filtered
+        """PT1 feedback filter (3.20)."""
+        return self.feedback_filter.update(f)
 
     def update(self, f_d, f, k_l, f_min, f_max) -> np.ndarray:
-        """One period: desired and measured forces [N], linear stiffness K_l [N/m] -> Δq_CFC [m]."""
+        """One period: desired and measured forces [N], cable stiffness K_l [N/m] -> Δq_CFC [m].
+
+        k_l is the secant stiffness per cable, an array (the thesis' linear model) or a function of
+        the output force f_c,out (a non-linear model (2.17): then K_l^-1 f_c,out is the elongation).
+        """
         if self.dq_0 is None:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
         f_fb = self.filter(f)
@@ -102,5 +107,6 @@ class CableForceController:
         sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
         u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
         self.f_out = f_d + u                                        # feed-forward (3.22)
-        self.dq_cfc = self.f_out / k_l - self.dq_0                  # (3.23)
+        stiffness = k_l(self.f_out) if callable(k_l) else k_l
+        self.dq_cfc = self.f_out / stiffness - self.dq_0            # (3.23)
         return self.dq_cfc

@@ -5,7 +5,11 @@ transfer delay T_d,w (3.25). The desired wrench anticipates them (3.26):
 
     w_d = w + (I - G_w(s)) w_dyn = w + w_dyn(t) - w_dyn(t - T_d,w) ,
 
-where w_dyn is the inverse-dynamics wrench (2.33) of the desired motion.
+where w_dyn is the inverse-dynamics wrench (2.33) of the desired motion. Written as
+w_d = w_dyn + w_dist with the disturbance w_dist = w - w_dyn(t - T_d,w) of (3.24), the measured
+part can be saturated (section 3.6.1): |w_dist| <= w_dist_max per axis limits how far model errors
+and the platform's own oscillations reach the force set-point (w_dist_max = 0 gives the model
+wrench (3.1), no limit the pure null-space control).
 """
 from __future__ import annotations
 
@@ -36,11 +40,15 @@ class WrenchSetpoint:
         self._buffer[:] = fill
         self._last = fill.copy()
 
-    def update(self, w, w_dyn) -> np.ndarray:
-        """One period: measured wrench w and model wrench w_dyn -> w_d (3.26)."""
+    def update(self, w, w_dyn, w_dist_max=None) -> np.ndarray:
+        """One period: measured wrench w and model wrench w_dyn -> w_d (3.26), optionally with
+        the disturbance w - w_dyn(t - T_d,w) saturated to ±w_dist_max (6,)."""
         w_dyn = np.asarray(w_dyn, dtype=float)
         self._buffer[self._index] = w_dyn
         self._index = (self._index + 1) % (self.delay + 1)
         delayed = self._buffer[self._index]        # written `delay` periods ago
         self._last = w_dyn.copy()
-        return np.asarray(w, dtype=float) + w_dyn - delayed
+        w_dist = np.asarray(w, dtype=float) - delayed                                 # (3.24)
+        if w_dist_max is not None:
+            w_dist = np.clip(w_dist, -w_dist_max, w_dist_max)
+        return w_dyn + w_dist

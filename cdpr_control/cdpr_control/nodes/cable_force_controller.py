@@ -5,9 +5,12 @@ Subscribes ``force_distribution`` (f_d, limits), ``cable_forces`` (f at the plat
 (cdpr_msgs/ControllerState, ``output`` = Δq_CFC [m] per cable). Disabled, it publishes Δq_CFC = 0:
 the IK-only reference control of section 2.3.2.
 
-The pre-tension elongation Δq_0 of (3.23) is taken at start-up from the first measured forces
-(as the thesis does for the forward kinematics, section 3.2), with the same linear stiffness
-K_l the controller uses, so that f = f_d commands no change.
+K_l of (3.23) is the thesis' linear model k_spec / l_t, or (default) the secant of the robot
+file's non-linear cable (2.16)-(2.17): with the linear model the integrator must make up the
+difference, which on the IPAnema 3's progressive 6 mm cable needs hundreds of newtons of
+saturation range. The pre-tension elongation Δq_0 is taken at start-up from the first measured
+forces (as the thesis does for the forward kinematics, section 3.2) in the same stiffness model,
+so that f = f_d commands no change.
 """
 from __future__ import annotations
 
@@ -33,6 +36,9 @@ PARAMS = [
     ParamSpec("F_sat_p", 200.0, "positive saturation of the PI part F_sat,p [N]", range=(0.0, 1e5)),
     ParamSpec("widen_band", 50.0, "force distance to a limit where the saturation widens [N]", range=(1e-3, 1e5)),
     ParamSpec("widen_factor", 3.0, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
+    ParamSpec("stiffness_model", "nonlinear", "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
+              "nonlinear (secant of (2.16)-(2.17): the elongation of the robot file's cable model)",
+              choices=("linear", "nonlinear")),
 ]
 
 
@@ -42,6 +48,7 @@ class CableForceControllerNode(CdprNode):
         m = self.robot.m
         self.names = [f"cable_{i + 1}" for i in range(m)]
         self.controller: CableForceController | None = None
+        self.calibration: tuple[np.ndarray, np.ndarray] | None = None   # (f_0, l_t) at start-up
         self.enabled = True
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
@@ -68,6 +75,21 @@ class CableForceControllerNode(CdprNode):
         if v["enabled"] and not self.enabled:
             self.controller.pi.reset()           # bumpless: start the integrator from zero
         self.enabled = v["enabled"]
+        if v["stiffness_model"] != getattr(self, "stiffness_model", None):
+            self.stiffness_model = v["stiffness_model"]
+            if self.calibration is not None:     # Δq_0 of the start-up forces in the new model
+                self.controller.dq_0 = self._elongation(*self.calibration)
+
+    def _stiffness(self, l_t):
+        """K_l of (3.23): an array (linear, (2.15)) or the secant of (2.17) as a function of f_c,out."""
+        if self.stiffness_model == "linear":
+            return self.robot.cable.k_spec_nominal / l_t
+        return lambda f_out: cable.stiffness(self.robot, np.maximum(f_out, 0.0), l_t)
+
+    def _elongation(self, f, l_t) -> np.ndarray:
+        """K_l^-1 f in the selected model: Δq_0 of the start-up forces, so f = f_d commands no change."""
+        k_l = self._stiffness(l_t)
+        return f / (k_l(f) if callable(k_l) else k_l)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         fd_msg, f_msg, theta_msg = msgs["f_d"], msgs["f"], msgs["theta"]
@@ -84,11 +106,13 @@ class CableForceControllerNode(CdprNode):
             self.publisher.publish(state)
             return
         l_t = cable.total_free_length(self.robot, theta)                    # (2.14)
-        k_l = self.robot.cable.k_spec_nominal / l_t                          # linear K_l (2.15)
+        k_l = self._stiffness(l_t)
         c = self.controller
         if self.enabled:
+            if self.calibration is None:
+                self.calibration = (f.copy(), l_t)
             if c.dq_0 is None:
-                c.reset(f / k_l, f=f)       # Δq_0 in the CFC's own (linear) stiffness model
+                c.reset(self._elongation(*self.calibration), f=f)
             dq = c.update(f_d, f, k_l, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
             state.reference, state.feedback = f_d.tolist(), c.f_filtered.tolist()
             state.error = (f_d - c.f_filtered).tolist()

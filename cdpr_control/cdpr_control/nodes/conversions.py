@@ -6,25 +6,47 @@ Poses in the library are x = [x, y, z, a, b, c] with Kardan angles R = Rx(a) Ry(
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from geometry_msgs.msg import Accel, Pose, Twist, Vector3, Wrench
-from scipy.spatial.transform import Rotation
 
-KARDAN = "XYZ"    # intrinsic x-y-z = Rx Ry Rz
+
+def kardan_to_quaternion(a: float, b: float, c: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of R = Rx(a) Ry(b) Rz(c): the product q_x(a) q_y(b) q_z(c), in closed form
+    (these conversions run several times per control period in every node)."""
+    ca, sa = math.cos(0.5 * a), math.sin(0.5 * a)
+    cb, sb = math.cos(0.5 * b), math.sin(0.5 * b)
+    cc, sc = math.cos(0.5 * c), math.sin(0.5 * c)
+    return (sa * cb * cc + ca * sb * sc,
+            ca * sb * cc - sa * cb * sc,
+            ca * cb * sc + sa * sb * cc,
+            ca * cb * cc - sa * sb * sc)
+
+
+def quaternion_to_kardan(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Kardan angles (a, b, c) of a unit quaternion, b in [-pi/2, pi/2] (R_02 = sin b)."""
+    n = x * x + y * y + z * z + w * w
+    s = 2.0 / n if n > 0.0 else 0.0
+    r02 = s * (x * z + w * y)
+    r12 = s * (y * z - w * x)
+    r22 = 1.0 - s * (x * x + y * y)
+    r01 = s * (x * y - w * z)
+    r00 = 1.0 - s * (y * y + z * z)
+    return math.atan2(-r12, r22), math.asin(max(-1.0, min(1.0, r02))), math.atan2(-r01, r00)
 
 
 def pose_to_msg(x, msg: Pose | None = None) -> Pose:
     msg = Pose() if msg is None else msg
-    msg.position.x, msg.position.y, msg.position.z = (float(v) for v in x[:3])
-    qx, qy, qz, qw = Rotation.from_euler(KARDAN, x[3:6]).as_quat()
-    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = float(qx), float(qy), float(qz), float(qw)
+    msg.position.x, msg.position.y, msg.position.z = float(x[0]), float(x[1]), float(x[2])
+    o = msg.orientation
+    o.x, o.y, o.z, o.w = kardan_to_quaternion(float(x[3]), float(x[4]), float(x[5]))
     return msg
 
 
 def pose_from_msg(msg: Pose) -> np.ndarray:
     q = msg.orientation
-    phi = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler(KARDAN)
-    return np.array([msg.position.x, msg.position.y, msg.position.z, *phi])
+    return np.array([msg.position.x, msg.position.y, msg.position.z, *quaternion_to_kardan(q.x, q.y, q.z, q.w)])
 
 
 def vector3(v, msg: Vector3 | None = None) -> Vector3:

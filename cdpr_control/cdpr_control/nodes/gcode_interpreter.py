@@ -5,8 +5,9 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
   state; result success or the first error as ``line:col: message ('text')`` with its line/column.
   Cancelling brakes jerk-limited on the path. A program starts at the current set-point.
 - publishes ``setpoint`` (cdpr_msgs/OperationalSetpoint: x_d, xdot_d, xddot_d, F_d,0, line) every
-  control period on the node clock (use_sim_time works), stamped on the period grid; between
-  programs it holds the last set-point (the robot's home at start-up).
+  control period: with ``sync_mode = latest`` on a timer of the node clock (use_sim_time works),
+  stamped on the period grid; with ``exact`` (lockstep) once per new ``winch/state``, with its
+  stamp. Between programs it holds the last set-point (the robot's home at start-up).
 - publishes ``program_status`` (cdpr_msgs/ProgramStatus) on change of state or line and every
   ``status_period``.
 - services ``~/pause`` and ``~/resume`` (std_srvs/Trigger): jerk-limited stop on the path and
@@ -29,6 +30,7 @@ from rcl_interfaces.srv import GetParameterTypes, SetParameters
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.parameter import Parameter
 from rclpy.task import Future
+from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from cdpr_control.gcode import parse_gcode
@@ -40,6 +42,7 @@ from .base import CdprNode, spin_node
 from .conversions import accel_to_msg, pose_to_msg, twist_to_msg, vector3
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL, STATUS
+from .sync import stamp_ns
 
 PARAMS = [
     ParamSpec("v_max", 0.5, "translational path velocity limit |xdot[0:3]| [m/s]", range=(1e-4, 10.0)),
@@ -175,7 +178,13 @@ class GCodeInterpreterNode(CdprNode):
                                           goal_callback=self._on_goal, cancel_callback=self._on_cancel)
         self.create_service(Trigger, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/resume", self._on_resume)
-        self.timer = self.create_timer(self.dt, self._tick)  # node clock: sim time when use_sim_time
+        if self.sync_mode == "exact":
+            # lockstep: one period per new winch state, stamped like it (a deterministic data flow;
+            # a timer on /clock could not produce the period of t = 0 before the loop has run)
+            self._last_tick_ns = -1
+            self.create_subscription(JointState, "winch/state", self._on_state, CONTROL)
+        else:
+            self.timer = self.create_timer(self.dt, self._tick)  # node clock: sim time when use_sim_time
         self._publish_status(self._stamp_ns(), force=True)
 
     # ---- parameters --------------------------------------------------------------------------
@@ -260,8 +269,14 @@ class GCodeInterpreterNode(CdprNode):
         dt_ns = int(round(self.dt * 1e9))
         return int(round(self.get_clock().now().nanoseconds / dt_ns)) * dt_ns
 
-    def _tick(self) -> None:
-        stamp = self._stamp_ns()
+    def _on_state(self, msg: JointState) -> None:
+        stamp = stamp_ns(msg)
+        if stamp > self._last_tick_ns:
+            self._last_tick_ns = stamp
+            self._tick(stamp)
+
+    def _tick(self, stamp: int | None = None) -> None:
+        stamp = self._stamp_ns() if stamp is None else stamp
         active = self.active
         if active is not None:
             self._step(active)

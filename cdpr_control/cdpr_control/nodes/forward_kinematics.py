@@ -1,0 +1,104 @@
+"""Node ``forward_kinematics``: elastic forward kinematics (3.7)-(3.9) and the wrench w = -A^T f (2.11).
+
+Subscribes ``winch/state`` (θ), ``cable_forces`` (f at the platform) and ``setpoint`` (x_d, the
+warm start and the pose of the frozen pulley model of section 3.2); publishes ``platform/pose``
+(PoseStamped, x), ``platform/wrench`` (WrenchStamped, w about the platform origin, base frame) and
+``forward_kinematics/diagnostics``. The elongation Δq_0 at start-up is taken from the first
+measured forces (3.7). A solve that does not converge is published with ``converged = false``
+(and reported on /diagnostics); the pose message then carries the last converged estimate.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from cdpr_msgs.msg import CableForces, ForwardKinematicsDiagnostics, OperationalSetpoint
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from sensor_msgs.msg import JointState
+
+from cdpr_control import cable
+from cdpr_control import forward_kinematics as fk
+from cdpr_control.kinematics import inverse_kinematics
+
+from .base import CdprNode, spin_node
+from .conversions import pose_from_msg, pose_to_msg, wrench_to_msg
+from .parameters import ParameterSet, ParamSpec
+from .qos import CONTROL
+from .sync import StampSync
+
+TERMINATION = {
+    fk.CONVERGED: ForwardKinematicsDiagnostics.CONVERGED,
+    fk.MAX_ITERATIONS: ForwardKinematicsDiagnostics.MAX_ITERATIONS,
+    fk.STALLED: ForwardKinematicsDiagnostics.STALLED,
+    fk.NON_FINITE: ForwardKinematicsDiagnostics.INVALID_INPUT,
+}
+
+PARAMS = [
+    ParamSpec("pulleys", "frozen", "pulley model in the iterations: frozen at x_d (section 3.2) or full",
+              choices=("frozen", "full")),
+    ParamSpec("max_iterations", 30, "Levenberg-Marquardt iterations per solve [-]", range=(1, 1000)),
+    ParamSpec("xtol", 1e-9, "convergence: Gauss-Newton step below this [m, rad]", range=(1e-15, 1e-3)),
+]
+
+
+class ForwardKinematicsNode(CdprNode):
+    def __init__(self, **kwargs):
+        super().__init__("forward_kinematics", **kwargs)
+        self.solver = fk.ForwardKinematics(self.robot)
+        self.params = ParameterSet(self, PARAMS, lambda v: None, self._apply)
+        self.dq_0: np.ndarray | None = None
+        self.x_last: np.ndarray | None = None
+        self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
+        self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
+        self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
+        self.sync = StampSync(self, {
+            "theta": (JointState, "winch/state"),
+            "f": (CableForces, "cable_forces"),
+            "setpoint": (OperationalSetpoint, "setpoint"),
+        }, primary="f", callback=self._cycle, mode=self.sync_mode)
+
+    def _apply(self, v: dict) -> None:
+        self.pulleys = v["pulleys"]
+        self.solver.max_iterations = int(v["max_iterations"])
+        self.solver.xtol = float(v["xtol"])
+
+    def _cycle(self, msgs: dict, t_ns: int) -> None:
+        theta = np.asarray(msgs["theta"].position, dtype=float)
+        f = np.asarray(msgs["f"].f, dtype=float)
+        x_d = pose_from_msg(msgs["setpoint"].pose)
+        header = self.header(t_ns)
+        diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
+        m = self.robot.m
+        if theta.shape != (m,) or f.shape != (m,) or not np.all(np.isfinite(np.r_[theta, f, x_d])):
+            diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
+            self.diag_pub.publish(diag)
+            self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)
+            return
+        if self.dq_0 is None:     # (3.7) at controller start-up
+            self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, f, theta)
+        start = time.perf_counter()
+        result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys)
+        diag.solve_time = time.perf_counter() - start
+        diag.termination = TERMINATION[result.termination]
+        diag.converged = result.converged
+        diag.iterations = result.iterations
+        diag.residual_norm = float(result.residual_norm)
+        self.diag_pub.publish(diag)
+        if result.converged:
+            self.x_last = result.x
+            self.report(DiagnosticStatus.OK, "converged", stamp_ns=t_ns)
+        else:
+            self.report(DiagnosticStatus.WARN, f"not converged ({result.termination})", stamp_ns=t_ns)
+        x = self.x_last if self.x_last is not None else x_d
+        w = -inverse_kinematics(self.robot, x).AT @ f                  # (2.11)
+        self.pose_pub.publish(PoseStamped(header=header, pose=pose_to_msg(x)))
+        self.wrench_pub.publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))
+
+
+def main(args=None):
+    spin_node(ForwardKinematicsNode, args)
+
+
+if __name__ == "__main__":
+    main()

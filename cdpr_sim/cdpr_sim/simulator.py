@@ -1,0 +1,315 @@
+"""The winch and platform simulator: one control period per :meth:`Simulator.step` (no ROS here).
+
+What is simulated (thesis sections 2.1.3, 3.3, 3.7):
+
+* the platform as a pybullet rigid body under gravity, with the robot file's mass, centre of
+  gravity and inertia, a payload that can change at run time, external wrenches and optional
+  contact with planes and a cylinder (:mod:`cdpr_sim.contacts`);
+* the cables as unilateral visco-elastic springs (2.14)-(2.17), (2.24) between the pulley leave
+  points and the platform anchors (:mod:`cdpr_sim.cables`);
+* the winches as position-controlled drives following theta_d, PT1 + dead time (3.10) or second
+  order (5.11) as the robot file says (cdpr_control.drive_models);
+* the winch force sensors behind the pulleys: the forward pulley friction model (3.30)-(3.43)
+  (cdpr_control.friction), the sensor line (3.29), noise and AD quantisation, and the encoders.
+
+Cable lengths: theta is the winch's unstretched cable length and the elongation is
+dq = IK{x} - theta (2.24), positive under tension (section 3.2). Encoders and commands may carry a
+calibration offset (``encoder_offset``): encoder theta = unstretched length + offset. With the
+offset of :func:`home_calibration_offset`, theta = IK{x} at the home pose under the start-up
+tension, as the thesis sets up its encoders (section 2.3.2); with no offset theta is the
+unstretched length itself.
+
+Time: a control period of ``period`` seconds is ``substeps`` physics steps (period / substeps
+<= 1 ms). theta_d is held over the period (zero-order hold); the outputs hold for the end of the
+period. Forces come from the state at the start of each physics step (pybullet integrates
+semi-implicitly). Everything is deterministic for a given seed: the only random numbers are the
+sensor noise, drawn from numpy's PCG64 generator.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+import pybullet
+
+from cdpr_control import cable
+from cdpr_control.drive_models import DriveModel
+from cdpr_control.friction import PulleyFriction, sensor_from_winch_force
+from cdpr_control.kinematics import inverse_kinematics
+
+from .cables import CableModel
+from .contacts import PlatformShape, add_obstacle, platform_collision_shape
+from .platform import PlatformBody, kardan_angles
+from .sensors import Encoder, ForceSensor
+from .wrench import WrenchPulse
+
+
+@functools.cache
+def compiled(fn):
+    """numba-compiled (and disk-cached) version of a numpy kernel, one per function and process."""
+    return numba.njit(cache=True)(fn)
+
+
+_ZERO6 = np.zeros(6)
+_ZERO6.setflags(write=False)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Simulator settings beyond the robot file (defaults in brackets are assumptions)."""
+
+    period: float = 1e-3               # s, control period (one step); the field bus cycle of 2.3.2
+    substeps: int = 1                  # physics steps per period; period / substeps <= 1 ms
+    seed: int = 0                      # sensor noise seed
+    cable_damping_time: float = 0.002  # s, Kelvin-Voigt tau_c [platform damping ratio ~5 %, 3.3.2]
+    ik_refresh_distance: float = 5e-3  # m, anchor motion before the pulley IK is evaluated again
+    friction: bool = True              # pulley friction between sensor and platform (3.30)-(3.43)
+    friction_v_eps: float = 1e-7       # m/s, |thetadot| up to this counts as standstill (Dahl)
+    noise_std: float | None = None     # N, force sensor noise; None: robot file
+    sensor_gamma_1: tuple | None = None  # true sensor line slopes (3.29) per cable; None: calibration
+    sensor_gamma_0: tuple | None = None  # true sensor line offsets (3.29) per cable; None: calibration
+    encoder_counts: int = 2**20        # per motor revolution; 0 = ideal encoder [20 bit]
+    platform_shape: PlatformShape = field(default_factory=PlatformShape)
+    obstacles: tuple = ()              # contacts.Plane / contacts.Cylinder
+
+    def __post_init__(self):
+        if not (math.isfinite(self.period) and self.period > 0.0):
+            raise ValueError(f"period must be > 0 s, got {self.period}")
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps}")
+        if self.period / self.substeps > 1e-3 + 1e-12:
+            raise ValueError(f"physics step period / substeps = {self.period / self.substeps} s "
+                             "exceeds 1 ms: raise substeps")
+        if not self.friction_v_eps >= 0.0:
+            raise ValueError(f"friction_v_eps must be >= 0 m/s, got {self.friction_v_eps}")
+
+    @property
+    def dt(self) -> float:
+        """Physics step [s]."""
+        return self.period / self.substeps
+
+
+@dataclass(slots=True)
+class SimOutput:
+    """Measurements and ground truth at time t (end of a control period).
+
+    Measured (what a hardware driver publishes): theta (m,) encoder cable lengths [m], thetadot
+    (m,) encoder difference over the period [m/s], F_s (m,) force sensor readings [N].
+    Ground truth (the "laser tracker"): x (6,) platform pose, xdot (6,) twist [v; omega] (base
+    frame), f (m,) cable forces at the platform [N], F_s_true (m,) sensor forces without noise and
+    quantisation, theta_true (m,) drive positions (encoder coordinates, not quantised), beta (m,)
+    wrap angles of the swivelling pulleys, w_ext (6,) external wrench about the platform origin,
+    w_contact (6,) contact wrench about the platform origin.
+    """
+
+    t: float
+    theta: np.ndarray
+    thetadot: np.ndarray
+    F_s: np.ndarray
+    x: np.ndarray
+    xdot: np.ndarray
+    f: np.ndarray
+    F_s_true: np.ndarray
+    theta_true: np.ndarray
+    beta: np.ndarray
+    w_ext: np.ndarray
+    w_contact: np.ndarray
+
+
+def pretension_lengths(robot, x, f) -> np.ndarray:
+    """Unstretched cable lengths theta (m,) that carry forces f (m,) at pose x: IK{x} - dq(f) (3.7)."""
+    q = inverse_kinematics(robot, x).q
+    return q - cable.elongation_from_force(robot, f, cable.total_free_length(robot, q))
+
+
+def home_calibration_offset(robot, f) -> np.ndarray:
+    """Encoder offset (m,) that reads theta = IK{home} with forces f at the home pose (2.3.2): dq(f)."""
+    q = inverse_kinematics(robot, robot.home).q
+    return cable.elongation_from_force(robot, f, cable.total_free_length(robot, q))
+
+
+class Simulator:
+    """Cable robot simulator for robot (cdpr_control.robot.Robot) with SimConfig ``config``.
+
+    Starts at rest at pose x0 (default robot.home) with unstretched cable lengths theta0 (default:
+    IK{x0}, i.e. no tension) and encoder offset ``encoder_offset`` (default 0). ``output`` holds
+    the SimOutput of time ``t``.
+    """
+
+    def __init__(self, robot, config: SimConfig = SimConfig(), x0=None, theta0=None, encoder_offset=None):
+        self.base_robot = robot
+        self.robot = robot
+        self.config = config
+        self.m = robot.m
+        self._pb = pybullet
+        self._client = pybullet.connect(pybullet.DIRECT)
+        pb, cid = self._pb, self._client
+        pb.setTimeStep(config.dt, physicsClientId=cid)
+        pb.setGravity(*map(float, robot.gravity), physicsClientId=cid)
+        self._obstacles = [add_obstacle(pb, cid, o) for o in config.obstacles]
+        shape = platform_collision_shape(pb, cid, config.platform_shape, np.asarray(robot.b))
+        x0 = robot.home if x0 is None else x0
+        self._body = PlatformBody(pb, cid, shape, robot.platform, x0, None)
+        self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance)
+        self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
+        self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
+        self._w_cont = np.zeros(6)
+        self._pulse: WrenchPulse | None = None
+        self._external = False            # a held wrench or a pulse is acting
+        self.reset(x0, theta0, encoder_offset=encoder_offset)
+
+    # --- set-up ----------------------------------------------------------------------------
+
+    def reset(self, x0=None, theta0=None, xdot0=None, encoder_offset=None, seed: int | None = None) -> SimOutput:
+        """Restart at time 0: pose x0, twist xdot0, unstretched lengths theta0, fresh noise and friction.
+
+        Keeps the payload; clears external wrenches. Returns the output at t = 0.
+        """
+        robot, cfg = self.robot, self.config
+        x0 = np.array(robot.home if x0 is None else x0, dtype=float)
+        if x0.shape != (6,) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"x0 must be 6 finite numbers, got {x0}")
+        theta0 = inverse_kinematics(robot, x0).q if theta0 is None else np.array(theta0, dtype=float)
+        self.encoder_offset = np.zeros(self.m) if encoder_offset is None else np.array(encoder_offset, dtype=float)
+        for name, v in (("theta0", theta0), ("encoder_offset", self.encoder_offset)):
+            if v.shape != (self.m,) or not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} must be {self.m} finite numbers, got {v}")
+        self.t = 0.0
+        self.steps = 0
+        self._rng = np.random.Generator(np.random.PCG64(cfg.seed if seed is None else seed))
+        self.sensor = ForceSensor(robot.sensor, self.m, self._rng, cfg.sensor_gamma_1, cfg.sensor_gamma_0,
+                                  cfg.noise_std)
+        self.friction = PulleyFriction.from_robot(robot, theta0, cfg.friction_v_eps, jit=compiled)
+        self.drives.reset(theta0)
+        self._body.set_state(x0, xdot0)
+        self.cables.refresh(x0)
+        self._w_cont = np.zeros(6)
+        self._pulse = None
+        self._external = False
+        self._theta_enc_prev = self.encoder.read(theta0 + self.encoder_offset)
+        self._theta_prev = self.drives.theta
+        self.output = self._measure()
+        return self.output
+
+    def set_payload(self, mass: float, center_of_gravity=(0.0, 0.0, 0.0), inertia=None) -> float:
+        """Attach a payload rigidly to the platform (replacing the previous one; mass 0 removes it).
+
+        center_of_gravity (3,) in the platform frame [m], inertia (3, 3) about it [kg m^2] (None:
+        a point mass), see Robot.with_payload. The platform keeps its pose and twist. Returns the
+        total mass [kg].
+        """
+        robot = self.base_robot.with_payload(mass, center_of_gravity, inertia)
+        self._body.set_mass_properties(robot.platform)      # same pose and twist: forces unchanged
+        self.robot = robot
+        return robot.platform.mass
+
+    def set_external_wrench(self, w) -> None:
+        """A held external wrench (6,) [N, N m] on the platform, base frame, about the platform origin."""
+        w = np.array(w, dtype=float)
+        if w.shape != (6,) or not np.all(np.isfinite(w)):
+            raise ValueError(f"external wrench must be 6 finite numbers, got {w}")
+        self._w_cont = w
+        self._external = self._pulse is not None or bool(w.any())
+
+    def apply_pulse(self, wrench, point=(0.0, 0.0, 0.0), shape: str = "step", duration: float = 0.0,
+                    frequency: float = 0.0) -> WrenchPulse:
+        """Start a wrench pulse now (replacing the active one), see :mod:`cdpr_sim.wrench`."""
+        self._pulse = WrenchPulse(tuple(map(float, wrench)), tuple(map(float, point)), shape,
+                                  float(duration), float(frequency), self.t)
+        self._external = True
+        return self._pulse
+
+    def clear_pulse(self) -> None:
+        self._pulse = None
+        self._external = bool(self._w_cont.any())
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._pb.disconnect(physicsClientId=self._client)
+            self._client = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # --- stepping --------------------------------------------------------------------------
+
+    def step(self, theta_d) -> SimOutput:
+        """Advance one control period with the drive command theta_d (m,) (encoder coordinates)."""
+        u = np.asarray(theta_d, dtype=float) - self.encoder_offset
+        if u.shape != (self.m,) or not np.isfinite(u).all():
+            raise ValueError(f"theta_d must be {self.m} finite numbers, got {theta_d}")
+        cfg, body, cables, drives, pb, cid = self.config, self._body, self.cables, self.drives, self._pb, self._client
+        dt = cfg.dt
+        t = self.t
+        for i in range(cfg.substeps):
+            if i == 0:                                   # the state of _measure: forces known
+                F, T, r, R = self._pending
+            else:
+                r, R, v, omega = body.state()
+                _, F, T, _ = cables.wrench(r, R, v, omega, drives.theta, drives.thetadot)
+            if self._external:
+                w = self._external_wrench(t, R)
+                F, T = F + w[:3], T + w[3:]
+            body.apply(F, T, r)
+            drives.step(u)
+            pb.stepSimulation(physicsClientId=cid)
+            t += dt
+        self.steps += 1
+        self.t = self.steps * cfg.period
+        self.output = self._measure()
+        return self.output
+
+    def _external_wrench(self, t: float, R) -> np.ndarray:
+        w = self._w_cont
+        if self._pulse is not None:
+            w = w + self._pulse.wrench_about_origin(t, R)
+            if self._pulse.finished(t):
+                self.clear_pulse()
+        return w
+
+    def _measure(self) -> SimOutput:
+        """Outputs at the current time; also prepares the forces for the next physics step."""
+        body, cables, drives, period = self._body, self.cables, self.drives, self.config.period
+        r, R, v, omega = body.state()
+        theta = drives.theta
+        f, F, T, _ = cables.wrench(r, R, v, omega, theta, drives.thetadot)
+        phi = kardan_angles(R)
+        if cables.needs_refresh():
+            cables.refresh(np.concatenate([r, phi]))
+            f, F, T, _ = cables.wrench(r, R, v, omega, theta, drives.thetadot)
+        f = f.copy()
+        self._pending = (F.copy(), T.copy(), r, R)
+        w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
+        # friction and sensors run at the control rate with the period's mean winch velocity
+        thetadot = (theta - self._theta_prev) * (1.0 / period)
+        self._theta_prev = theta
+        if self.config.friction:
+            F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
+        else:
+            F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
+        theta_true = theta + self.encoder_offset
+        theta_enc = self.encoder.read(theta_true)
+        thetadot_enc = (theta_enc - self._theta_enc_prev) * (1.0 / period)
+        self._theta_enc_prev = theta_enc
+        return SimOutput(
+            t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
+            x=np.concatenate([r, phi]), xdot=np.concatenate([v, omega]), f=f,
+            F_s_true=F_s_true, theta_true=theta_true, beta=cables.beta, w_ext=w_ext,
+            w_contact=self._contact_wrench(r) if self._obstacles else _ZERO6,
+        )
+
+    def _contact_wrench(self, r) -> np.ndarray:
+        """Sum of the contact forces on the platform (last physics step) about its origin."""
+        w = np.zeros(6)
+        for c in self._pb.getContactPoints(bodyA=self._body.body, physicsClientId=self._client):
+            n, d1, d2 = np.array(c[7]), np.array(c[11]), np.array(c[13])
+            F = c[9] * n + c[10] * d1 + c[12] * d2
+            w[:3] += F
+            w[3:] += np.cross(np.array(c[5]) - r, F)
+        return w

@@ -1,0 +1,149 @@
+"""winch_platform_sim node: lockstep protocol with /clock, missed deadlines, services, parameters."""
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from cdpr_msgs.msg import CableForces  # noqa: E402
+from cdpr_msgs.srv import ApplyWrench, SetPayload  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from cdpr_control.kinematics import inverse_kinematics  # noqa: E402
+from cdpr_control.nodes.qos import CONTROL  # noqa: E402
+from cdpr_sim.nodes.winch_platform_sim import CLOCK_QOS, WinchPlatformSimNode  # noqa: E402
+
+
+@pytest.fixture()
+def graph(request):
+    rclpy.init()
+    extra = getattr(request, "param", [])
+    sim = WinchPlatformSimNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini"),
+                                                    Parameter("lockstep_timeout", value=0.2)] + extra)
+    probe = rclpy.create_node("probe")
+    executor = SingleThreadedExecutor()
+    executor.add_node(sim)
+    executor.add_node(probe)
+    yield sim, probe, executor
+    sim.destroy_node()
+    probe.destroy_node()
+    rclpy.shutdown()
+
+
+def _spin_until(executor, done, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    return done()
+
+
+def _ns(msg):
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def test_lockstep_echo_loop_advances_one_period_per_command(graph):
+    sim, probe, executor = graph
+    states, clocks, poses, forces = [], [], [], []
+    command = probe.create_publisher(JointState, "winch/command", CONTROL)
+
+    def controller(msg):                      # hold the measured lengths, stamped with the state's time
+        states.append(msg)
+        command.publish(JointState(header=msg.header, position=list(msg.position)))
+
+    probe.create_subscription(JointState, "winch/state", controller, CONTROL)
+    probe.create_subscription(Clock, "/clock", clocks.append, CLOCK_QOS)
+    probe.create_subscription(PoseStamped, "ground_truth/pose", poses.append, CONTROL)
+    probe.create_subscription(CableForces, "ground_truth/cable_forces", forces.append, CONTROL)
+    assert _spin_until(executor, lambda: len(states) >= 200)
+    stamps = np.array([_ns(m) for m in states])
+    assert stamps[0] == 0                                           # the start is announced at t = 0
+    assert np.all(np.diff(stamps) == 1_000_000)                     # then one period per command
+    assert sim.missed_deadlines == 0 and sim.late_commands == 0
+    assert clocks and clocks[-1].clock.sec * 1_000_000_000 + clocks[-1].clock.nanosec <= stamps[-1]
+    robot = sim.robot
+    # start-up calibration: the encoders read IK{home} at home under tension (2.3.2)
+    np.testing.assert_allclose(states[0].position, inverse_kinematics(robot, robot.home).q, atol=1e-6)
+    assert np.all(np.asarray(forces[-1].f) > robot.cable.f_min - 1e-6)
+    assert abs(poses[-1].pose.position.z - robot.home[2]) < 1e-4        # holding theta keeps it there
+    assert len(states[-1].effort) == robot.m and len(states[-1].velocity) == robot.m
+
+
+def test_missed_deadline_advances_after_the_timeout(graph):
+    sim, probe, executor = graph
+    command = probe.create_publisher(JointState, "winch/command", CONTROL)
+    states = []
+    probe.create_subscription(JointState, "winch/state", states.append, CONTROL)
+    assert _spin_until(executor, lambda: len(states) >= 1)
+    command.publish(JointState(header=states[-1].header, position=list(states[-1].position)))
+    assert _spin_until(executor, lambda: sim.sim.steps >= 1)
+    # no further command: after 0.2 s the simulator advances anyway, holding the last command
+    assert _spin_until(executor, lambda: sim.missed_deadlines >= 2, timeout=5.0)
+    assert sim.sim.steps == 1 + sim.missed_deadlines
+    # a command answering an old state is late: held, counted, no step
+    steps = sim.sim.steps
+    command.publish(JointState(header=states[0].header, position=list(states[0].position)))
+    assert _spin_until(executor, lambda: sim.late_commands == 1)
+    assert sim.sim.steps - steps <= 1                               # at most a timeout step
+    # a command of wrong length is refused and does not advance time
+    steps = sim.sim.steps
+    command.publish(JointState(position=[1.0, 2.0]))
+    assert _spin_until(executor, lambda: sim.invalid_commands == 1)
+    assert sim.sim.steps - steps <= 1                               # at most a timeout step
+
+
+def test_payload_and_wrench_services(graph):
+    sim, probe, executor = graph
+    payload = probe.create_client(SetPayload, "sim/set_payload")
+    wrench = probe.create_client(ApplyWrench, "sim/apply_wrench")
+    assert payload.wait_for_service(timeout_sec=5.0) and wrench.wait_for_service(timeout_sec=5.0)
+
+    def call(client, request):
+        future = client.call_async(request)
+        assert _spin_until(executor, future.done)
+        return future.result()
+
+    request = SetPayload.Request()
+    request.payload.m = 0.5
+    request.payload.com.z = -0.05
+    response = call(payload, request)
+    assert response.success and response.total_mass == pytest.approx(sim.sim.robot.platform.mass)
+    assert response.total_mass == pytest.approx(1.5)
+    request.payload.m = -1.0
+    response = call(payload, request)
+    assert not response.success and "mass" in response.message
+
+    request = ApplyWrench.Request(shape=ApplyWrench.Request.SHAPE_HALF_SINE, duration=0.1)
+    request.wrench.force.x = 2.0
+    assert call(wrench, request).success
+    request.duration = 0.0                                           # a half sine needs a duration
+    response = call(wrench, request)
+    assert not response.success and "duration" in response.message
+
+
+def test_parameters_are_validated_on_set(graph):
+    sim, _, _ = graph
+    ok = sim.set_parameters([Parameter("lockstep_timeout", value=0.5)])[0]
+    assert ok.successful and sim.lockstep_timeout == 0.5
+    out_of_range = sim.set_parameters([Parameter("realtime_factor", value=-1.0)])[0]
+    assert not out_of_range.successful and sim.realtime_factor == 1.0
+    read_only = sim.set_parameters([Parameter("seed", value=3)])[0]
+    assert not read_only.successful
+
+
+@pytest.mark.parametrize("graph", [[Parameter("sync_mode", value="latest"), Parameter("realtime_factor", value=0.5)]],
+                         indirect=True)
+def test_free_running_keeps_pace_with_the_wall_clock(graph):
+    sim, probe, executor = graph
+    states = []
+    probe.create_subscription(JointState, "winch/state", states.append, CONTROL)
+    start = time.monotonic()
+    _spin_until(executor, lambda: time.monotonic() - start > 1.0, timeout=1.5)
+    expected = (time.monotonic() - sim._wall_start) * 0.5 / sim.dt
+    assert 0.5 * expected < sim.sim.steps <= expected + 1
+    stamps = np.array([_ns(m) for m in states])
+    assert len(stamps) > 100 and np.all(np.diff(stamps) > 0) and np.all(stamps % 1_000_000 == 0)
+    assert sim.missed_deadlines == 0                      # no controller yet: nothing was missed
