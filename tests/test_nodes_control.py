@@ -95,7 +95,7 @@ def test_rejected_parameter_keeps_old_value_and_says_why(graph):
     cfc, ospc, jc = nodes
     result = cfc.set_parameters([Parameter("K_p", value=-1.0)])[0]
     assert not result.successful and result.reason
-    assert cfc.get_parameter("K_p").value == 0.85 and cfc.controller.params.K_p == 0.85
+    assert cfc.get_parameter("K_p").value == 0.85 and cfc.stage.params.K_p == 0.85
     result = ospc.set_parameters([Parameter("T_i", value=[0.18] * 5)])[0]
     assert not result.successful and "T_i" in result.reason
     assert len(ospc.get_parameter("T_i").value) == 6
@@ -110,7 +110,7 @@ def test_parameters_apply_live(graph):
     nodes, _, _ = graph
     cfc, ospc, jc = nodes
     assert cfc.set_parameters([Parameter("K_p", value=0.5)])[0].successful
-    assert cfc.controller.params.K_p == 0.5 and cfc.controller.pi.K_p[0] == 0.5
+    assert cfc.stage.params.K_p == 0.5 and cfc.stage.controller.pi.K_p[0] == 0.5
     assert jc.set_parameters([Parameter("mode", value="ik_only")])[0].successful and jc.mode == "ik_only"
     assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
     assert ospc.set_parameters([Parameter("x_sat", value=[0.01] * 6)])[0].successful

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import cable
 from .filters import LowPass
 from .pi_control import PIController
 
@@ -34,6 +35,7 @@ class CFCParams:
     F_sat_p: float = 200.0       # N, positive saturation of the PI part (ASSUMPTION per robot)
     widen_band: float = 50.0     # N, distance to a force limit where widening starts
     widen_factor: float = 3.0    # -, saturation multiplier reached at the limit
+    stiffness_model: str = "nonlinear"   # K_l of (3.23): "linear" (thesis, (2.15)) or "nonlinear" (2.17)
 
     def validate(self) -> None:
         checks = {
@@ -44,6 +46,7 @@ class CFCParams:
             "F_sat_p": self.F_sat_p >= 0.0,
             "widen_band": self.widen_band > 0.0,
             "widen_factor": self.widen_factor >= 1.0,
+            "stiffness_model": self.stiffness_model in ("linear", "nonlinear"),
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -110,3 +113,55 @@ class CableForceController:
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
         self.dq_cfc = self.f_out / stiffness - self.dq_0            # (3.23)
         return self.dq_cfc
+
+
+class CableForceControl:
+    """The CFC stage of the control loop for one robot: the controller plus its stiffness model.
+
+    K_l of (3.23) is the thesis' linear k_spec / l_t (2.15), or (default) the secant of the robot
+    file's non-linear cable (2.16)-(2.17), so that K_l^-1 f_c,out is the elongation the cable
+    really needs; with the linear model the integrator must make up the difference, which on the
+    IPAnema 3's progressive 6 mm cable exceeds a few hundred newtons of saturation range. Δq_0 is
+    the elongation of the first measured forces (the encoder calibration's pre-tension) in the same
+    model, so that f = f_d commands no change. Disabled, the output is zero (IK-only control).
+    """
+
+    def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True):
+        self.robot = robot
+        self.controller = CableForceController(robot.m, params or CFCParams(), dt)
+        self.enabled = enabled
+        self.calibration: tuple[np.ndarray, np.ndarray] | None = None    # (f_0, l_t) at start-up
+
+    @property
+    def params(self) -> CFCParams:
+        return self.controller.params
+
+    def set_params(self, params: CFCParams, enabled: bool | None = None) -> None:
+        model_changed = params.stiffness_model != self.params.stiffness_model
+        self.controller.set_params(params)
+        if model_changed and self.calibration is not None:
+            self.controller.dq_0 = self._elongation(*self.calibration)
+        if enabled is not None and enabled != self.enabled:
+            self.enabled = enabled
+            self.controller.pi.reset()           # bumpless: the integrator starts from zero
+
+    def _stiffness(self, l_t):
+        if self.params.stiffness_model == "linear":
+            return self.robot.cable.k_spec_nominal / l_t                       # (2.15)
+        return lambda f_out: cable.stiffness(self.robot, np.maximum(f_out, 0.0), l_t)   # (2.17)
+
+    def _elongation(self, f, l_t) -> np.ndarray:
+        k_l = self._stiffness(l_t)
+        return f / (k_l(f) if callable(k_l) else k_l)
+
+    def update(self, f_d, f, theta, f_min, f_max) -> np.ndarray:
+        """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23)."""
+        if not self.enabled:
+            return np.zeros(self.robot.m)
+        l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
+        if self.calibration is None:
+            self.calibration = (np.array(f, dtype=float), l_t)
+        c = self.controller
+        if c.dq_0 is None:
+            c.reset(self._elongation(*self.calibration), f=f)
+        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max)

@@ -248,3 +248,31 @@ class ForwardKinematics:
                 if lam > _LAMBDA_MAX:
                     return FKResult(x, False, STALLED, it, math.sqrt(cost))
         return FKResult(x, False, MAX_ITERATIONS, self.max_iterations, math.sqrt(cost))
+
+
+class PoseEstimator:
+    """The forward kinematics stage of the control loop (Fig. 3.4, section 3.2).
+
+    Per period: the elastic FK (3.7)-(3.9) from θ and f, warm-started at x_d with the pulleys
+    frozen there, and the measured wrench w = -A^T(x) f (2.11). The start-up elongation Δq_0 is
+    taken from the first sample. A solve that does not converge keeps the last converged pose
+    (x_d before the first) and says so in ``result``.
+    """
+
+    def __init__(self, robot, pulleys: str = "frozen", max_iterations: int = 30, xtol: float = 1e-9):
+        self.robot = robot
+        self.solver = ForwardKinematics(robot, xtol=xtol, max_iterations=max_iterations)
+        self.pulleys = pulleys
+        self.dq_0: np.ndarray | None = None
+        self.x: np.ndarray | None = None
+        self.result: FKResult | None = None
+
+    def update(self, theta, f, x_d) -> tuple[np.ndarray, np.ndarray]:
+        """-> (x, w): the pose estimate and the wrench of the measured forces about its origin."""
+        if self.dq_0 is None:                                                 # (3.7) at start-up
+            self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, f, theta)
+        self.result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys)
+        if self.result.converged:
+            self.x = self.result.x
+        x = self.x if self.x is not None else np.asarray(x_d, dtype=float)
+        return x, -inverse_kinematics(self.robot, x).AT @ f                  # (2.11)

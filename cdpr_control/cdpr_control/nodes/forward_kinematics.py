@@ -5,7 +5,8 @@ warm start and the pose of the frozen pulley model of section 3.2); publishes ``
 (PoseStamped, x), ``platform/wrench`` (WrenchStamped, w about the platform origin, base frame) and
 ``forward_kinematics/diagnostics``. The elongation Δq_0 at start-up is taken from the first
 measured forces (3.7). A solve that does not converge is published with ``converged = false``
-(and reported on /diagnostics); the pose message then carries the last converged estimate.
+(and reported on /diagnostics); the pose message then carries the last converged estimate. The
+computation is :class:`cdpr_control.forward_kinematics.PoseEstimator`.
 """
 from __future__ import annotations
 
@@ -17,9 +18,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from sensor_msgs.msg import JointState
 
-from cdpr_control import cable
 from cdpr_control import forward_kinematics as fk
-from cdpr_control.kinematics import inverse_kinematics
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg, pose_to_msg, wrench_to_msg
@@ -45,10 +44,8 @@ PARAMS = [
 class ForwardKinematicsNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("forward_kinematics", **kwargs)
-        self.solver = fk.ForwardKinematics(self.robot)
+        self.estimator = fk.PoseEstimator(self.robot)
         self.params = ParameterSet(self, PARAMS, lambda v: None, self._apply)
-        self.dq_0: np.ndarray | None = None
-        self.x_last: np.ndarray | None = None
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
@@ -59,9 +56,10 @@ class ForwardKinematicsNode(CdprNode):
         }, primary="f", callback=self._cycle, mode=self.sync_mode)
 
     def _apply(self, v: dict) -> None:
-        self.pulleys = v["pulleys"]
-        self.solver.max_iterations = int(v["max_iterations"])
-        self.solver.xtol = float(v["xtol"])
+        e = self.estimator
+        e.pulleys = v["pulleys"]
+        e.solver.max_iterations = int(v["max_iterations"])
+        e.solver.xtol = float(v["xtol"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         theta = np.asarray(msgs["theta"].position, dtype=float)
@@ -75,10 +73,9 @@ class ForwardKinematicsNode(CdprNode):
             self.diag_pub.publish(diag)
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)
             return
-        if self.dq_0 is None:     # (3.7) at controller start-up
-            self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, f, theta)
         start = time.perf_counter()
-        result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys)
+        x, w = self.estimator.update(theta, f, x_d)
+        result = self.estimator.result
         diag.solve_time = time.perf_counter() - start
         diag.termination = TERMINATION[result.termination]
         diag.converged = result.converged
@@ -86,12 +83,9 @@ class ForwardKinematicsNode(CdprNode):
         diag.residual_norm = float(result.residual_norm)
         self.diag_pub.publish(diag)
         if result.converged:
-            self.x_last = result.x
             self.report(DiagnosticStatus.OK, "converged", stamp_ns=t_ns)
         else:
             self.report(DiagnosticStatus.WARN, f"not converged ({result.termination})", stamp_ns=t_ns)
-        x = self.x_last if self.x_last is not None else x_d
-        w = -inverse_kinematics(self.robot, x).AT @ f                  # (2.11)
         self.pose_pub.publish(PoseStamped(header=header, pose=pose_to_msg(x)))
         self.wrench_pub.publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))
 

@@ -1,0 +1,84 @@
+"""The control architecture of Fig. 3.4 as one object: the stages the nodes run, in one process.
+
+Per period: friction compensation (3.44) -> forward kinematics (3.7)-(3.9) and w = -A^T f ->
+force set-point (3.26)-(3.28) -> cable force control (3.19)-(3.23) and OSPC (3.16) -> safety ->
+joint command θ_d = IK{x_d + x_OSPC} - Δq_CFC (5.10). The ROS nodes wrap exactly these stage
+objects one per node; this class chains them directly, which is what the closed-loop tests, the
+benchmarks and offline studies use when the ROS transport is not the subject.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .cable_force_control import CableForceControl, CFCParams
+from .force_setpoint import ForceSetpoint, ForceSetpointParams
+from .forward_kinematics import PoseEstimator
+from .friction_compensation import FrictionCompensation, FrictionCompensationParams
+from .joint_command import JointCommand
+from .kinematics import inverse_kinematics
+from .ospc import OperationalSpacePositionController, OSPCParams
+from .safety import SafetyConfig, SafetyMonitor
+
+
+@dataclass
+class ControlLoopParams:
+    mode: str = "force_control"          # or "ik_only" (section 2.3.2)
+    cfc_enabled: bool = True
+    ospc_enabled: bool = True
+    cfc: CFCParams = field(default_factory=CFCParams)
+    ospc: OSPCParams = field(default_factory=OSPCParams)
+    force: ForceSetpointParams = field(default_factory=ForceSetpointParams)
+    friction: FrictionCompensationParams = field(default_factory=FrictionCompensationParams)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+
+
+@dataclass
+class LoopState:
+    """What one period computed (the content of the nodes' topics)."""
+
+    f: np.ndarray            # cable forces at the platform (friction-compensated)
+    x: np.ndarray            # pose estimate
+    w: np.ndarray            # measured wrench
+    f_d: np.ndarray          # force set-point
+    status: int              # force distribution status
+    dq_cfc: np.ndarray       # CFC output
+    x_ospc: np.ndarray       # OSPC output
+    theta_d: np.ndarray      # drive command
+    faults: list             # safety faults
+    fk_converged: bool
+
+
+class ControlLoop:
+    def __init__(self, robot, dt: float, params: ControlLoopParams | None = None):
+        p = params or ControlLoopParams()
+        self.robot, self.dt, self.params = robot, dt, p
+        self.friction = FrictionCompensation(robot, dt, p.friction)
+        self.estimator = PoseEstimator(robot)
+        self.force = ForceSetpoint(robot, dt, p.force)
+        self.cfc = CableForceControl(robot, dt, p.cfc, enabled=p.cfc_enabled)
+        self.ospc = OperationalSpacePositionController(p.ospc, dt)
+        self.monitor = SafetyMonitor(p.safety)
+        self.command = JointCommand(robot, dt)
+
+    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
+        """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
+        robot = self.robot
+        if self.command.theta_d is None:
+            self.command.reset(theta)
+        beta = inverse_kinematics(robot, x_d).beta
+        f = self.friction.update(F_s, theta, thetadot, beta)
+        x, w = self.estimator.update(theta, f, x_d)
+        dist = self.force.update(x_d, xdot_d, xddot_d, w)
+        dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
+        x_ospc = self.ospc.update(x_d, x) if self.params.ospc_enabled else np.zeros(6)
+        faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
+                                    fk_converged=self.estimator.result.converged)
+        hold = any(fault.holds for fault in faults)
+        if self.params.mode == "force_control":
+            theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)
+        else:
+            theta_d = self.command.update(x_d, hold=hold)
+        return LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
+                         self.estimator.result.converged)
