@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
-COMMANDS = ("demo", "robot", "bench")
+COMMANDS = ("demo", "robot", "bench", "topic", "param", "bag", "launch")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -25,6 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # ROS 2 discovery stays on this machine unless the user says otherwise
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     args = build_parser().parse_args(argv)
     try:
         return int(args.run(args) or 0)

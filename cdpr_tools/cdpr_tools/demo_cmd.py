@@ -1,55 +1,102 @@
 """``cdpr demo``: the project's main job.
 
-Target (issue 7): the IPAnema 3 Mini in the simulator runs a shipped G-code program through the
-whole node graph with OSPC + CFC and the QP at minimal tension, records a bag under bags/ and prints
-pose error, cable forces against limits, real-time factor and the bag path.
-
-Until every part exists, the demo runs the stages that are ready, in order, and names the ones
-that are missing; it never fakes a result.
+The IPAnema 3 Mini (or another robot) in the lockstep simulator runs a shipped G-code program
+through the whole node graph of Fig. 3.4 (graphs/closed_loop.yaml: OSPC + CFC, QP at minimal
+tension), composed in one process; every topic is recorded to a bag under bags/. Then it prints
+the pose error against the simulator's ground truth, the cable forces against their limits, the
+real-time factor and the bag path, and writes PNG plots next to the bag.
 """
 from __future__ import annotations
 
-import importlib.util
+import json
+import time
+from datetime import datetime
+from pathlib import Path
 
-import numpy as np
-
+from cdpr_control import programs
 from cdpr_control.robot import load_robot
 
-# (stage, module that must exist, issue that delivers it)
-STAGES = (
-    ("robot description", "cdpr_control.robot", 2),
-    ("G-code program and jerk-limited interpolation", "cdpr_control.interpolation", 6),
-    ("inverse kinematics along the program", "cdpr_control.kinematics", 3),
-    ("cable force distribution along the program", "cdpr_control.force_distribution", 4),
-    ("pybullet winch and platform simulator", "cdpr_sim.simulator", 5),
-    ("closed loop through the node graph, bag recording", "cdpr_tools.launch", 7),
-)
+GRAPH = Path(__file__).parent / "graphs" / "closed_loop.yaml"
+BAGS = Path(__file__).resolve().parents[2] / "bags"
+DEFAULT_PROGRAM = {"ipanema3_mini": "cuboid_mini", "ipanema3": "rectangle"}
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("demo", help="run the main job (simulated robot, G-code program, bag)")
-    p.add_argument("--robot", default="ipanema3_mini", help="robot name or YAML path")
+    p = sub.add_parser("demo", help="run the main job: a G-code program through the simulated closed loop, recorded")
+    p.add_argument("--robot", default="ipanema3_mini", help="shipped robot name (default: ipanema3_mini)")
+    p.add_argument("--program", help="G-code file or shipped program name (default: cuboid_mini for the Mini)")
+    p.add_argument("--mode", choices=("composed", "processes"), default="composed", help="how to run the graph")
+    p.add_argument("--controller", choices=("force_control", "ik_only"), default="force_control",
+                   help="joint_command mode: the thesis' force control or the IK-only reference")
+    p.add_argument("--output", help="bag directory (default: bags/demo_<robot>_<date-time>)")
+    p.add_argument("--timeout", type=float, default=900.0, help="wall-clock limit for the program [s]")
     p.set_defaults(run=run)
 
 
+def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
+    name = program or DEFAULT_PROGRAM.get(robot_name, "rectangle")
+    path = Path(name)
+    if path.suffix == ".gcode" or path.exists():
+        return path.stem, path.read_text()
+    return name, programs.read(name)
+
+
 def run(args) -> int:
+    from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
+    from cdpr_tools.program_client import run_program
+    from cdpr_tools.run_report import plot_run, run_data, summarize
+
     robot = load_robot(args.robot)
-    np.set_printoptions(precision=4, suppress=True)
-    print(f"[demo] robot: {robot.name}, {robot.m} cables, platform {robot.platform.mass} kg, "
-          f"f in [{robot.cable.f_min.min()}, {robot.cable.f_max.max()}] N")
-    missing = [(name, issue) for name, module, issue in STAGES if not _exists(module)]
-    ready = [name for name, module, _ in STAGES if _exists(module)]
-    print("[demo] stages ready: " + "; ".join(ready))
-    if missing:
-        print("[demo] not yet available, so the main job cannot run end to end:")
-        for name, issue in missing:
-            print(f"         - {name} (issue {issue})")
-        return 0
+    name, text = program_text(args.robot, args.program)
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    bag = Path(args.output) if args.output else BAGS / f"demo_{args.robot}_{stamp}"
+    description = load_launch_file(GRAPH, {"robot": args.robot})
+    description.record = RecordSpec(output=str(bag))
+    for spec in description.nodes:
+        if spec.module.endswith("joint_command"):
+            spec.parameters.append({"mode": args.controller})
+    print(f"[demo] {robot.name}: program {name!r} through the node graph ({args.mode}, {args.controller}), "
+          f"recording to {bag}", flush=True)
+    wall0 = time.perf_counter()
+    with Launcher(description, mode=args.mode) as launch:
+        result = run_program(text, name, timeout=args.timeout, feedback=_progress)
+        wall = time.perf_counter() - wall0
+        errors = list(launch.errors)
+    if errors:
+        print("[demo] the graph reported errors: " + "; ".join(errors))
+    if not result.success:
+        print(f"[demo] program failed: {result.message}")
+        return 1
+    from cdpr_tools.bag import BagReader
+
+    reader = BagReader(bag)
+    messages: dict[str, list] = {}
+    for m in reader.messages():
+        messages.setdefault(m.topic.lstrip("/"), []).append(m.msg)
+    data = run_data(messages)
+    summary = summarize(data)
+    summary.update({"program": name, "robot": args.robot, "controller": args.controller, "mode": args.mode,
+                    "program_duration_s": result.duration, "wall_time_s": wall,
+                    "real_time_factor": data.t[-1] / wall, "bag": str(bag)})
+    plots = plot_run(data, bag.parent, prefix=f"{bag.name}_")
+    (bag.parent / f"{bag.name}_summary.json").write_text(json.dumps(summary, indent=2))
+    print(f"[demo] pose error: RMS {summary['position_error_rms_mm']:.3f} mm, max {summary['position_error_max_mm']:.3f} mm; "
+          f"orientation RMS {summary['orientation_error_rms_deg']:.4f} deg, max {summary['orientation_error_max_deg']:.4f} deg")
+    print(f"[demo] cable forces: {summary['cable_force_min_N']:.2f} .. {summary['cable_force_max_N']:.2f} N "
+          f"(limits {summary['f_min_N']:.1f} .. {summary['f_max_N']:.1f} N; periods below f_min: "
+          f"{summary['samples_below_f_min']}, above f_max: {summary['samples_above_f_max']})")
+    print(f"[demo] {data.t[-1]:.2f} s simulated in {wall:.1f} s wall: real-time factor {summary['real_time_factor']:.2f}")
+    print(f"[demo] bag: {bag}")
+    print("[demo] plots: " + ", ".join(str(p) for p in plots))
     return 0
 
 
-def _exists(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        return False
+_reported = [-1]
+
+
+def _progress(line: int, progress: float) -> None:
+    """One line per 10 % of the program (feedback comes every few periods)."""
+    decile = int(10 * progress)
+    if decile > _reported[0]:
+        _reported[0] = decile
+        print(f"[demo] {100 * progress:5.1f} %  (line {line})", flush=True)

@@ -7,7 +7,6 @@ arguments of ``rclpy.node.Node`` (``parameter_overrides``, ``cli_args``, ``names
 """
 from __future__ import annotations
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from std_msgs.msg import Header
@@ -16,6 +15,7 @@ from cdpr_control.robot import load_robot
 
 from .parameters import ParamSpec
 from .qos import DIAGNOSTICS
+from .runner import run_node
 
 COMMON_PARAMS = (
     ParamSpec("robot", "ipanema3_mini", "robot name or path of its YAML description", read_only=True),
@@ -60,16 +60,5 @@ class CdprNode(Node):
 
 
 def spin_node(node_class, args=None) -> None:
-    """main() of a node module: spin one node until SIGINT."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = node_class(cli_args=None)
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    """main() of a node module: the node alone on an EventsExecutor until SIGINT/SIGTERM."""
+    run_node(node_class, args)

@@ -1,0 +1,188 @@
+"""BagReader: messages, types and timestamps out of rosbag2 MCAP bags.
+
+Reads what :class:`~cdpr_tools.bag.writer.BagWriter` and ``ros2 bag record -s mcap`` write: a
+bag directory (metadata.yaml and one or more .mcap files) or a single .mcap file. Messages come in
+receive-time (log time) order and deserialise lazily with the installed message classes.
+"""
+from __future__ import annotations
+
+import functools
+import heapq
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+import yaml
+from mcap.reader import make_reader
+from rclpy.serialization import deserialize_message
+
+from cdpr_tools.bag.qos import parse_profiles
+from cdpr_tools.message_convert import field_value, message_class
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    name: str
+    type: str
+    message_count: int
+    serialization_format: str
+    offered_qos_profiles: list
+    type_description_hash: str
+
+
+@dataclass
+class BagMessage:
+    """One recorded message; ``msg`` deserialises ``data`` on first use."""
+    topic: str
+    type: str
+    log_time_ns: int  # receive time at the recorder (sim time if it ran on /clock)
+    publish_time_ns: int  # source timestamp from the middleware, or the log time
+    data: bytes  # CDR, encapsulation header included
+
+    @functools.cached_property
+    def msg(self):
+        return deserialize_message(self.data, message_class(self.type))
+
+
+class BagReader:
+    """Open a bag directory or .mcap file for reading.
+
+    >>> bag = BagReader("bags/run1")
+    >>> bag.topics["/joint_states"].type
+    'sensor_msgs/msg/JointState'
+    >>> for m in bag.messages(["/joint_states"]):
+    ...     print(m.log_time_ns, m.msg.position)
+    >>> t, position = bag.series("/joint_states", "position")
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.files = _mcap_files(self.path)
+        self._channels: list[dict[int, tuple[str, str]]] = []  # per file: channel id -> (topic, type)
+        topics: dict[str, dict] = {}
+        self.start_time_ns: int | None = None
+        self.end_time_ns: int | None = None
+        self.message_count = 0
+        embedded: dict | None = None
+        for file in self.files:
+            with open(file, "rb") as stream:
+                reader = make_reader(stream)
+                summary = reader.get_summary()
+                if summary is None:
+                    raise ValueError(f"{file}: no MCAP summary (was the recording cut off? "
+                                     "`mcap recover` repairs such files)")
+                channels = {}
+                for cid, ch in summary.channels.items():
+                    schema = summary.schemas.get(ch.schema_id)
+                    type_name = schema.name if schema is not None else ""
+                    channels[cid] = (ch.topic, type_name)
+                    entry = topics.setdefault(ch.topic, {
+                        "type": type_name, "count": 0, "format": ch.message_encoding,
+                        "qos": parse_profiles(ch.metadata.get("offered_qos_profiles")),
+                        "hash": ch.metadata.get("topic_type_hash", "")})
+                    if summary.statistics is not None:
+                        entry["count"] += summary.statistics.channel_message_counts.get(cid, 0)
+                self._channels.append(channels)
+                stats = summary.statistics
+                if stats is not None and stats.message_count:
+                    self.message_count += stats.message_count
+                    self.start_time_ns = _min(self.start_time_ns, stats.message_start_time)
+                    self.end_time_ns = max(self.end_time_ns or 0, stats.message_end_time)
+                if embedded is None:
+                    embedded = _embedded_metadata(reader)
+        self.topics = {name: TopicInfo(name, e["type"], e["count"], e["format"], e["qos"], e["hash"])
+                       for name, e in sorted(topics.items())}
+        self.metadata = _directory_metadata(self.path) or embedded or {}
+
+    @property
+    def duration_ns(self) -> int:
+        return (self.end_time_ns - self.start_time_ns) if self.message_count else 0
+
+    def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[BagMessage]:
+        """Messages in log-time order, optionally only ``topics`` and log times in [start_ns, end_ns)."""
+        wanted = None
+        if topics is not None:
+            wanted = set(topics)
+            unknown = wanted - set(self.topics)
+            if unknown:
+                raise ValueError(f"bag {self.path} has no topic {', '.join(sorted(unknown))}; "
+                                 f"topics: {', '.join(self.topics) or '(none)'}")
+        streams = [self._file_messages(i, wanted, start_ns, end_ns) for i in range(len(self.files))]
+        yield from heapq.merge(*streams, key=lambda m: m.log_time_ns) if len(streams) > 1 else streams[0]
+
+    def _file_messages(self, index: int, wanted, start_ns, end_ns) -> Iterator[BagMessage]:
+        channels = self._channels[index]
+        with open(self.files[index], "rb") as stream:
+            reader = make_reader(stream)
+            for _, channel, message in reader.iter_messages(
+                    topics=sorted(wanted) if wanted is not None else None,
+                    starting_at=start_ns, ending_before=end_ns, log_time_order=True):
+                topic, type_name = channels[channel.id]
+                yield BagMessage(topic, type_name, message.log_time, message.publish_time, message.data)
+
+    def series(self, topic: str, *fields: str, stamp: str = "log") -> tuple[np.ndarray, ...]:
+        """Time series of fields of one topic: ``(t, values_1, ...)`` as numpy arrays.
+
+        ``t`` is in seconds: log time since the bag's start (float64 keeps ns resolution that way),
+        or with ``stamp="header"`` the messages' ``header.stamp`` as is (sim time starts near 0).
+        Fields are dotted paths (``"wrench.force.x"``); array fields give one row per message.
+        """
+        if stamp not in ("log", "header"):
+            raise ValueError(f"stamp must be 'log' or 'header', got {stamp!r}")
+        times, columns = [], [[] for _ in fields]
+        for m in self.messages([topic]):
+            msg = m.msg
+            if stamp == "header":
+                s = field_value(msg, "header.stamp")
+                times.append(s.sec + 1e-9 * s.nanosec)
+            else:
+                times.append(1e-9 * (m.log_time_ns - self.start_time_ns))
+            for column, path in zip(columns, fields):
+                column.append(np.asarray(field_value(msg, path)))
+        return (np.asarray(times, dtype=float), *(_stack(c, topic, p) for c, p in zip(columns, fields)))
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    if path.is_file() and path.suffix == ".mcap":
+        return [path]
+    if path.is_dir():
+        metadata = _directory_metadata(path)
+        if metadata and metadata.get("relative_file_paths"):
+            files = [path / Path(p).name for p in metadata["relative_file_paths"]]
+        else:
+            files = sorted(path.glob("*.mcap"))
+        missing = [f for f in files if not f.is_file()]
+        if missing:
+            raise FileNotFoundError(f"bag {path}: missing {', '.join(map(str, missing))}")
+        if files:
+            return files
+    raise FileNotFoundError(f"no bag at {path}: expected a bag directory with .mcap files or an .mcap file")
+
+
+def _directory_metadata(path: Path) -> dict | None:
+    meta = path / "metadata.yaml" if path.is_dir() else None
+    if meta is None or not meta.is_file():
+        return None
+    return (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information")
+
+
+def _embedded_metadata(reader) -> dict | None:
+    for record in reader.iter_metadata():
+        if record.name == "rosbag2" and "serialized_metadata" in record.metadata:
+            return yaml.safe_load(record.metadata["serialized_metadata"])
+    return None
+
+
+def _min(a: int | None, b: int) -> int:
+    return b if a is None else min(a, b)
+
+
+def _stack(values: list, topic: str, path: str) -> np.ndarray:
+    try:
+        return np.stack(values) if values else np.empty(0)
+    except ValueError:
+        raise ValueError(f"{topic} {path}: array length changes between messages; "
+                         "iterate with messages() instead") from None

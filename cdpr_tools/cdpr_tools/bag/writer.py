@@ -1,0 +1,211 @@
+"""BagWriter: ROS messages into one MCAP file in the rosbag2 layout.
+
+What ``ros2 bag record -s mcap`` writes, so that ``ros2 bag info/play``, Foxglove, ``mcap_ros2``
+and ``rosbags`` read it: profile ``ros2``; one schema per type (``ros2msg``, nested definitions
+appended, see :mod:`.schema`); one channel per topic (encoding ``cdr``, metadata
+``offered_qos_profiles`` and ``topic_type_hash``); CDR payloads cut to their encoding
+(:mod:`.cdr`); chunks with message indexes, statistics and summary; and a ``rosbag2`` metadata
+record holding the bag metadata (version 9). A bag directory also gets rosbag2's metadata.yaml.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+from mcap.writer import CompressionType, IndexType, Writer
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
+
+from cdpr_tools.bag.cdr import trimmed
+from cdpr_tools.bag.qos import dump_profiles, qos_to_dict
+from cdpr_tools.bag.schema import ENCODING, message_definition, type_hash
+from cdpr_tools.message_convert import type_name_of
+
+METADATA_VERSION = 9  # rosbag2 in ROS 2 Jazzy
+SERIALIZATION_FORMAT = "cdr"
+_COMPRESSION = {"none": CompressionType.NONE, "zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}
+
+
+@dataclass
+class _Channel:
+    id: int
+    topic: str
+    type: str
+    qos_profiles: list[dict]
+    type_hash: str
+    count: int = 0
+
+
+@dataclass
+class _Times:
+    start: int | None = None
+    end: int | None = None
+
+    def add(self, t: int) -> None:
+        self.start = t if self.start is None else min(self.start, t)
+        self.end = t if self.end is None else max(self.end, t)
+
+
+class BagWriter:
+    """Write ROS messages to a bag.
+
+    ``path`` ending in ``.mcap``: that one file. Any other path: a rosbag2 bag directory
+    ``path/`` with ``path/<name>_0.mcap`` and ``path/metadata.yaml``, as ``ros2 bag record -s mcap
+    -o path`` makes it. Existing bags are never overwritten.
+
+    >>> with BagWriter("bags/run1") as bag:
+    ...     bag.write("/chatter", "std_msgs/msg/String", String(data="hi"), log_time_ns=t)
+    """
+
+    def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20):
+        path = Path(path)
+        if path.suffix == ".mcap":
+            self.directory, self.mcap_path = None, path
+        else:
+            self.directory, self.mcap_path = path, path / f"{path.name}_0.mcap"
+        for existing in (self.directory, self.mcap_path):
+            if existing is not None and existing.exists():
+                raise FileExistsError(f"{existing} exists already; choose another bag name")
+        if compression not in _COMPRESSION:
+            raise ValueError(f"compression must be one of {', '.join(_COMPRESSION)}, got {compression!r}")
+        self.mcap_path.parent.mkdir(parents=True, exist_ok=True)
+        self.compression = compression
+        self._stream = open(self.mcap_path, "wb")
+        self._mcap = Writer(self._stream, chunk_size=chunk_size, compression=_COMPRESSION[compression],
+                            index_types=IndexType.ALL, use_chunking=True, use_statistics=True,
+                            use_summary_offsets=True)
+        self._mcap.start(profile="ros2", library="cdpr_tools bag writer (rosbag2 layout)")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, _Channel] = {}
+        self._times = _Times()
+        self._lock = threading.Lock()
+        self._closed = False
+
+    # -- topics ------------------------------------------------------------------------------
+    def add_topic(self, topic: str, type_name: str, qos: Any = None, type_description_hash: str | None = None) -> None:
+        """Declare a topic before (or without) writing to it.
+
+        ``qos``: the offered QoS, a ``QoSProfile``, a rosbag2 profile dict or a list of either (one
+        per publisher); ``type_description_hash``: ``RIHS01_...``, by default from the installed type.
+        """
+        with self._lock:
+            self._add_topic(topic, type_name, qos, type_description_hash)
+
+    def _add_topic(self, topic: str, type_name: str, qos: Any, type_description_hash: str | None) -> _Channel:
+        if self._closed:
+            raise ValueError(f"bag {self.path} is closed")
+        if topic in self._channels:
+            channel = self._channels[topic]
+            if channel.type != type_name:
+                raise ValueError(f"topic {topic} is recorded as {channel.type}, not {type_name}")
+            return channel
+        if type_name not in self._schemas:
+            self._schemas[type_name] = self._mcap.register_schema(
+                name=type_name, encoding=ENCODING, data=message_definition(type_name).encode())
+        profiles = _profiles(qos)
+        digest = type_hash(type_name) if type_description_hash is None else type_description_hash
+        channel_id = self._mcap.register_channel(
+            topic=topic, message_encoding=SERIALIZATION_FORMAT, schema_id=self._schemas[type_name],
+            metadata={"offered_qos_profiles": dump_profiles(profiles), "topic_type_hash": digest})
+        channel = _Channel(channel_id, topic, type_name, profiles, digest)
+        self._channels[topic] = channel
+        return channel
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Topic -> type of everything declared so far."""
+        return {t: c.type for t, c in self._channels.items()}
+
+    # -- messages ----------------------------------------------------------------------------
+    def write(self, topic: str, type_name: str | None, data: Any, log_time_ns: int,
+              qos: Any = None, publish_time_ns: int | None = None) -> None:
+        """Write one message: ``data`` is a message instance or its CDR bytes.
+
+        ``log_time_ns`` is the receive time (sim time when the graph runs on /clock), which orders
+        the bag; ``type_name`` may be None for a message instance; ``qos`` is used on the topic's
+        first message only (see :meth:`add_topic`).
+        """
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            type_name = type_name or type_name_of(data)
+            data = serialize_message(data)
+        with self._lock:
+            channel = self._channels.get(topic)
+            if channel is None or (type_name is not None and type_name != channel.type):
+                if type_name is None:
+                    raise ValueError(f"first message on {topic}: give its type name")
+                channel = self._add_topic(topic, type_name, qos, None)
+            data = trimmed(channel.type, data)
+            channel.count += 1
+            self._times.add(log_time_ns)
+            self._mcap.add_message(channel.id, log_time_ns, bytes(data),
+                                   log_time_ns if publish_time_ns is None else publish_time_ns, channel.count)
+
+    @property
+    def message_count(self) -> int:
+        return sum(c.count for c in self._channels.values())
+
+    @property
+    def path(self) -> Path:
+        """What to hand to readers and ``ros2 bag``: the bag directory, or the single .mcap file."""
+        return self.directory or self.mcap_path
+
+    # -- closing -----------------------------------------------------------------------------
+    def metadata(self) -> dict:
+        """rosbag2's bag metadata (the mapping under ``rosbag2_bagfile_information``)."""
+        start = self._times.start or 0
+        duration = (self._times.end - start) if self._times.end is not None else 0
+        name = self.mcap_path.name
+        return {
+            "version": METADATA_VERSION,
+            "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": self.message_count,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": c.topic, "type": c.type, "serialization_format": SERIALIZATION_FORMAT,
+                                    "offered_qos_profiles": c.qos_profiles, "type_description_hash": c.type_hash},
+                 "message_count": c.count}
+                for c in self._channels.values()],
+            "compression_format": "",
+            "compression_mode": "",
+            "relative_file_paths": [name],
+            "files": [{"path": name, "starting_time": {"nanoseconds_since_epoch": start},
+                       "duration": {"nanoseconds": duration}, "message_count": self.message_count}],
+            "custom_data": None,
+            "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
+        }
+
+    def close(self) -> None:
+        """Finish the MCAP file (summary, indexes) and write metadata.yaml; safe to call twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            metadata = self.metadata()
+            self._mcap.add_metadata("rosbag2", {"serialized_metadata": _yaml(metadata),
+                                                "ROS_DISTRO": metadata["ros_distro"]})
+            self._mcap.finish()
+            self._stream.close()
+            if self.directory is not None:
+                (self.directory / "metadata.yaml").write_text(_yaml({"rosbag2_bagfile_information": metadata}))
+
+    def __enter__(self) -> "BagWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _profiles(qos: Any) -> list[dict]:
+    if qos is None:
+        return []
+    items: Iterable = qos if isinstance(qos, (list, tuple)) else [qos]
+    return [qos_to_dict(q) if isinstance(q, QoSProfile) else dict(q) for q in items]
+
+
+def _yaml(data: dict) -> str:
+    return yaml.safe_dump(data, sort_keys=False, default_flow_style=False)

@@ -1,0 +1,155 @@
+"""``cdpr bag record|info|play``: rosbag2-compatible MCAP bags without ros2cli.
+
+The bags are what ``ros2 bag record -s mcap`` writes (a directory with ``<name>_0.mcap`` and
+metadata.yaml), so ``ros2 bag info/play``, Foxglove, ``rosbags`` and ``mcap_ros2`` read them, and
+these commands read bags from ``ros2 bag`` in turn.
+"""
+from __future__ import annotations
+
+import argparse
+import threading
+from datetime import datetime, timezone
+
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
+from cdpr_tools.bag.reader import BagReader
+from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
+from cdpr_control.nodes.runner import spin, stop_on_signals
+from cdpr_tools.ros_graph import new_context
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("bag", help="record, inspect and play bags (rosbag2 MCAP layout)",
+                       description=__doc__.replace("``", ""), formatter_class=argparse.RawDescriptionHelpFormatter)
+    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
+
+    r = verbs.add_parser("record", help="record topics to a bag until Ctrl-C",
+                         description="Record topics to a bag directory until Ctrl-C (or --stop-after). "
+                                     "Topics appearing later are picked up as they get publishers.")
+    r.add_argument("topics", nargs="*", help="topics to record (default with -a: all)")
+    r.add_argument("-a", "--all", action="store_true", help="record every topic (the default without TOPICS)")
+    r.add_argument("-o", "--output", help="bag directory, or a path ending in .mcap for a single file "
+                                          "(default: bags/rosbag2_<date>-<time>)")
+    r.add_argument("-x", "--exclude", default="", help="regular expression of topics not to record")
+    r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
+    r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
+    r.add_argument("--stop-after", type=float, metavar="SEC", help="stop recording after SEC seconds")
+    r.set_defaults(run=run_record)
+
+    i = verbs.add_parser("info", help="print a bag's duration, topics, types and counts",
+                         description="Print what a bag holds, as `ros2 bag info` does.")
+    i.add_argument("bag", help="bag directory or .mcap file")
+    i.set_defaults(run=run_info)
+
+    y = verbs.add_parser("play", help="publish a bag's messages again",
+                         description="Publish the messages of a bag with their recorded types, QoS and "
+                                     "relative timing.")
+    y.add_argument("bag", help="bag directory or .mcap file")
+    y.add_argument("-r", "--rate", type=float, default=1.0, help="playback speed factor (default 1.0)")
+    y.add_argument("--clock", type=float, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
+                   help=f"publish /clock from the bag time at HZ (default {DEFAULT_CLOCK_HZ:g} Hz when given)")
+    y.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
+    y.add_argument("--start-offset", type=float, default=0.0, metavar="SEC", help="start SEC seconds into the bag")
+    y.add_argument("-l", "--loop", action="store_true", help="play the bag again and again until Ctrl-C")
+    y.add_argument("-d", "--delay", type=float, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
+    y.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SEC",
+                   help="wait up to SEC seconds until every topic has a subscriber")
+    y.set_defaults(run=run_play)
+
+
+def run_record(args) -> int:
+    if args.all and args.topics:
+        raise ValueError("give either -a/--all or topics, not both")
+    overrides = [Parameter("output", value=args.output or default_bag_name()),
+                 Parameter("exclude", value=args.exclude),
+                 Parameter("include_hidden_topics", value=args.include_hidden_topics),
+                 Parameter("use_sim_time", value=args.use_sim_time)]
+    if args.topics:
+        overrides.append(Parameter("topics", value=list(args.topics)))
+    context = new_context()
+    recorder = None
+    stop = threading.Event()
+    try:
+        with stop_on_signals(stop):
+            recorder = BagRecorder(context=context, parameter_overrides=overrides)
+            executor = EventsExecutor(context=context)
+            executor.add_node(recorder)
+            if args.stop_after is not None:
+                timer = threading.Timer(args.stop_after, stop.set)
+                timer.daemon = True
+                timer.start()
+            print(f"recording to {recorder.writer.path} (Ctrl-C to stop)", flush=True)
+            spin(executor, stop)
+    finally:
+        stop.set()
+        if recorder is not None:
+            recorder.destroy_node()
+            print(f"bag {recorder.writer.path}: {recorder.writer.message_count} messages on "
+                  f"{len(recorder.writer.topics)} topics")
+        context.try_shutdown()
+    return 0
+
+
+def run_info(args) -> int:
+    bag = BagReader(args.bag)
+    print(format_info(bag))
+    return 0
+
+
+def format_info(bag: BagReader) -> str:
+    """The summary `ros2 bag info` prints."""
+    size = sum(f.stat().st_size for f in bag.files)
+    lines = [
+        f"Files:             {', '.join(f.name for f in bag.files)}",
+        f"Bag size:          {_size(size)}",
+        "Storage id:        mcap",
+        f"ROS Distro:        {bag.metadata.get('ros_distro', 'unknown')}",
+        f"Duration:          {bag.duration_ns / 1e9:.9f}s",
+        f"Start:             {_stamp(bag.start_time_ns)}",
+        f"End:               {_stamp(bag.end_time_ns)}",
+        f"Messages:          {bag.message_count}",
+    ]
+    topics = [f"Topic: {t.name} | Type: {t.type} | Count: {t.message_count} | "
+              f"Serialization Format: {t.serialization_format}" for t in bag.topics.values()]
+    lines.append("Topic information: " + ("\n" + " " * 19).join(topics or ["(none)"]))
+    return "\n".join(lines)
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{n} B"
+        n /= 1024
+
+
+def _stamp(ns: int | None) -> str:
+    if ns is None:
+        return "(no messages)"
+    wall = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return f"{wall:%b %d %Y %H:%M:%S}.{nsec:09d} ({sec}.{nsec:09d})"
+
+
+def run_play(args) -> int:
+    bag = BagReader(args.bag)
+    context = new_context()
+    stop = threading.Event()
+    try:
+        with stop_on_signals(stop):
+            node = Node("bag_player", context=context, start_parameter_services=False)
+            player = BagPlayer(node, bag, rate=args.rate, topics=args.topics, start_offset=args.start_offset,
+                               clock_hz=args.clock, loop=args.loop)
+            if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(args.wait_for_subscribers, stop):
+                print("not every topic has a subscriber; playing anyway", flush=True)
+            if args.delay > 0:
+                stop.wait(args.delay)
+            print(f"playing {bag.path}: {len(player.publishers)} topics, {bag.duration_ns / 1e9:.3f} s "
+                  f"at rate {args.rate:g}" + (f", /clock at {args.clock:g} Hz" if args.clock else ""), flush=True)
+            count = player.play(stop)
+        print(f"published {count} messages" + (" (stopped)" if stop.is_set() else ""))
+    finally:
+        context.try_shutdown()
+    return 0

@@ -1,0 +1,410 @@
+"""The launcher: start a node graph from a YAML description, composed or one process per node.
+
+``launch``/``launch_ros`` are not on PyPI, so the project starts its graphs itself. A graph is a
+list of nodes (a Python module following the node convention of docs/tools.md, or a console-script
+entry point) with name, namespace, parameters (inline or standard parameter files) and
+remappings. Every node gets the same ``--ros-args`` in both modes:
+
+- ``composed``: one process, every node built with ``cli_args=<its ros args>`` in one context and
+  spun by one ``EventsExecutor`` (about 17 us a hop);
+- ``processes``: one subprocess per node, ``main([module, --ros-args ...])``; DDS connects them, so
+  they may as well run on other machines.
+
+Optionally every topic is recorded to a bag meanwhile. ``stop()`` (Ctrl-C in ``cdpr launch``)
+ends everything cleanly: executors stop, nodes are destroyed, children get SIGINT (then SIGTERM,
+then SIGKILL if they hang), the bag is closed.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib
+import importlib.metadata
+import inspect
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from rclpy.context import Context
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
+from cdpr_control.nodes.runner import spin
+from cdpr_tools.ros_graph import keep_discovery_local, new_context
+
+MODES = ("composed", "processes")
+STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SIGTERM
+# child process: import the node module and call its main([module, --ros-args, ...])
+_BOOTSTRAP = ("import importlib, sys; "
+              "sys.exit(getattr(importlib.import_module(sys.argv[1]), sys.argv[2])([sys.argv[1]] + sys.argv[3:]))")
+_SUBSTITUTION = re.compile(r"\$\((arg|env)\s+([A-Za-z_][\w]*)(?:\s+([^)]*))?\)")
+
+
+@dataclass
+class NodeSpec:
+    """One node of a graph; ``module`` (dotted path) or ``entry_point`` (console script name)."""
+    module: str | None = None
+    entry_point: str | None = None
+    name: str | None = None  # node name; default: the one the class gives itself
+    namespace: str | None = None
+    parameters: list = field(default_factory=list)  # mappings (inline) and parameter file paths, in order
+    remappings: dict = field(default_factory=dict)  # from -> to
+    ros_args: list = field(default_factory=list)  # further --ros-args arguments, e.g. [--log-level, debug]
+    required: bool = False  # its end (process exit) ends the whole launch
+
+    def target(self) -> tuple[str, str]:
+        """(module, main function name) to run."""
+        if bool(self.module) == bool(self.entry_point):
+            raise ValueError(f"node {self.label}: give exactly one of module or entry_point")
+        if self.module:
+            return self.module, "main"
+        found = importlib.metadata.entry_points(group="console_scripts", name=self.entry_point)
+        if not found:
+            raise LookupError(f"node {self.label}: no console script {self.entry_point!r} is installed")
+        module, _, func = next(iter(found)).value.partition(":")
+        return module.strip(), (func.strip() or "main")
+
+    @property
+    def label(self) -> str:
+        base = self.name or (self.module or self.entry_point or "?").rpartition(".")[2]
+        return f"{(self.namespace or '').strip('/')}/{base}".lstrip("/")
+
+
+@dataclass
+class RecordSpec:
+    """Record topics to a bag while the graph runs (see :class:`~cdpr_tools.bag.recorder.BagRecorder`)."""
+    output: str | None = None
+    topics: list = field(default_factory=list)  # empty: every topic
+    exclude: str = ""
+    include_hidden_topics: bool = False
+
+
+@dataclass
+class LaunchDescription:
+    nodes: list
+    mode: str = "composed"
+    parameters: dict = field(default_factory=dict)  # given to every node first, e.g. {use_sim_time: true}
+    record: RecordSpec | None = None
+    source: Path | None = None  # the launch file, for messages and relative paths
+
+
+# -- launch files ---------------------------------------------------------------------------------
+_TOP_KEYS = {"arguments", "mode", "parameters", "record", "nodes"}
+_NODE_KEYS = {"module", "entry_point", "name", "namespace", "parameters", "remappings", "ros_args", "required"}
+_RECORD_KEYS = {"output", "topics", "exclude", "include_hidden_topics"}
+
+
+def load_launch_file(path: str | os.PathLike, arguments: dict | None = None) -> LaunchDescription:
+    """Read a launch file (schema in docs/tools.md); ``arguments`` override its ``arguments:``."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"launch file {path} not found") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: a launch file is a mapping with a 'nodes' list")
+    _check_keys(data, _TOP_KEYS, str(path))
+    declared = {str(k): v for k, v in (data.get("arguments") or {}).items()}
+    unknown = sorted(set(arguments or {}) - set(declared))
+    if unknown:
+        raise ValueError(f"{path}: unknown argument {', '.join(unknown)}; arguments: {', '.join(declared) or '(none)'}")
+    values = {**declared, **(arguments or {})}
+    data = _substitute({k: v for k, v in data.items() if k != "arguments"}, values, path)
+    base = path.parent
+    nodes = []
+    for i, entry in enumerate(data.get("nodes") or []):
+        where = f"{path}: nodes[{i}]"
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: a node is a mapping with module or entry_point")
+        _check_keys(entry, _NODE_KEYS, where)
+        params = entry.get("parameters") or []
+        params = [params] if isinstance(params, dict) else list(params)
+        params = [p if isinstance(p, dict) else _existing(base / str(p), where) for p in params]
+        remaps = entry.get("remappings") or {}
+        if isinstance(remaps, list):  # also accept ["from:=to", ...]
+            remaps = dict(r.split(":=", 1) for r in remaps)
+        nodes.append(NodeSpec(module=entry.get("module"), entry_point=entry.get("entry_point"),
+                              name=entry.get("name"), namespace=entry.get("namespace"), parameters=params,
+                              remappings={str(k): str(v) for k, v in remaps.items()},
+                              ros_args=[str(a) for a in entry.get("ros_args") or []],
+                              required=bool(entry.get("required", False))))
+        nodes[-1].target()  # fail now on a missing entry point or an ambiguous spec
+    if not nodes:
+        raise ValueError(f"{path}: no nodes")
+    record = data.get("record")
+    if record is True:
+        record = {}
+    if isinstance(record, dict):
+        _check_keys(record, _RECORD_KEYS, f"{path}: record")
+        record = RecordSpec(**record)
+    elif record not in (None, False):
+        raise ValueError(f"{path}: record is true, false or a mapping of {', '.join(sorted(_RECORD_KEYS))}")
+    mode = data.get("mode", "composed")
+    if mode not in MODES:
+        raise ValueError(f"{path}: mode must be one of {', '.join(MODES)}, got {mode!r}")
+    return LaunchDescription(nodes=nodes, mode=mode, parameters=dict(data.get("parameters") or {}),
+                             record=record or None, source=path)
+
+
+def _check_keys(mapping: dict, allowed: set, where: str) -> None:
+    unknown = sorted(set(mapping) - allowed)
+    if unknown:
+        raise ValueError(f"{where}: unknown key {', '.join(map(str, unknown))}; allowed: {', '.join(sorted(allowed))}")
+
+
+def _existing(path: Path, where: str) -> str:
+    if not path.is_file():
+        raise FileNotFoundError(f"{where}: parameter file {path} not found")
+    return str(path)
+
+
+def _substitute(value, arguments: dict, path: Path):
+    """Replace ``$(arg NAME)`` and ``$(env NAME [default])`` in every string (typed if alone)."""
+    if isinstance(value, dict):
+        return {k: _substitute(v, arguments, path) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_substitute(v, arguments, path) for v in value]
+    if not isinstance(value, str) or "$(" not in value:
+        return value
+
+    def replace(match: re.Match) -> str:
+        kind, name, default = match.groups()
+        if kind == "arg":
+            if name not in arguments:
+                raise ValueError(f"{path}: $(arg {name}) is not declared under arguments")
+            return str(arguments[name])
+        if name in os.environ or default is not None:
+            return os.environ.get(name, default)
+        raise ValueError(f"{path}: environment variable {name} is not set and $(env {name}) has no default")
+
+    full = _SUBSTITUTION.fullmatch(value.strip())
+    text = _SUBSTITUTION.sub(replace, value)
+    return yaml.safe_load(text) if full and text.strip() else text
+
+
+# -- the arguments every node gets ------------------------------------------------------------------
+def ros_arguments(spec: NodeSpec, common: dict, tmpdir: Path) -> list[str]:
+    """``--ros-args`` for one node: remaps, then parameters (common, then the node's, in order)."""
+    args = ["--ros-args"]
+    if spec.name:
+        args += ["-r", f"__node:={spec.name}"]
+    if spec.namespace:
+        args += ["-r", f"__ns:=/{spec.namespace.strip('/')}"]
+    for src, dst in spec.remappings.items():
+        args += ["-r", f"{src}:={dst}"]
+    for params in ([common] if common else []) + list(spec.parameters):
+        if isinstance(params, dict):  # inline: through a parameter file, so YAML types carry over
+            fd, name = tempfile.mkstemp(prefix="params_", suffix=".yaml", dir=tmpdir)
+            with os.fdopen(fd, "w") as f:
+                yaml.safe_dump({"/**": {"ros__parameters": params}}, f)
+            params = name
+        args += ["--params-file", str(params)]
+    return args + list(spec.ros_args)
+
+
+def node_class(module_name: str) -> type:
+    """The node class a module defines (the one most-derived ``rclpy.node.Node`` subclass)."""
+    module = importlib.import_module(module_name)
+    classes = [c for c in vars(module).values()
+               if inspect.isclass(c) and issubclass(c, Node) and c.__module__ == module.__name__]
+    leaves = [c for c in classes if not any(o is not c and issubclass(o, c) for o in classes)]
+    if len(leaves) != 1:
+        found = ", ".join(c.__name__ for c in leaves) or "none"
+        raise LookupError(f"module {module_name} must define exactly one node class (rclpy Node subclass); found {found}")
+    return leaves[0]
+
+
+# -- running --------------------------------------------------------------------------------------
+class Launcher:
+    """Start, watch and stop a graph.
+
+    >>> with Launcher(load_launch_file("graph.yaml")) as launch:
+    ...     launch.wait()            # until Ctrl-C, stop(), or the graph ends by itself
+    """
+
+    def __init__(self, description: LaunchDescription, mode: str | None = None):
+        self.description = description
+        self.mode = mode or description.mode
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        self.nodes: list[Node] = []  # composed mode: the node objects
+        self.processes: dict[str, subprocess.Popen] = {}  # processes mode: label -> child
+        self.recorder: BagRecorder | None = None
+        self.errors: list[str] = []
+        self._stop = threading.Event()
+        self._done = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._contexts: list[Context] = []
+        self._tmpdir = tempfile.TemporaryDirectory(prefix="cdpr_launch_")
+        self._output_lock = threading.Lock()
+        self._started = self._stopped = False
+
+    def start(self) -> "Launcher":
+        if self._started:
+            raise RuntimeError("launcher already started")
+        self._started = True
+        keep_discovery_local()  # children inherit it
+        try:
+            if self.mode == "processes":
+                self._start_processes()  # before any thread of ours: children fork from a quiet parent
+            else:
+                self._start_composed()
+            if self.description.record is not None:
+                self._start_recorder(self.description.record)
+            for thread in self._threads:
+                thread.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def _start_composed(self) -> None:
+        context = self._new_context()
+        executor = EventsExecutor(context=context)
+        for spec in self.description.nodes:
+            module, _ = spec.target()
+            cls = node_class(module)
+            try:
+                node = cls(context=context, cli_args=ros_arguments(spec, self.description.parameters,
+                                                                    Path(self._tmpdir.name)))
+            except Exception as exc:
+                raise RuntimeError(f"node {spec.label} ({module}) failed to start: {exc}") from exc
+            self.nodes.append(node)
+            executor.add_node(node)
+        self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "graph"),
+                                              name="cdpr-launch-graph", daemon=True))
+
+    def _start_processes(self) -> None:
+        # children import what the launcher can import (its sys.path), and print as they go
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), "PYTHONUNBUFFERED": "1"}
+        for spec in self.description.nodes:
+            module, func = spec.target()
+            cmd = [sys.executable, "-c", _BOOTSTRAP, module, func,
+                   *ros_arguments(spec, self.description.parameters, Path(self._tmpdir.name))]
+            label = spec.label
+            while label in self.processes:
+                label += "'"
+            self.processes[label] = subprocess.Popen(
+                cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                text=True, errors="replace",
+                start_new_session=True,  # Ctrl-C reaches the launcher only, which stops children in order
+                preexec_fn=_die_with_parent)
+        for (label, process), spec in zip(self.processes.items(), self.description.nodes):
+            self._threads.append(threading.Thread(target=self._watch, args=(label, process, spec.required),
+                                                  name=f"cdpr-launch-{label}", daemon=True))
+
+    def _start_recorder(self, record: RecordSpec) -> None:
+        context = self._new_context()
+        overrides = [Parameter("output", value=record.output or default_bag_name()),
+                     Parameter("exclude", value=record.exclude),
+                     Parameter("include_hidden_topics", value=bool(record.include_hidden_topics)),
+                     Parameter("use_sim_time", value=bool(self.description.parameters.get("use_sim_time", False)))]
+        if record.topics:
+            overrides.append(Parameter("topics", value=[str(t) for t in record.topics]))
+        self.recorder = BagRecorder(context=context, parameter_overrides=overrides)
+        executor = EventsExecutor(context=context)
+        executor.add_node(self.recorder)
+        self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "recorder"),
+                                              name="cdpr-launch-recorder", daemon=True))
+
+    def _new_context(self) -> Context:
+        context = new_context()
+        self._contexts.append(context)
+        return context
+
+    def _run_executor(self, executor, what: str) -> None:
+        try:
+            spin(executor, self._stop)
+        except Exception as exc:  # a callback raised: report it and end the launch
+            self._print(what, traceback.format_exc().rstrip())
+            self.errors.append(f"{what}: {type(exc).__name__}: {exc}")
+        finally:
+            self._done.set()
+
+    def _watch(self, label: str, process: subprocess.Popen, required: bool) -> None:
+        for line in process.stdout:
+            self._print(label, line.rstrip("\n"))
+        code = process.wait()
+        if not self._stop.is_set():
+            self._print(label, f"process exited with code {code}")
+            if code != 0:
+                self.errors.append(f"{label}: exit code {code}")
+        if required or all(p.poll() is not None for p in self.processes.values()):
+            self._done.set()
+
+    def _print(self, label: str, text: str) -> None:
+        with self._output_lock:
+            for line in text.splitlines() or [""]:
+                print(f"[{label}] {line}", flush=True)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the graph ends by itself or :meth:`stop` is called; False on timeout."""
+        return self._done.wait(timeout)
+
+    def stop(self, timeout: float = STOP_TIMEOUT) -> None:
+        """Stop everything cleanly (idempotent); children that ignore SIGINT get SIGTERM, then SIGKILL."""
+        if self._stopped:
+            return
+        self._stopped = True
+        self._stop.set()
+        for process in self.processes.values():
+            _signal(process, signal.SIGINT)
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            for label, process in self.processes.items():
+                try:
+                    process.wait(timeout)
+                except subprocess.TimeoutExpired:
+                    self._print(label, f"did not stop within {timeout:g} s, sending {sig.name}")
+                    _signal(process, sig)
+            timeout = 3.0
+        for thread in self._threads:
+            if thread.is_alive():
+                thread.join(timeout)
+        for node in self.nodes:
+            node.destroy_node()
+        if self.recorder is not None:
+            self.recorder.destroy_node()
+        for context in self._contexts:
+            context.try_shutdown()
+        self._tmpdir.cleanup()
+        self._done.set()
+
+    @property
+    def exit_codes(self) -> dict[str, int | None]:
+        return {label: p.poll() for label, p in self.processes.items()}
+
+    def __enter__(self) -> "Launcher":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def _signal(process: subprocess.Popen, sig: signal.Signals) -> None:
+    if process.poll() is None:
+        try:
+            process.send_signal(sig)
+        except ProcessLookupError:
+            pass
+
+
+_PR_SET_PDEATHSIG = 1
+_libc = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: get SIGTERM if the launcher dies, so no node outlives it.
+
+    (Linux delivers it when the thread that started the child ends: start from the main thread.)
+    """
+    if _libc is not None:
+        _libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)

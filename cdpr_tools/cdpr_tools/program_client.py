@@ -1,0 +1,51 @@
+"""Running a G-code program on a running graph through the RunProgram action (the client side)."""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+from cdpr_msgs.action import RunProgram
+from rclpy.action import ActionClient
+from rclpy.experimental import EventsExecutor
+
+from cdpr_tools.ros_graph import new_context
+
+
+def run_program(text: str, name: str, action: str = "/run_program", timeout: float = 600.0,
+                feedback: Callable[[int, float], None] | None = None, server_timeout: float = 30.0):
+    """Send the program, wait for its end; returns the RunProgram result (success, message, ...)."""
+    context = new_context()
+    node = None
+    try:
+        from rclpy.node import Node
+
+        node = Node("cdpr_program_client", context=context)
+        executor = EventsExecutor(context=context)
+        executor.add_node(node)
+        client = ActionClient(node, RunProgram, action)
+        deadline = time.monotonic() + server_timeout
+        while not client.server_is_ready():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no RunProgram action server at {action} after {server_timeout:.0f} s")
+            executor.spin_once(timeout_sec=0.1)
+        on_feedback = None if feedback is None else (lambda m: feedback(m.feedback.line, m.feedback.progress))
+        sent = client.send_goal_async(RunProgram.Goal(program=text, name=name), feedback_callback=on_feedback)
+        _spin_until(executor, sent.done, time.monotonic() + server_timeout)
+        handle = sent.result()
+        if not handle.accepted:
+            raise RuntimeError(f"program {name!r} was rejected by {action}")
+        done = handle.get_result_async()
+        if not _spin_until(executor, done.done, time.monotonic() + timeout):
+            handle.cancel_goal_async()
+            raise TimeoutError(f"program {name!r} did not finish within {timeout:.0f} s")
+        return done.result().result
+    finally:
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def _spin_until(executor, done, deadline: float) -> bool:
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    return done()

@@ -1,0 +1,160 @@
+"""The launcher: launch files, composed and multi-process graphs, clean stop on SIGINT, recording."""
+import signal
+import subprocess
+import sys
+import threading
+
+import pytest
+import yaml
+from std_msgs.msg import Int32
+
+from cdpr_test_nodes.graph import Collector, Spinner, subprocess_env, wait_for
+from cdpr_tools.bag import BagReader
+from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, load_launch_file, node_class, ros_arguments
+
+GRAPH = """
+arguments:
+  rate: 100.0
+  ns: {ns}
+mode: {mode}
+parameters: {{use_sim_time: false}}
+record: {{output: {bag}}}
+nodes:
+  - module: cdpr_test_nodes.talker
+    name: talker_x
+    namespace: $(arg ns)
+    parameters:
+      - {{rate: $(arg rate), greeting: launched}}
+      - talker_params.yaml
+  - module: cdpr_test_nodes.listener
+    namespace: $(arg ns)
+    required: true
+"""
+
+
+def write_graph(tmp_path, mode: str, ns: str):
+    (tmp_path / "talker_params.yaml").write_text(yaml.safe_dump(
+        {"/**": {"ros__parameters": {"gains": {"kp": 2.5}}}}))
+    path = tmp_path / f"{mode}.yaml"
+    path.write_text(GRAPH.format(mode=mode, ns=ns, bag=tmp_path / f"{mode}_bag"))
+    return path
+
+
+@pytest.fixture
+def listen():
+    spinner = Spinner()
+    yield spinner
+    spinner.close()
+
+
+def check_bag(path, ns: str) -> None:
+    bag = BagReader(path)
+    assert bag.topics[f"{ns}/chatter"].type == "std_msgs/msg/String"
+    assert bag.topics[f"{ns}/heard"].message_count > 0
+    heard = [m.msg.data for m in bag.messages([f"{ns}/heard"])]
+    assert heard == sorted(heard)
+
+
+def wait_for_graph_and_recorder(launcher, collector, ns: str) -> None:
+    wait_for(lambda: {f"{ns}/chatter", f"{ns}/heard"} <= set(launcher.recorder.recorded_topics),
+             what="recorder subscribed")
+    start = collector.count(f"{ns}/heard")
+    wait_for(lambda: collector.count(f"{ns}/heard") >= start + 5, what=f"talker -> listener -> {ns}/heard")
+
+
+def test_launch_file_arguments_parameters_and_ros_args(tmp_path, monkeypatch):
+    monkeypatch.setenv("CDPR_TEST_FRAME", "tool")
+    path = write_graph(tmp_path, "composed", "/a")
+    text = path.read_text().replace("greeting: launched", "greeting: launched, frame: $(env CDPR_TEST_FRAME)")
+    path.write_text(text.replace("    required: true", "    remappings: [heard:=/elsewhere]"))
+    description = load_launch_file(path, {"rate": "42.0"})
+    talker, listener = description.nodes
+    assert talker.parameters[0] == {"rate": 42.0, "greeting": "launched", "frame": "tool"}  # typed, substituted
+    assert talker.parameters[1] == str(tmp_path / "talker_params.yaml")  # relative to the launch file
+    assert listener.remappings == {"heard": "/elsewhere"} and listener.namespace == "/a"
+    args = ros_arguments(talker, description.parameters, tmp_path)
+    assert args[:5] == ["--ros-args", "-r", "__node:=talker_x", "-r", "__ns:=/a"]
+    files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
+    assert len(files) == 3 and files[2] == str(tmp_path / "talker_params.yaml")
+    assert yaml.safe_load(open(files[0])) == {"/**": {"ros__parameters": {"use_sim_time": False}}}
+    assert yaml.safe_load(open(files[1]))["/**"]["ros__parameters"]["rate"] == 42.0
+    assert node_class("cdpr_test_nodes.talker").__name__ == "Talker"
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda t: t + "surprise: 1\n", "unknown key surprise"),
+    (lambda t: t.replace("talker_params.yaml", "missing.yaml"), "parameter file .*missing.yaml not found"),
+    (lambda t: t.replace("cdpr_test_nodes.listener", "cdpr_tools.message_convert"), "exactly one node class"),
+    (lambda t: t.replace("    name: talker_x", "    entry_point: cdpr\n    name: talker_x"), "exactly one of module"),
+    (lambda t: t.replace("$(arg rate)", "$(arg speed)"), r"\$\(arg speed\) is not declared"),
+])
+def test_launch_file_errors_name_the_problem(tmp_path, change, message):
+    path = write_graph(tmp_path, "composed", "/a")
+    path.write_text(change(path.read_text()))
+    with pytest.raises((ValueError, LookupError, FileNotFoundError), match=message):
+        description = load_launch_file(path)
+        for spec in description.nodes:
+            node_class(spec.target()[0])
+    with pytest.raises(ValueError, match="unknown argument speed; arguments: rate, ns"):
+        load_launch_file(write_graph(tmp_path, "composed", "/a"), {"speed": "1"})
+
+
+def test_composed_graph_runs_in_process_and_records(tmp_path, listen):
+    collector = listen.add(Collector, topics={"/comp/heard": Int32})
+    launcher = Launcher(load_launch_file(write_graph(tmp_path, "composed", "/comp")))
+    with launcher:
+        talker = next(n for n in launcher.nodes if n.get_name() == "talker_x")
+        assert talker.get_fully_qualified_name() == "/comp/talker_x"
+        assert talker.get_parameter("rate").value == 100.0
+        assert talker.get_parameter("gains.kp").value == 2.5  # from the parameter file
+        assert talker.get_parameter("greeting").value == "launched"
+        wait_for_graph_and_recorder(launcher, collector, "/comp")
+    assert not any(t.is_alive() for t in launcher._threads)
+    assert not launcher.errors
+    check_bag(tmp_path / "composed_bag", "/comp")
+
+
+def test_processes_graph_runs_and_stops_cleanly(tmp_path, listen, capfd):
+    collector = listen.add(Collector, topics={"/proc/heard": Int32})
+    launcher = Launcher(load_launch_file(write_graph(tmp_path, "processes", "/proc")))
+    with launcher:
+        assert set(launcher.processes) == {"proc/talker_x", "proc/listener"}
+        wait_for_graph_and_recorder(launcher, collector, "/proc")
+    assert launcher.exit_codes == {"proc/talker_x": 0, "proc/listener": 0}
+    assert "[proc/listener] " in capfd.readouterr().out
+    check_bag(tmp_path / "processes_bag", "/proc")
+
+
+@pytest.mark.parametrize("mode", ["composed", "processes"])
+def test_cdpr_launch_stops_cleanly_on_sigint(tmp_path, listen, mode):
+    ns = f"/sig_{mode}"
+    collector = listen.add(Collector, topics={f"{ns}/heard": Int32})
+    launch = subprocess.Popen([sys.executable, "-m", "cdpr_tools.cli", "launch", str(write_graph(tmp_path, mode, ns))],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=subprocess_env())
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(launch.stdout), daemon=True)
+    reader.start()
+    try:
+        wait_for(lambda: all(f"subscribed to {ns}/{t}" in "".join(lines) for t in ("chatter", "heard")),
+                 timeout=30, what="the recorder")
+        start = collector.count(f"{ns}/heard")
+        wait_for(lambda: collector.count(f"{ns}/heard") >= start + 5, timeout=30, what=f"the {mode} graph")
+        launch.send_signal(signal.SIGINT)
+        assert launch.wait(30) == 0, "".join(lines)
+    finally:
+        if launch.poll() is None:
+            launch.kill()
+    reader.join(5)
+    output = "".join(lines)
+    assert "[launch] stopped\n" in output and "Traceback" not in output
+    assert "listener stopped after" in output  # the node's destroy_node ran
+    check_bag(tmp_path / f"{mode}_bag", ns)
+
+
+def test_a_raising_callback_ends_a_composed_launch_with_the_error(capfd):
+    launcher = Launcher(LaunchDescription(nodes=[NodeSpec(module="cdpr_test_nodes.failing"),
+                                                 NodeSpec(module="cdpr_test_nodes.listener")]))
+    with launcher:
+        assert launcher.wait(15)
+    assert launcher.errors == ["graph: RuntimeError: boom"]
+    assert "RuntimeError: boom" in capfd.readouterr().out  # the traceback, printed under [graph]
