@@ -1,0 +1,60 @@
+"""``cdpr program``: list the shipped G-code programs, check one, or run one on a running graph."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from cdpr_control import programs
+from cdpr_control.gcode import parse_gcode
+from cdpr_control.gcode_program import GCodeError
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("program", help="list, check or run G-code programs (dialect: docs/gcode.md)")
+    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
+    verbs.add_parser("list", help="shipped programs").set_defaults(run=_list)
+    check = verbs.add_parser("check", help="parse a program and report every error with line:col")
+    check.add_argument("program", help="G-code file or shipped program name")
+    check.set_defaults(run=_check)
+    run = verbs.add_parser("run", help="run a program through the RunProgram action of a running graph")
+    run.add_argument("program", help="G-code file or shipped program name")
+    run.add_argument("--action", default="/run_program", help="action name (default /run_program)")
+    run.add_argument("--timeout", type=float, default=3600.0, help="wall-clock limit [s]")
+    run.set_defaults(run=_run)
+
+
+def _text(program: str) -> tuple[str, str]:
+    path = Path(program)
+    if path.exists():
+        return path.stem, path.read_text()
+    if program in programs.names() or f"{program}.gcode" in programs.names():
+        return program.removesuffix(".gcode"), programs.read(program)
+    raise FileNotFoundError(f"no file {program!r} and no shipped program of that name; shipped: {', '.join(programs.names())}")
+
+
+def _list(args) -> int:
+    for name in programs.names():
+        print(name)
+    return 0
+
+
+def _check(args) -> int:
+    name, text = _text(args.program)
+    try:
+        program = parse_gcode(text)
+    except GCodeError as exc:
+        for d in exc.diagnostics:
+            print(f"{args.program}:{d}")
+        return 1
+    print(f"{name}: ok, {len(program.blocks)} blocks")
+    return 0
+
+
+def _run(args) -> int:
+    from cdpr_tools.program_client import run_program
+
+    name, text = _text(args.program)
+    result = run_program(text, name, action=args.action, timeout=args.timeout,
+                         feedback=lambda line, progress: print(f"\r line {line:5d}  {100 * progress:5.1f} %", end="", flush=True))
+    print()
+    print(f"{name}: {'done' if result.success else 'failed'} after {result.duration:.2f} s {result.message}")
+    return 0 if result.success else 1
