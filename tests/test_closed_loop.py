@@ -88,3 +88,26 @@ def test_tension_level_changed_live_moves_internal_forces_not_the_pose():
     np.testing.assert_allclose(back, low, atol=0.3)
     dev = 1e3 * np.linalg.norm(r.x[:, :3] - r.x_d[:, :3], axis=1)
     assert dev.max() < 1.0                              # the pose moves less than 1 mm throughout
+
+
+def _param_file(name: str) -> dict:
+    import yaml
+    from importlib import resources
+
+    return yaml.safe_load(resources.files("cdpr_control").joinpath("params", f"{name}.yaml").read_text())
+
+
+def test_cable_forces_stay_within_limits_on_the_cuboid_program():
+    """The main job's program with the Mini's parameter file: all true cable forces within limits."""
+    from cdpr_control import programs
+    from cdpr_control.gcode import parse_gcode
+    from cdpr_control.interpolation import Interpolator
+    from cdpr_sim.closed_loop import program
+
+    robot = ROBOTS["ipanema3_mini"]
+    fd = _param_file("ipanema3_mini")["force_distribution"]["ros__parameters"]
+    interp = Interpolator(parse_gcode(programs.read("cuboid_mini"), start_pose=robot.home), dt=1e-3)
+    params = ControlLoopParams(force=ForceSetpointParams(f_min=np.asarray(fd["f_min"]), tension_level=fd["tension_level"]))
+    r = run(robot, program(interp), interp.duration + 0.2, params)
+    assert r.f.min() >= robot.cable.f_min.min() and r.f.max() <= robot.cable.f_max.max()
+    np.testing.assert_allclose(r.x[-1, :3], r.x_d[-1, :3], atol=1e-3)      # ends at the end point
