@@ -59,6 +59,7 @@ def run(args) -> int:
           f"recording to {bag}", flush=True)
     wall0 = time.perf_counter()
     with Launcher(description, mode=args.mode) as launch:
+        _wait_for_recorder(launch)           # the recorder discovers the topics only after a while
         result = run_program(text, name, timeout=args.timeout, feedback=_progress)
         wall = time.perf_counter() - wall0
         errors = list(launch.errors)
@@ -89,6 +90,20 @@ def run(args) -> int:
     print(f"[demo] bag: {bag}")
     print("[demo] plots: " + ", ".join(str(p) for p in plots))
     return 0
+
+
+RECORDED = {"/winch/state", "/winch/command", "/setpoint", "/ground_truth/pose", "/ground_truth/cable_forces",
+            "/cable_forces", "/force_distribution", "/platform/pose", "/cable_force_controller/state", "/ospc/state"}
+
+
+def _wait_for_recorder(launch, timeout: float = 60.0) -> None:
+    """Until the bag recorder subscribes to every loop topic (DDS discovery takes up to seconds)."""
+    deadline = time.monotonic() + timeout
+    while not RECORDED <= set(launch.recorder.recorded_topics()):
+        if time.monotonic() > deadline:
+            missing = sorted(RECORDED - set(launch.recorder.recorded_topics()))
+            raise TimeoutError(f"the recorder did not find {', '.join(missing)} within {timeout:.0f} s")
+        time.sleep(0.1)
 
 
 _reported = [-1]
