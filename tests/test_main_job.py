@@ -180,3 +180,12 @@ def test_run_summary_is_finite_and_the_platform_ends_at_the_end_point(job):
     np.testing.assert_allclose(data.x_d[-1, :3], END_POINT, atol=1e-9)
     error = np.linalg.norm(data.x[-1, :3] - END_POINT)
     assert error < 1e-3, f"platform ends {1e3 * error:.3f} mm from the programmed end point"
+
+
+def test_cdpr_plot_writes_the_pngs_of_the_run(job, tmp_path):
+    """``cdpr plot BAG``: pose error, cable forces and controller outputs as PNG files."""
+    from cdpr_tools.cli import main
+
+    assert main(["plot", str(job.bag), "-o", str(tmp_path)]) == 0
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert len(pngs) == 3 and all(p.stat().st_size > 10_000 for p in tmp_path.glob("*.png"))

@@ -44,7 +44,7 @@ def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
 def run(args) -> int:
     from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
     from cdpr_tools.program_client import run_program
-    from cdpr_tools.run_report import plot_run, run_data, summarize
+    from cdpr_tools.run_report import plot_run, read_bag, summarize
 
     robot = load_robot(args.robot)
     name, text = program_text(args.robot, args.program)
@@ -68,13 +68,7 @@ def run(args) -> int:
     if not result.success:
         print(f"[demo] program failed: {result.message}")
         return 1
-    from cdpr_tools.bag import BagReader
-
-    reader = BagReader(bag)
-    messages: dict[str, list] = {}
-    for m in reader.messages():
-        messages.setdefault(m.topic.lstrip("/"), []).append(m.msg)
-    data = run_data(messages)
+    data = read_bag(bag)
     summary = summarize(data)
     summary.update({"program": name, "robot": args.robot, "controller": args.controller, "mode": args.mode,
                     "program_duration_s": result.duration, "wall_time_s": wall,
@@ -99,9 +93,9 @@ RECORDED = {"/winch/state", "/winch/command", "/setpoint", "/ground_truth/pose",
 def _wait_for_recorder(launch, timeout: float = 60.0) -> None:
     """Until the bag recorder subscribes to every loop topic (DDS discovery takes up to seconds)."""
     deadline = time.monotonic() + timeout
-    while not RECORDED <= set(launch.recorder.recorded_topics()):
+    while not RECORDED <= set(launch.recorder.recorded_topics):
         if time.monotonic() > deadline:
-            missing = sorted(RECORDED - set(launch.recorder.recorded_topics()))
+            missing = sorted(RECORDED - set(launch.recorder.recorded_topics))
             raise TimeoutError(f"the recorder did not find {', '.join(missing)} within {timeout:.0f} s")
         time.sleep(0.1)
 
