@@ -1,0 +1,61 @@
+"""Aligned numpy series of the identification topics from a bag (header stamps = sim time)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .experiments import TOPIC_COMMAND, TOPIC_FORCES, TOPIC_POSE, TOPIC_SETPOINT, TOPIC_STATE
+
+_POSE_FIELDS = tuple(f"pose.position.{a}" for a in "xyz") + tuple(f"pose.orientation.{a}" for a in "xyzw")
+
+
+@dataclass
+class WinchSeries:
+    """Samples k at the stamps t (N,) shared by every topic read: theta, thetadot, F_s (N, m)."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    thetadot: np.ndarray
+    F_s: np.ndarray
+
+
+def at_stamps(t_ref, t, values, topic):
+    """Rows of values whose stamps equal t_ref (stamps in whole ns, so the match is exact)."""
+    ns_ref, ns = np.rint(t_ref * 1e9).astype(np.int64), np.rint(t * 1e9).astype(np.int64)
+    idx = np.searchsorted(ns, ns_ref)
+    idx = np.minimum(idx, len(ns) - 1)
+    if not np.array_equal(ns[idx], ns_ref):
+        raise ValueError(f"{topic}: stamps do not match {TOPIC_STATE} (record them in one run)")
+    return values[idx]
+
+
+def winch_state(bag) -> WinchSeries:
+    t, theta, thetadot, F_s = bag.series(TOPIC_STATE, "position", "velocity", "effort", stamp="header")
+    return WinchSeries(t, theta, thetadot, F_s)
+
+
+def reference_forces(bag, t) -> np.ndarray:
+    """The reference force at the platform (N, m) at stamps t (ground_truth/cable_forces)."""
+    t_f, f = bag.series(TOPIC_FORCES, "f", stamp="header")
+    return at_stamps(t, t_f, f, TOPIC_FORCES)
+
+
+def poses(bag, t) -> np.ndarray:
+    """Platform poses x (N, 6) at stamps t: ground_truth/pose, else the set-point x_d."""
+    from cdpr_control.nodes.conversions import quaternion_to_kardan
+
+    topic = TOPIC_POSE if TOPIC_POSE in bag.topics else TOPIC_SETPOINT
+    t_p, *cols = bag.series(topic, *_POSE_FIELDS, stamp="header")
+    if topic == TOPIC_SETPOINT:                    # x_d of period k holds until the next one
+        idx = np.clip(np.searchsorted(np.rint(t_p * 1e9), np.rint(t * 1e9), side="right") - 1, 0, None)
+        cols, t_p = [c[idx] for c in cols], t
+    x = np.empty((len(t_p), 6))
+    x[:, :3] = np.column_stack(cols[:3])
+    x[:, 3:] = [quaternion_to_kardan(*q) for q in zip(*cols[3:])]
+    return at_stamps(t, t_p, x, topic)
+
+
+def commands(bag) -> tuple[np.ndarray, np.ndarray]:
+    """(t (K,), theta_d (K, m)) of winch/command."""
+    return bag.series(TOPIC_COMMAND, "position", stamp="header")

@@ -1,0 +1,118 @@
+"""Drive dynamics from a recorded sweep: PT1 + dead time (3.10) or second order (5.11).
+
+The recorded commands theta_d (``winch/command``, stamp t_k, held over one period) drive
+cdpr_control.drive_models.DriveModel, the same exact discretisation the simulator runs; the
+parameters minimise the squared difference of its theta_k+1 to the encoder's ``winch/state``
+stamped t_k+1 (least squares, trust region with T >= 0; the fractional dead time keeps the
+residual smooth in T_d). Only the winches whose command moves take part; every drive of a robot
+shares one model. Returns T_1, T_d (3.10) or T_w, zeta, T_d (5.11).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from cdpr_control.drive_models import PT1_DEADTIME, SECOND_ORDER, DriveModel
+
+from . import bag_data
+
+# start values and lower bounds of the parameters per model
+_START = {PT1_DEADTIME: {"T_1": 0.01, "T_d": 0.002}, SECOND_ORDER: {"T_w": 0.01, "zeta": 0.7, "T_d": 0.002}}
+_LOWER = {PT1_DEADTIME: [0.0, 0.0], SECOND_ORDER: [1e-4, 0.05, 0.0]}
+
+
+@dataclass
+class DriveData:
+    """Commands theta_d (K, n) of the excited winches ``cables`` and the measured theta (K + 1, n)."""
+
+    t: np.ndarray                 # (K + 1,) stamps of theta
+    theta_d: np.ndarray
+    theta: np.ndarray
+    cables: list
+    dt: float
+
+
+@dataclass
+class DriveFit:
+    model: str
+    params: dict                  # T_1, T_d or T_w, zeta, T_d [s, -]
+    rms: float                    # rms of theta - model [m]
+    nfev: int
+    theta_model: np.ndarray = field(repr=False)
+
+
+def load_data(bag, min_motion: float = 0.1) -> DriveData:
+    """The sweep in ``bag``: the winches whose command range exceeds min_motion of the largest one."""
+    t_c, theta_d = bag_data.commands(bag)
+    state = bag_data.winch_state(bag)
+    dt = float(np.median(np.diff(t_c)))
+    span = np.ptp(theta_d, axis=0)
+    cables = [int(i) for i in np.flatnonzero(span > min_motion * span.max())]
+    # theta_k+1: the state stamped one period after each command, and theta_0 at the first command
+    t_next = np.concatenate([t_c[:1], t_c + dt])
+    theta = bag_data.at_stamps(t_next, state.t, state.theta, bag_data.TOPIC_STATE)
+    return DriveData(t_next, theta_d[:, cables], theta[:, cables], cables, dt)
+
+
+def build_model(kind: str, params: dict, dt: float, m: int) -> DriveModel:
+    if kind == PT1_DEADTIME:
+        return DriveModel.pt1_deadtime(params["T_1"], params["T_d"], dt, m)
+    if kind == SECOND_ORDER:
+        return DriveModel.second_order(params["T_w"], params["zeta"], params["T_d"], dt, m)
+    raise ValueError(f"unknown drive model {kind!r} (use {PT1_DEADTIME} or {SECOND_ORDER})")
+
+
+def simulate(kind: str, params: dict, data: DriveData) -> np.ndarray:
+    """theta (K + 1, n) of the model from the measured theta_0 under the recorded commands."""
+    drive = build_model(kind, params, data.dt, len(data.cables))
+    drive.reset(data.theta[0])
+    out = np.empty_like(data.theta)
+    out[0] = data.theta[0]
+    for k, u in enumerate(data.theta_d):
+        out[k + 1] = drive.step(u)
+    return out
+
+
+def identify(bag, kind: str = PT1_DEADTIME, start: dict | None = None) -> tuple[DriveData, DriveFit]:
+    """Least-squares fit of the drive model ``kind`` to the sweep in ``bag``."""
+    if kind not in _START:
+        raise ValueError(f"unknown drive model {kind!r} (use {PT1_DEADTIME} or {SECOND_ORDER})")
+    data = load_data(bag)
+    names = list(_START[kind])
+    p0 = np.array([(start or _START[kind]).get(n, _START[kind][n]) for n in names])
+
+    def residual(p):
+        return (simulate(kind, dict(zip(names, p)), data) - data.theta)[1:].ravel()
+
+    res = least_squares(residual, p0, bounds=(_LOWER[kind], math.inf), x_scale=p0, diff_step=1e-4,
+                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    params = {n: float(v) for n, v in zip(names, res.x)}
+    theta_model = simulate(kind, params, data)
+    rms = float(np.sqrt(np.mean((theta_model - data.theta) ** 2)))
+    return data, DriveFit(kind, params, rms, int(res.nfev), theta_model)
+
+
+def plot(data: DriveData, fit: DriveFit, path) -> None:
+    """PNG: command, measured and modelled theta of the first excited winch, and the model error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t0 = data.theta[0, 0]
+    fig, (a, b) = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+    a.plot(data.t[:-1], 1e3 * (data.theta_d[:, 0] - t0), lw=0.7, label="theta_d")
+    a.plot(data.t, 1e3 * (data.theta[:, 0] - t0), lw=0.7, label="theta (encoder)")
+    a.plot(data.t, 1e3 * (fit.theta_model[:, 0] - t0), lw=0.7, ls="--", label="model")
+    a.set_ylabel(f"cable {data.cables[0] + 1} [mm]")
+    a.set_title(f"{fit.model}: " + ", ".join(f"{k} {v:.5g}" for k, v in fit.params.items()), fontsize=9)
+    a.legend(fontsize=7)
+    b.plot(data.t, 1e6 * (data.theta[:, 0] - fit.theta_model[:, 0]), lw=0.7)
+    b.set_ylabel("theta - model [um]")
+    b.set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

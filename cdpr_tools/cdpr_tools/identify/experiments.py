@@ -1,0 +1,237 @@
+"""Identification experiments recorded with the simulator into bags, as a real robot records them.
+
+Topics and types are the graph's (docs/sim.md): ``winch/state`` (sensor_msgs/JointState: position
+theta, velocity thetadot, effort F_s), ``winch/command`` (JointState: position theta_d),
+``ground_truth/cable_forces`` (cdpr_msgs/CableForces: the reference force at the platform that
+stands in for the extra sensor of section 3.7.2), ``ground_truth/pose`` (PoseStamped) and
+``setpoint`` (cdpr_msgs/OperationalSetpoint: x_d). Header stamps and log times are sim time.
+
+The command of period k is stamped t_k and held over [t_k, t_k+1]; the state it causes is stamped
+t_k+1, as in the lockstep graph (controllers answer the state of t_k with a command stamped t_k).
+
+* :func:`record_friction_run`: IK-only reference control theta_d = IK{x_d} (section 2.3.2) along
+  the identification trajectory of section 3.7.2, shortened: stop-and-go and alternating moves of
+  0.5 .. 10 mm at 0.083 m/s along x, y, z, then alternating 30 mm moves at rising velocity.
+* :func:`record_circle_run`: the circle of section 4.1.1 at constant angular velocity (mass).
+* :func:`record_stiffness_run`: tension steps at home (force/elongation data for (2.16)).
+* :func:`record_drive_sweep`: a sine sweep on theta_d of one winch while the others hold the
+  platform (section 3.3.1).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.robot import load_robot
+
+TOPIC_STATE = "winch/state"
+TOPIC_COMMAND = "winch/command"
+TOPIC_FORCES = "ground_truth/cable_forces"
+TOPIC_POSE = "ground_truth/pose"
+TOPIC_SETPOINT = "setpoint"
+
+
+def smooth_moves(waypoints, velocity, pause: float, dt: float) -> np.ndarray:
+    """x_d samples (N, 6) through ``waypoints`` (k, 6): cosine-shaped moves, ``pause`` s at each.
+
+    A move of length L takes 1.5 L / velocity (the cosine profile peaks at about ``velocity``);
+    ``velocity`` is a number or one per move.
+    """
+    waypoints = np.asarray(waypoints, dtype=float)
+    v = np.broadcast_to(np.asarray(velocity, dtype=float), (len(waypoints) - 1,))
+    parts = [np.repeat(waypoints[:1], max(int(round(pause / dt)), 1), axis=0)]
+    for a, b, vi in zip(waypoints[:-1], waypoints[1:], v):
+        length = np.linalg.norm(b[:3] - a[:3])
+        n = max(int(math.ceil(1.5 * length / vi / dt)), 1)
+        s = 0.5 * (1.0 - np.cos(np.pi * np.arange(1, n + 1) / n))
+        parts.append(a + s[:, None] * (b - a))
+        parts.append(np.repeat(b[None], int(round(pause / dt)), axis=0))
+    return np.concatenate(parts)
+
+
+def friction_trajectory(home, amplitudes=(0.0005, 0.002, 0.01), velocity: float = 0.083, pause: float = 0.15,
+                        fast_amplitude: float = 0.03, fast_velocities=(0.17, 0.35, 0.5), dt: float = 1e-3):
+    """The reference trajectory of section 3.7.2 (shortened) about ``home``: x_d (N, 6).
+
+    Per axis x, y, z: stop-and-go forward over ``amplitudes`` and back, then alternating moves of
+    each amplitude; then alternating moves of ``fast_amplitude`` along x and z at ``fast_velocities``.
+    """
+    home = np.asarray(home, dtype=float)
+    points, speeds = [home], []
+    for axis in range(3):
+        e = np.zeros(6)
+        e[axis] = 1.0
+        offset = 0.0
+        for a in amplitudes:                                  # stop-and-go in one direction
+            offset += a
+            points.append(home + offset * e)
+        for a in reversed(amplitudes):                        # and back
+            offset -= a
+            points.append(home + offset * e)
+        for a in amplitudes:                                  # alternating
+            points += [home + a * e, home - a * e, home]
+        speeds += [velocity] * (len(points) - 1 - len(speeds))
+    for v in fast_velocities:                                 # rising velocity
+        for axis in (0, 2):
+            e = np.zeros(6)
+            e[axis] = fast_amplitude
+            points += [home + e, home - e, home]
+            speeds += [v] * 3
+    return smooth_moves(points, speeds, pause, dt)
+
+
+def sweep(duration: float, f_start: float, f_end: float, dt: float) -> np.ndarray:
+    """Unit-amplitude exponential sine sweep from f_start to f_end Hz, samples at k dt, k = 0..N-1."""
+    t = np.arange(int(round(duration / dt))) * dt
+    rate = math.log(f_end / f_start) / duration
+    return np.sin(2.0 * np.pi * f_start * (np.exp(rate * t) - 1.0) / rate)
+
+
+class _Recorder:
+    """Writes SimOutputs and commands on the graph's topics (messages imported on use: ROS types)."""
+
+    def __init__(self, bag, robot):
+        from cdpr_control.nodes.qos import CONTROL
+
+        self.bag, self.robot, self.qos = bag, robot, CONTROL
+        self.names = [f"cable_{i + 1}" for i in range(robot.m)]
+
+    def _header(self, t: float):
+        from std_msgs.msg import Header
+
+        h = Header(frame_id="base")
+        ns = int(round(t * 1e9))
+        h.stamp.sec, h.stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        return h, ns
+
+    def state(self, out) -> None:
+        from cdpr_control.nodes.conversions import pose_to_msg
+        from cdpr_msgs.msg import CableForces
+        from geometry_msgs.msg import PoseStamped
+        from sensor_msgs.msg import JointState
+
+        h, ns = self._header(out.t)
+        c = self.robot.cable
+        self.bag.write(TOPIC_STATE, None, JointState(header=h, name=self.names, position=out.theta.tolist(),
+                                                    velocity=out.thetadot.tolist(), effort=out.F_s.tolist()),
+                       ns, qos=self.qos)
+        self.bag.write(TOPIC_FORCES, None, CableForces(header=h, f=out.f.tolist(), f_min=np.broadcast_to(c.f_min, out.f.shape).tolist(),
+                                                      f_max=np.broadcast_to(c.f_max, out.f.shape).tolist()), ns, qos=self.qos)
+        self.bag.write(TOPIC_POSE, None, PoseStamped(header=h, pose=pose_to_msg(out.x)), ns, qos=self.qos)
+
+    def command(self, t: float, theta_d, x_d=None) -> None:
+        from cdpr_control.nodes.conversions import pose_to_msg
+        from cdpr_msgs.msg import OperationalSetpoint
+        from sensor_msgs.msg import JointState
+
+        h, ns = self._header(t)
+        self.bag.write(TOPIC_COMMAND, None, JointState(header=h, name=self.names, position=list(map(float, theta_d))),
+                       ns, qos=self.qos)
+        if x_d is not None:
+            self.bag.write(TOPIC_SETPOINT, None, OperationalSetpoint(header=h, pose=pose_to_msg(x_d)), ns,
+                           qos=self.qos)
+
+
+def circle_trajectory(home, r_c: float = 0.1, frequency: float = 1.0, revolutions: float = 3.0,
+                      ramp: float = 1.0, dt: float = 1e-3) -> np.ndarray:
+    """x_d (N, 6) on the circle of section 4.1.1 (Fig. 4.2) in the xy plane, starting at ``home``.
+
+    The centre is home - r_c e_x; the angular velocity rises smoothly to 2 pi frequency over
+    ``ramp`` s, then stays constant for ``revolutions`` turns (the window of (4.2)-(4.3)).
+    """
+    omega = 2.0 * np.pi * frequency
+    t_ramp = np.arange(int(round(ramp / dt))) * dt
+    # thetadot_c = omega (1 - cos(pi t / ramp)) / 2 during the ramp
+    angle_ramp = 0.5 * omega * (t_ramp - ramp / np.pi * np.sin(np.pi * t_ramp / ramp))
+    t_const = np.arange(int(round(revolutions / frequency / dt)) + 1) * dt
+    angle = np.concatenate([angle_ramp, 0.5 * omega * ramp + omega * t_const])
+    x = np.repeat(np.asarray(home, dtype=float)[None], len(angle), axis=0)
+    x[:, 0] += r_c * (np.cos(angle) - 1.0)
+    x[:, 1] += r_c * np.sin(angle)
+    return x
+
+
+def _simulator(robot, seed: int, noise_std, level: float):
+    from cdpr_sim.simulator import SimConfig, Simulator
+    from cdpr_sim.startup import startup_state
+
+    x0, theta0, offset = startup_state(robot, robot.home, level=level, calibrate_home=True)
+    return Simulator(robot, SimConfig(seed=seed, noise_std=noise_std, friction=True), x0=x0, theta0=theta0,
+                     encoder_offset=offset)
+
+
+def _run(robot, bag_path, commands, x_d, seed, noise_std, level) -> Path:
+    """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag."""
+    from cdpr_tools.bag import BagWriter
+
+    with _simulator(robot, seed, noise_std, level) as sim, BagWriter(bag_path) as bag:
+        rec = _Recorder(bag, robot)
+        rec.state(sim.output)
+        for k, theta_d in enumerate(commands):
+            rec.command(sim.t, theta_d, None if x_d is None else x_d[k])
+            rec.state(sim.step(theta_d))
+        return Path(bag.path)
+
+
+def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
+                        **trajectory) -> Path:
+    """Record the friction identification run (IK-only control along :func:`friction_trajectory`)."""
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    x_d = friction_trajectory(robot.home, **trajectory)
+    commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
+    return _run(robot, bag_path, commands, x_d, seed, noise_std, level)
+
+
+def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
+                      **circle) -> Path:
+    """Record the circle run of section 4.1.1 (IK-only control along :func:`circle_trajectory`)."""
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    x_d = circle_trajectory(robot.home, **circle)
+    commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
+    return _run(robot, bag_path, commands, x_d, seed, noise_std, level)
+
+
+def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.65, 0.9), hold: float = 0.4,
+                         ramp: float = 0.3, seed: int = 1, level: float = 0.5) -> Path:
+    """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
+    (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16)."""
+    from cdpr_sim.simulator import pretension_lengths
+    from cdpr_sim.startup import startup_forces, startup_state
+
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    offset = startup_state(robot, robot.home, level, calibrate_home=True)[2]
+    targets = [pretension_lengths(robot, robot.home, startup_forces(robot, robot.home, lv)) + offset
+               for lv in (level, *levels)]
+    n_ramp, n_hold = int(round(ramp / 1e-3)), int(round(hold / 1e-3))
+    parts = [np.repeat(targets[0][None], n_hold, axis=0)]
+    for a, b in zip(targets[:-1], targets[1:]):
+        s = 0.5 * (1.0 - np.cos(np.pi * np.arange(1, n_ramp + 1) / n_ramp))
+        parts += [a + s[:, None] * (b - a), np.repeat(b[None], n_hold, axis=0)]
+    return _run(robot, bag_path, np.concatenate(parts), None, seed, None, level)
+
+
+def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitude: float = 5e-4,
+                       duration: float = 3.0, f_start: float = 0.5, f_end: float = 40.0, seed: int = 1,
+                       level: float = 0.5) -> Path:
+    """Record a sine sweep of ``amplitude`` m on theta_d of winch ``cable`` (0-based), the platform held."""
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    hold = inverse_kinematics(robot, robot.home).q            # the encoders read IK{home} at home
+    commands = np.repeat(hold[None], int(round(duration / 1e-3)), axis=0)
+    commands[:, cable] += amplitude * sweep(duration, f_start, f_end, 1e-3)
+    return _run(robot, bag_path, commands, None, seed, None, level)
+
+
+def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print) -> dict[str, Path]:
+    """Record every identification experiment into ``outdir``: name -> bag path."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    bags = {}
+    for name, record in (("friction", record_friction_run), ("drive_sweep", record_drive_sweep),
+                         ("circle", record_circle_run), ("stiffness", record_stiffness_run)):
+        progress(f"recording {name} ...")
+        bags[name] = record(outdir / name, robot=robot, seed=seed)
+        progress(f"  {bags[name]}")
+    return bags

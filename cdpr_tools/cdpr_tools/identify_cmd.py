@@ -1,0 +1,135 @@
+"""``cdpr identify``: model parameters from recorded bags (thesis sections 3.3.1, 3.7.2).
+
+    cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
+    cdpr identify drive BAG [--model pt1_deadtime|second_order] [--plot fit.png]
+    cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
+"""
+from __future__ import annotations
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("identify", help="identify friction / drive parameters from bags")
+    what = p.add_subparsers(dest="what", metavar="WHAT", required=True)
+
+    f = what.add_parser("friction", help="pulley friction mu, sigma, F_pv per cable by LM (3.45)")
+    f.add_argument("bag", help="bag with winch/state, ground_truth/cable_forces and ground_truth/pose or setpoint")
+    f.add_argument("-o", "--output", help="write the friction_compensation parameter file (YAML)")
+    f.add_argument("--plot", metavar="PNG", help="plot of the fit against the reference force")
+    f.add_argument("--robot", default="ipanema3_mini", help="robot name or file (pulley geometry)")
+    f.add_argument("--cables", help="comma-separated 1-based cables (default: all)")
+    f.add_argument("--start", nargs=3, type=float, default=(0.02, 1000.0, 1.0), metavar=("MU", "SIGMA", "F_PV"),
+                   help="start values (default 0.02 1000 1.0)")
+    f.set_defaults(run=run_friction)
+
+    d = what.add_parser("drive", help="drive dynamics from a sine sweep: (3.10) or (5.11)")
+    d.add_argument("bag", help="bag with winch/command and winch/state")
+    d.add_argument("--model", default="pt1_deadtime", choices=("pt1_deadtime", "second_order"))
+    d.add_argument("--plot", metavar="PNG", nargs="?", const="drive_fit.png",
+                   help="plot of the fit (default file drive_fit.png)")
+    d.set_defaults(run=run_drive)
+
+    m = what.add_parser("mass", help="platform mass from the circle run (4.2)-(4.4)")
+    m.add_argument("bag", help="bag with winch/state, setpoint and ground_truth/pose")
+    m.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, friction)")
+    m.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
+    m.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    m.set_defaults(run=run_mass)
+
+    k = what.add_parser("stiffness", help="cable stiffness k0, k1, k2 (2.16) from tension steps at rest")
+    k.add_argument("bag", help="bag with winch/state, winch/command and ground_truth/pose or setpoint")
+    k.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, friction)")
+    k.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
+    k.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    k.set_defaults(run=run_stiffness)
+
+    r = what.add_parser("record-experiments", help="record the identification runs with the simulator")
+    r.add_argument("outdir", help="directory for the bags (friction/, drive_sweep/)")
+    r.add_argument("--robot", default="ipanema3_mini")
+    r.add_argument("--seed", type=int, default=1)
+    r.set_defaults(run=run_record)
+
+
+def run_friction(args) -> int:
+    from cdpr_control.robot import load_robot
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import friction
+
+    robot = load_robot(args.robot)
+    cables = None if not args.cables else [int(c) - 1 for c in args.cables.split(",")]
+    print(f"fitting (3.45) per cable on {args.bag} ...", flush=True)
+    data, fits = friction.identify(BagReader(args.bag), robot, cables, tuple(args.start), jit=_jit(),
+                                   progress=lambda line: print(line, flush=True))
+    if args.output:
+        if len(fits) != robot.m:
+            raise ValueError(f"a parameter file needs all {robot.m} cables (drop --cables)")
+        friction.write_parameter_file(fits, args.output)
+        print(f"wrote {args.output}")
+    if args.plot:
+        friction.plot(data, fits, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def run_drive(args) -> int:
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import drive
+
+    data, fit = drive.identify(BagReader(args.bag), args.model)
+    print(f"{fit.model} from cables {[c + 1 for c in data.cables]}: "
+          + ", ".join(f"{k} = {v:.6g}" for k, v in fit.params.items()) + f"  (rms {fit.rms:.3g} m)")
+    if args.plot:
+        drive.plot(data, fit, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def run_mass(args) -> int:
+    from cdpr_control.robot import load_robot
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import mass
+
+    fit = mass.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args), args.reference)
+    print(f"circle {fit.frequency:.3f} Hz, r_c {fit.r_c:.4f} m, window {fit.window[0]:.2f}-{fit.window[1]:.2f} s")
+    print(f"m_p from the force harmonics (4.3): {fit.m_circle:.4f} kg")
+    print(f"m_p from w_z (4.4):                 {fit.m_static:.4f} kg")
+    return 0
+
+
+def run_stiffness(args) -> int:
+    from cdpr_control.robot import load_robot
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import stiffness
+
+    fit = stiffness.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args), args.reference)
+    print(f"k0 = {fit.k0:.6g} N, k1 = {fit.k1:.6g}, k2 = {fit.k2:.6g} 1/N  (2.16), "
+          f"{fit.n_samples} samples at rest, rms {fit.rms:.3g} m")
+    print("encoder offsets delta [mm]: " + " ".join(f"{1e3 * d:.4f}" for d in fit.delta))
+    return 0
+
+
+def _friction_params(args) -> dict | None:
+    """mu, sigma, F_pv of a friction_compensation parameter file (--friction), None: robot file."""
+    if not args.friction:
+        return None
+    import yaml
+
+    with open(args.friction) as f:
+        return yaml.safe_load(f)["friction_compensation"]["ros__parameters"]
+
+
+def run_record(args) -> int:
+    from cdpr_tools.identify.experiments import record_experiments
+
+    record_experiments(args.outdir, args.robot, args.seed, progress=lambda line: print(line, flush=True))
+    return 0
+
+
+def _jit():
+    """The simulator's compiled kernels when cdpr_sim is there (a robot PC may not have it)."""
+    try:
+        from cdpr_sim.simulator import compiled
+    except ImportError:
+        return None
+    return compiled
