@@ -29,22 +29,13 @@ from cdpr_control.dynamics import gravity_wrench
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.robot import load_robot
 from cdpr_control.workspace import evaluate_workspace, static_problem, with_platform_mass, workspace_grid
+from timing import python_calibration_us
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"qp_median_us": 10.0, "full_step_median_us": 50.0, "workspace_poses_per_s": 200_000.0}
 THESIS_US_PER_SOLVE = 2.2 / 15_000 * 1e6      # 147 us, section 3.6.2
 N_STEPS = 3000                                 # 3 s of a 1 kHz trajectory
 F_MIN, F_MAX = 100.0, 3000.0
-
-
-def python_calibration_us() -> float:
-    """Time of sum(range(1000)) [us]: how fast (or loaded) this machine is right now."""
-    best = float("inf")
-    for _ in range(200):
-        t0 = time.perf_counter_ns()
-        sum(range(1000))
-        best = min(best, (time.perf_counter_ns() - t0) / 1e3)
-    return best
 
 
 def per_call_us(fn, args_list):

@@ -23,6 +23,7 @@ from cdpr_control.dynamics import platform_wrench
 from cdpr_control.forward_kinematics import ForwardKinematics
 from cdpr_control.kinematics import inverse_kinematics, twist_from_pose_rates
 from cdpr_control.robot import load_robot
+from timing import python_calibration_us
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,16 +34,6 @@ TARGET_FK_MEDIAN_US = 100.0
 TARGET_IK_CABLES_PER_S = 1e6
 # circle radius [m] and frequency [Hz] of the test trajectory per robot
 TRAJECTORY = {"ipanema3": (0.5, 0.5), "ipanema3_mini": (0.08, 1.0)}
-
-
-def python_calibration_us() -> float:
-    """Time of sum(range(1000)) [us]: how fast (or loaded) this machine is right now."""
-    best = float("inf")
-    for _ in range(200):
-        t0 = time.perf_counter_ns()
-        sum(range(1000))
-        best = min(best, (time.perf_counter_ns() - t0) / 1e3)
-    return best
 
 
 def timed(fn, repeats):

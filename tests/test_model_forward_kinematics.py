@@ -9,6 +9,7 @@ from cdpr_control.dynamics import gravity_wrench
 from cdpr_control.forward_kinematics import CONVERGED, MAX_ITERATIONS, NON_FINITE, ForwardKinematics
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.robot import load_robot
+from poses import random_poses
 
 ROBOTS = ["ipanema3", "ipanema3_mini"]
 
@@ -16,11 +17,6 @@ ROBOTS = ["ipanema3", "ipanema3_mini"]
 @pytest.fixture(scope="module", params=ROBOTS)
 def robot(request):
     return load_robot(request.param)
-
-
-def random_poses(robot, n, rng, angle=0.2):
-    r = rng.uniform(robot.workspace_min, robot.workspace_max, (n, 3))
-    return np.hstack([r, rng.uniform(-angle, angle, (n, 3))])
 
 
 def equilibrium(robot, x):

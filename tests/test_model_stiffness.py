@@ -8,6 +8,7 @@ from cdpr_control import cable
 from cdpr_control.dynamics import mass_matrix
 from cdpr_control.kinematics import inverse_kinematics, kardan_rate_matrix
 from cdpr_control.robot import load_robot
+from poses import random_poses
 from cdpr_control.stiffness import (
     cable_stiffness,
     eigenfrequencies,
@@ -22,11 +23,6 @@ ROBOTS = ["ipanema3", "ipanema3_mini"]
 @pytest.fixture(scope="module", params=ROBOTS)
 def robot(request):
     return load_robot(request.param)
-
-
-def random_poses(robot, n, rng, angle=0.2):
-    r = rng.uniform(robot.workspace_min, robot.workspace_max, (n, 3))
-    return np.hstack([r, rng.uniform(-angle, angle, (n, 3))])
 
 
 def kardan_map(x):
