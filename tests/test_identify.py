@@ -8,14 +8,7 @@ from cdpr_tools import cli
 from cdpr_tools.bag import BagReader
 from cdpr_tools.identify import drive, experiments, friction, mass, stiffness
 
-# a few seconds of the section 3.7.2 trajectory: stop-and-go and alternating moves, then faster ones
-SHORT_RUN = dict(amplitudes=(0.0005, 0.002, 0.005), pause=0.05, fast_amplitude=0.01, fast_velocities=(0.2, 0.4))
-
-
-@pytest.fixture(scope="module")
-def friction_bag(tmp_path_factory):
-    return experiments.record_friction_run(tmp_path_factory.mktemp("id") / "friction", "ipanema3_mini", seed=3,
-                                           **SHORT_RUN)
+# friction_bag: the short identification run of conftest.py
 
 
 def test_recorded_bag_has_the_graph_topics(friction_bag):
