@@ -8,7 +8,7 @@ move smoothly and the platform does not.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
