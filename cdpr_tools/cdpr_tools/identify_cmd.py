@@ -1,16 +1,17 @@
-"""``cdpr identify``: model parameters from recorded bags (thesis sections 3.3.1, 3.7.2).
+"""``cdpr identify``: model parameters from recorded bags (thesis sections 3.3.1, 3.7.2, 4.1.1, 4.3).
 
     cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
     cdpr identify drive BAG [--model pt1_deadtime|second_order] [--plot fit.png]
     cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
 """
 from __future__ import annotations
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("identify", help="identify friction / drive parameters from bags")
+    p = sub.add_parser("identify", help="identify friction, drive, mass, stiffness, eigenfrequency from bags")
     what = p.add_subparsers(dest="what", metavar="WHAT", required=True)
 
     f = what.add_parser("friction", help="pulley friction mu, sigma, F_pv per cable by LM (3.45)")
@@ -30,7 +31,7 @@ def add_parser(sub) -> None:
                    help="plot of the fit (default file drive_fit.png)")
     d.set_defaults(run=run_drive)
 
-    m = what.add_parser("mass", help="platform mass from the circle run (4.2)-(4.4)")
+    m = what.add_parser("mass", help="platform mass and centre of gravity from the circle run (4.2)-(4.4)")
     m.add_argument("bag", help="bag with winch/state, setpoint and ground_truth/pose")
     m.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, friction)")
     m.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
@@ -44,8 +45,17 @@ def add_parser(sub) -> None:
     k.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
     k.set_defaults(run=run_stiffness)
 
+    e = what.add_parser("eigenfrequency", help="platform eigenfrequency in z from a knock, against (4.8)")
+    e.add_argument("bag", help="bag with winch/state, ground_truth/cable_forces and ground_truth/pose")
+    e.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, mass, cable)")
+    e.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
+    e.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    e.add_argument("--plot", metavar="PNG", nargs="?", const="eigenfrequency_fit.png",
+                   help="plot of the fitted decay (default file eigenfrequency_fit.png)")
+    e.set_defaults(run=run_eigenfrequency)
+
     r = what.add_parser("record-experiments", help="record the identification runs with the simulator")
-    r.add_argument("outdir", help="directory for the bags (friction/, drive_sweep/)")
+    r.add_argument("outdir", help="directory for the bags (friction/, drive_sweep/, circle/, stiffness/, pulse/)")
     r.add_argument("--robot", default="ipanema3_mini")
     r.add_argument("--seed", type=int, default=1)
     r.set_defaults(run=run_record)
@@ -94,6 +104,25 @@ def run_mass(args) -> int:
     print(f"circle {fit.frequency:.3f} Hz, r_c {fit.r_c:.4f} m, window {fit.window[0]:.2f}-{fit.window[1]:.2f} s")
     print(f"m_p from the force harmonics (4.3): {fit.m_circle:.4f} kg")
     print(f"m_p from w_z (4.4):                 {fit.m_static:.4f} kg")
+    print("c_mp (platform frame) from the torques (4.3) [mm]: " + " ".join(f"{1e3 * c:.2f}" for c in fit.c_mp))
+    return 0
+
+
+def run_eigenfrequency(args) -> int:
+    from cdpr_control.robot import load_robot
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import eigenfrequency
+
+    fit = eigenfrequency.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args),
+                                  args.reference)
+    print(f"z decay {fit.window[0]:.3f}-{fit.window[1]:.3f} s, amplitude {1e3 * fit.amplitude:.3f} mm, "
+          f"rms {1e6 * fit.rms:.2f} um")
+    print(f"measured: f_d {fit.f_d:.3f} Hz, zeta {fit.zeta:.3f}, undamped f_n {fit.f_n:.3f} Hz")
+    print(f"model (4.8): {fit.f_model:.3f} Hz  (f_n {100 * (fit.f_n / fit.f_model - 1):+.2f} %); coupled modes "
+          + " ".join(f"{f:.2f}" for f in fit.f_modes) + " Hz")
+    if args.plot:
+        eigenfrequency.plot(fit, args.plot)
+        print(f"wrote {args.plot}")
     return 0
 
 

@@ -14,6 +14,7 @@ t_k+1, as in the lockstep graph (controllers answer the state of t_k with a comm
   0.5 .. 10 mm at 0.083 m/s along x, y, z, then alternating 30 mm moves at rising velocity.
 * :func:`record_circle_run`: the circle of section 4.1.1 at constant angular velocity (mass).
 * :func:`record_stiffness_run`: tension steps at home (force/elongation data for (2.16)).
+* :func:`record_pulse_response`: a wrench pulse on the held platform, its free oscillation (4.8).
 * :func:`record_drive_sweep`: a sine sweep on theta_d of one winch while the others hold the
   platform (section 3.3.1).
 """
@@ -154,23 +155,36 @@ def circle_trajectory(home, r_c: float = 0.1, frequency: float = 1.0, revolution
     return x
 
 
-def _simulator(robot, seed: int, noise_std, level: float):
+def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps: int = 1):
+    """The simulator at rest at home under the QP forces of ``level``; payload (mass, c) carried from
+    the start (tensed and encoders calibrated with it on, so the run starts in equilibrium)."""
     from cdpr_sim.simulator import SimConfig, Simulator
     from cdpr_sim.startup import startup_state
 
-    x0, theta0, offset = startup_state(robot, robot.home, level=level, calibrate_home=True)
-    return Simulator(robot, SimConfig(seed=seed, noise_std=noise_std, friction=True), x0=x0, theta0=theta0,
-                     encoder_offset=offset)
+    loaded = robot if payload is None else robot.with_payload(*payload)
+    x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True)
+    sim = Simulator(robot, SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps), x0=x0, theta0=theta0,
+                    encoder_offset=offset)
+    if payload is not None:
+        sim.set_payload(*payload)
+    return sim
 
 
-def _run(robot, bag_path, commands, x_d, seed, noise_std, level) -> Path:
-    """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag."""
+def _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, before_step=None,
+         substeps: int = 1) -> Path:
+    """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag.
+
+    payload: (mass, centre of gravity) on the platform; before_step(sim, k): called before step k;
+    substeps: physics steps per 1 ms period.
+    """
     from cdpr_tools.bag import BagWriter
 
-    with _simulator(robot, seed, noise_std, level) as sim, BagWriter(bag_path) as bag:
+    with _simulator(robot, seed, noise_std, level, payload, substeps) as sim, BagWriter(bag_path) as bag:
         rec = _Recorder(bag, robot)
         rec.state(sim.output)
         for k, theta_d in enumerate(commands):
+            if before_step is not None:
+                before_step(sim, k)
             rec.command(sim.t, theta_d, None if x_d is None else x_d[k])
             rec.state(sim.step(theta_d))
         return Path(bag.path)
@@ -186,12 +200,41 @@ def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_st
 
 
 def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
-                      **circle) -> Path:
-    """Record the circle run of section 4.1.1 (IK-only control along :func:`circle_trajectory`)."""
+                      payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0), **circle) -> Path:
+    """Record the circle run of section 4.1.1 (IK-only control along :func:`circle_trajectory`).
+
+    payload_mass [kg] at payload_cog [m, platform frame]: an additional load as in Fig. 4.1, (4.1).
+    """
     robot = load_robot(robot) if isinstance(robot, str) else robot
     x_d = circle_trajectory(robot.home, **circle)
     commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
-    return _run(robot, bag_path, commands, x_d, seed, noise_std, level)
+    payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
+    return _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload)
+
+
+def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10.0, 0.0, 0.0, 0.0),
+                          pulse: float = 0.004, rest: float = 0.2, duration: float = 0.6, seed: int = 1,
+                          level: float = 0.5, payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0),
+                          substeps: int = 10) -> Path:
+    """Record the free oscillation of the platform for its eigenfrequency (section 4.3, (4.8)).
+
+    The drives hold theta_d = IK{home} (no controller acts, as in the thesis' experiment); after
+    ``rest`` s a rectangular ``wrench`` [N, N m] of ``pulse`` s (a knock on the platform, shorter than
+    a period of the oscillation) hits the platform origin; ``duration`` s in all. ``substeps``
+    physics steps per period: at 1 ms the explicit cable damping (zeta ~0.2 at 34 Hz on the Mini)
+    raises the damped frequency by ~2 % over the continuous system.
+    """
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    hold = inverse_kinematics(robot, robot.home).q
+    commands = np.repeat(hold[None], int(round(duration / 1e-3)), axis=0)
+    k_pulse = int(round(rest / 1e-3))
+
+    def knock(sim, k):
+        if k == k_pulse:
+            sim.apply_pulse(wrench, shape="rectangle", duration=pulse)
+
+    payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
+    return _run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps)
 
 
 def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.65, 0.9), hold: float = 0.4,
@@ -230,7 +273,8 @@ def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=pr
     outdir.mkdir(parents=True, exist_ok=True)
     bags = {}
     for name, record in (("friction", record_friction_run), ("drive_sweep", record_drive_sweep),
-                         ("circle", record_circle_run), ("stiffness", record_stiffness_run)):
+                         ("circle", record_circle_run), ("stiffness", record_stiffness_run),
+                         ("pulse", record_pulse_response)):
         progress(f"recording {name} ...")
         bags[name] = record(outdir / name, robot=robot, seed=seed)
         progress(f"  {bags[name]}")

@@ -1,4 +1,4 @@
-"""Platform mass from the circle run, thesis section 4.1.1, (4.2)-(4.4).
+"""Platform mass (and centre of gravity, cog.py) from the circle run, thesis section 4.1.1, (4.2)-(4.4).
 
 On the circle at constant angular velocity thetadot_c the platform accelerates by
 r_c thetadot_c^2 towards the centre (4.2), so the cable wrench w = A^T f (2.10) carries a first
@@ -22,8 +22,7 @@ import numpy as np
 from cdpr_control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control.kinematics import inverse_kinematics
 
-from . import bag_data
-from .friction import wrap_angles
+from . import bag_data, cog
 
 
 @dataclass
@@ -33,6 +32,7 @@ class MassFit:
     frequency: float             # Hz, circle frequency found in the set-points
     r_c: float                   # m, measured circle radius
     window: tuple                # s, (start, end) of the constant-velocity window
+    c_mp: np.ndarray             # m, centre of gravity in the platform frame (4.3), see cog.py
 
 
 def cable_wrench(robot, x, f) -> np.ndarray:
@@ -89,7 +89,9 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
     X = np.array([_harmonic(t, x[mask, j], omega) for j in (0, 1)])
     m_circle = float(np.linalg.norm(W) / (omega**2 * np.linalg.norm(X)))
     m_static = float(np.mean(w[mask, 2]) / (0.0 - robot.gravity[2]))
-    return MassFit(m_circle, m_static, frequency, float(np.linalg.norm(X) / np.sqrt(2.0)), (t[0], t[-1]))
+    xddot = cog.accelerations(data.t, x)[mask]
+    c_mp = cog.centre_of_gravity(t, x[mask], xddot, w[mask, 3:], m_circle, omega, robot.gravity)
+    return MassFit(m_circle, m_static, frequency, float(np.linalg.norm(X) / np.sqrt(2.0)), (t[0], t[-1]), c_mp)
 
 
 def _setpoints(bag, t) -> np.ndarray:
