@@ -1,7 +1,7 @@
 """``cdpr identify``: model parameters from recorded bags (thesis sections 3.3.1, 3.7.2, 4.1.1, 4.3).
 
     cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
-    cdpr identify drive BAG [--model pt1_deadtime|second_order] [--plot fit.png]
+    cdpr identify drive BAG [--model pt1_deadtime|second_order] [--robot NAME] [--plot fit.png]
     cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
@@ -26,7 +26,9 @@ def add_parser(sub) -> None:
 
     d = what.add_parser("drive", help="drive dynamics from a sine sweep: (3.10) or (5.11)")
     d.add_argument("bag", help="bag with winch/command and winch/state")
-    d.add_argument("--model", default="pt1_deadtime", choices=("pt1_deadtime", "second_order"))
+    d.add_argument("--model", choices=("pt1_deadtime", "second_order"),
+                   help="model to fit (default: the drive model of the --robot file)")
+    d.add_argument("--robot", default="ipanema3_mini", help="robot name or file (its drive model is the default)")
     d.add_argument("--plot", metavar="PNG", nargs="?", const="drive_fit.png",
                    help="plot of the fit (default file drive_fit.png)")
     d.set_defaults(run=run_drive)
@@ -86,7 +88,10 @@ def run_drive(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import drive
 
-    data, fit = drive.identify(BagReader(args.bag), args.model)
+    from cdpr_control.robot import load_robot
+
+    model = args.model or load_robot(args.robot).drive.model
+    data, fit = drive.identify(BagReader(args.bag), model)
     print(f"{fit.model} from cables {[c + 1 for c in data.cables]}: "
           + ", ".join(f"{k} = {v:.6g}" for k, v in fit.params.items()) + f"  (rms {fit.rms:.3g} m)")
     if args.plot:
