@@ -48,7 +48,7 @@ def bench(name: str) -> dict:
     robot = load_robot(name)
     x0, theta0, offset = startup_state(robot, robot.home, 0.0, calibrate_home=True)
     loop = ControlLoop(robot, PERIOD)
-    parts = {k: [] for k in ("friction_us", "forward_kinematics_us", "force_setpoint_us", "cfc_us", "ospc_us",
+    parts = {k: [] for k in ("ik_x_d_us", "friction_us", "forward_kinematics_us", "force_setpoint_us", "cfc_us", "ospc_us",
                               "joint_command_us", "simulator_us")}
     commands = []
     with Simulator(robot, SimConfig(), x0=x0, theta0=theta0, encoder_offset=offset) as sim:
@@ -57,16 +57,16 @@ def bench(name: str) -> dict:
         wall0 = time.perf_counter()
         for k in range(STEPS):
             x_d, xd, xdd = circle(robot, k)
-            beta = inverse_kinematics(robot, x_d).beta
-            f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, beta)
-            (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d)
-            dist, t3 = timed(loop.force.update, x_d, xd, xdd, w)
+            ik_d, t0 = timed(inverse_kinematics, robot, x_d)
+            f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, ik_d.beta)
+            (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d, ik_d)
+            dist, t3 = timed(loop.force.update, x_d, xd, xdd, w, ik_d.AT)
             dq, t4 = timed(loop.cfc.update, dist.f, f, out.theta, dist.f_min, dist.f_max)
             x_ospc, t5 = timed(loop.ospc.update, x_d, x)
             theta_d, t6 = timed(loop.command.update, x_d, [x_ospc], dq)
             out, t7 = timed(sim.step, theta_d)
             commands.append(theta_d)
-            for key, t in zip(parts, (t1, t2, t3, t4, t5, t6, t7)):
+            for key, t in zip(parts, (t0, t1, t2, t3, t4, t5, t6, t7)):
                 parts[key].append(t / 1e3)
         wall = time.perf_counter() - wall0
     x0, theta0, offset = startup_state(robot, robot.home, 0.0, calibrate_home=True)

@@ -67,10 +67,10 @@ class ControlLoop:
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta)
-        beta = inverse_kinematics(robot, x_d).beta
-        f = self.friction.update(F_s, theta, thetadot, beta)
-        x, w = self.estimator.update(theta, f, x_d)
-        dist = self.force.update(x_d, xdot_d, xddot_d, w)
+        ik_d = inverse_kinematics(robot, x_d)          # once per period, shared by three stages
+        f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
+        x, w = self.estimator.update(theta, f, x_d, ik_d)
+        dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)
         dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
         x_ospc = self.ospc.update(x_d, x) if self.params.ospc_enabled else np.zeros(6)
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,

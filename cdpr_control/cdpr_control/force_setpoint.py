@@ -112,8 +112,11 @@ class ForceSetpoint:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
 
-    def update(self, x_d, xdot_d, xddot_d, w) -> DistributionResult:
-        """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d."""
+    def update(self, x_d, xdot_d, xddot_d, w, AT=None) -> DistributionResult:
+        """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
+
+        AT: the structure matrix at x_d when the caller has it (else computed here).
+        """
         if self.f_ref_override is None:
             self._ramp_level()
         w_dyn = platform_wrench(self.robot, x_d, xdot_d, xddot_d)              # (2.33), A^T f = -w
@@ -124,5 +127,6 @@ class ForceSetpoint:
             self.w_d = self.smith.update(w_f, w_dyn, self.w_dist_max)         # (3.26), saturated
         else:
             self.w_d = w_dyn                                                  # (3.1)
-        AT = inverse_kinematics(self.robot, x_d).AT
+        if AT is None:
+            AT = inverse_kinematics(self.robot, x_d).AT
         return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)

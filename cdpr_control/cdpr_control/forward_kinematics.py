@@ -267,11 +267,14 @@ class PoseEstimator:
         self.x: np.ndarray | None = None
         self.result: FKResult | None = None
 
-    def update(self, theta, f, x_d) -> tuple[np.ndarray, np.ndarray]:
-        """-> (x, w): the pose estimate and the wrench of the measured forces about its origin."""
+    def update(self, theta, f, x_d, ik_d=None) -> tuple[np.ndarray, np.ndarray]:
+        """-> (x, w): the pose estimate and the wrench of the measured forces about its origin.
+
+        ik_d: inverse_kinematics(robot, x_d) when the caller has it (saves the pulley IK at x_d).
+        """
         if self.dq_0 is None:                                                 # (3.7) at start-up
             self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, f, theta)
-        self.result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys)
+        self.result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys, ik_d=ik_d)
         if self.result.converged:
             self.x = self.result.x
         x = self.x if self.x is not None else np.asarray(x_d, dtype=float)

@@ -10,6 +10,13 @@
 from __future__ import annotations
 
 
+def _force_arguments(parser) -> None:
+    """The options of the identifications that need the cable forces at the platform."""
+    parser.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, mass, cable, friction)")
+    parser.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
+    parser.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("identify", help="identify friction, drive, mass, stiffness, eigenfrequency from bags")
     what = p.add_subparsers(dest="what", metavar="WHAT", required=True)
@@ -35,23 +42,17 @@ def add_parser(sub) -> None:
 
     m = what.add_parser("mass", help="platform mass and centre of gravity from the circle run (4.2)-(4.4)")
     m.add_argument("bag", help="bag with winch/state, setpoint and ground_truth/pose")
-    m.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, friction)")
-    m.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
-    m.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    _force_arguments(m)
     m.set_defaults(run=run_mass)
 
     k = what.add_parser("stiffness", help="cable stiffness k0, k1, k2 (2.16) from tension steps at rest")
     k.add_argument("bag", help="bag with winch/state, winch/command and ground_truth/pose or setpoint")
-    k.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, friction)")
-    k.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
-    k.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    _force_arguments(k)
     k.set_defaults(run=run_stiffness)
 
     e = what.add_parser("eigenfrequency", help="platform eigenfrequency in z from a knock, against (4.8)")
     e.add_argument("bag", help="bag with winch/state, ground_truth/cable_forces and ground_truth/pose")
-    e.add_argument("--robot", default="ipanema3_mini", help="robot name or file (geometry, mass, cable)")
-    e.add_argument("--friction", metavar="YAML", help="friction_compensation parameter file (default: robot file)")
-    e.add_argument("--reference", action="store_true", help="use ground_truth/cable_forces instead of F_s")
+    _force_arguments(e)
     e.add_argument("--plot", metavar="PNG", nargs="?", const="eigenfrequency_fit.png",
                    help="plot of the fitted decay (default file eigenfrequency_fit.png)")
     e.set_defaults(run=run_eigenfrequency)
