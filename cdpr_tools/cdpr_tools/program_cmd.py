@@ -6,14 +6,22 @@ from pathlib import Path
 from cdpr_control import programs
 from cdpr_control.gcode import parse_gcode
 from cdpr_control.gcode_program import GCodeError
+from cdpr_control.program_check import check_program
+from cdpr_control.robot import load_robot
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("program", help="list, check or run G-code programs (dialect: docs/gcode.md)")
     verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     verbs.add_parser("list", help="shipped programs").set_defaults(run=_list)
-    check = verbs.add_parser("check", help="parse a program and report every error with line:col")
+    check = verbs.add_parser("check", help="parse and plan a program for a robot; every error with line:col",
+                             description="Parse the program, plan its time law and check that its path "
+                                         "stays in the robot's wrench-feasible workspace (with the payload); "
+                                         "errors name line:col. The interpreter runs the same check before "
+                                         "it starts a program.")
     check.add_argument("program", help="G-code file or shipped program name")
+    check.add_argument("--robot", default="ipanema3_mini", help="robot name or file (default ipanema3_mini)")
+    check.add_argument("--payload", type=float, default=0.0, help="payload carried [kg] (default 0)")
     check.set_defaults(run=_check)
     run = verbs.add_parser("run", help="run a program through the RunProgram action of a running graph")
     run.add_argument("program", help="G-code file or shipped program name")
@@ -25,7 +33,7 @@ def add_parser(sub) -> None:
 def _text(program: str) -> tuple[str, str]:
     path = Path(program)
     if path.exists():
-        return path.stem, path.read_text()
+        return path.stem, path.read_bytes()         # the parser names line:col of non-UTF-8 bytes
     if program in programs.names() or f"{program}.gcode" in programs.names():
         return program.removesuffix(".gcode"), programs.read(program)
     raise FileNotFoundError(f"no file {program!r} and no shipped program of that name; shipped: {', '.join(programs.names())}")
@@ -39,13 +47,16 @@ def _list(args) -> int:
 
 def _check(args) -> int:
     name, text = _text(args.program)
+    robot = load_robot(args.robot)
     try:
-        program = parse_gcode(text)
+        program = parse_gcode(text, start_pose=robot.home)
+        duration = check_program(program, robot, payload=args.payload)
     except GCodeError as exc:
         for d in exc.diagnostics:
             print(f"{args.program}:{d}")
         return 1
-    print(f"{name}: ok, {len(program.blocks)} blocks")
+    print(f"{name}: ok for {robot.name}, {len(program.blocks)} blocks, {duration:.2f} s "
+          "(at the interpreter's default limits)")
     return 0
 
 
