@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .kinematics import inverse_kinematics
+
 ROBOTS_DIR = Path(__file__).parent / "robots"
+MAX_VALUES = 100_000      # scalars a robot file may expand to (a YAML alias bomb is refused early)
 
 
 class RobotFileError(ValueError):
@@ -155,6 +158,7 @@ class _Reader:
     def __init__(self, data: dict, file: Path):
         self.data = data
         self.file = file
+        self.used: set[str] = set()          # dotted keys read, to find unknown ones
 
     def error(self, key: str, message: str) -> RobotFileError:
         return RobotFileError(f"{self.file}: {key}: {message}")
@@ -167,15 +171,40 @@ class _Reader:
             if part not in node:
                 raise self.error(key, "missing key")
             node = node[part]
+        self.used.add(key)
         return node
+
+    def optional(self, key: str) -> bool:
+        """Whether an optional key is present (mark it read with the typed accessors)."""
+        try:
+            self.raw(key)
+        except RobotFileError:
+            return False
+        return True
+
+    def check_unknown(self) -> None:
+        """Every key of the file must have been read: a typo (``f_mx``) is an error, not a default."""
+        def walk(node, prefix):
+            for k, v in node.items():
+                key = f"{prefix}{k}"
+                if key in self.used:
+                    continue
+                if isinstance(v, dict) and any(u.startswith(key + ".") for u in self.used):
+                    walk(v, key + ".")
+                else:
+                    known = sorted({u.split(".")[prefix.count(".")] for u in self.used if u.startswith(prefix)})
+                    raise self.error(key, f"unknown key; known here: {', '.join(known)}")
+        walk(self.data, "")
 
     def array(self, key: str, shape: tuple, sign: str | None = None, deg: bool = False) -> np.ndarray:
         """A float array of the given shape; a scalar broadcasts to a (m,) shape."""
         value = self.raw(key)
+        if _has_bool(value):                      # YAML's true is not 1.0 m
+            raise self.error(key, f"expected numbers of shape {shape}, got {_short(value)}")
         try:
             x = np.array(value, dtype=float)
         except (TypeError, ValueError):
-            raise self.error(key, f"expected numbers of shape {shape}, got {value!r}") from None
+            raise self.error(key, f"expected numbers of shape {shape}, got {_short(value)}") from None
         if x.ndim == 0 and len(shape) == 1:
             x = np.full(shape, float(x))
         if x.shape != shape:
@@ -186,7 +215,7 @@ class _Reader:
     def scalar(self, key: str, sign: str | None = None) -> float:
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, f"expected a number, got {value!r}")
+            raise self.error(key, f"expected a number, got {_short(value)}")
         x = np.array([float(value)])
         self._check_sign(key, x, sign)
         return float(x[0])
@@ -194,19 +223,19 @@ class _Reader:
     def integer(self, key: str, minimum: int) -> int:
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise self.error(key, f"expected an integer >= {minimum}, got {value!r}")
+            raise self.error(key, f"expected an integer >= {minimum}, got {_short(value)}")
         return value
 
     def choice(self, key: str, options: tuple) -> str:
         value = self.raw(key)
         if value not in options:
-            raise self.error(key, f"expected one of {', '.join(options)}, got {value!r}")
+            raise self.error(key, f"expected one of {', '.join(options)}, got {_short(value)}")
         return value
 
     def boolean(self, key: str) -> bool:
         value = self.raw(key)
         if not isinstance(value, bool):
-            raise self.error(key, f"expected true or false, got {value!r}")
+            raise self.error(key, f"expected true or false, got {_short(value)}")
         return value
 
     def _check_sign(self, key: str, x: np.ndarray, sign: str | None) -> None:
@@ -221,10 +250,51 @@ class _Reader:
                 raise self.error(where, f"must be >= 0, got {v}")
 
 
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _has_bool(value) -> bool:
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, list) and any(_has_bool(v) for v in value)
+
+
+def _count_values(node, limit: int) -> int:
+    """Scalars in a parsed YAML tree, counting shared (aliased) parts each time; stops past ``limit``."""
+    count, stack = 0, [node]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        else:
+            count += 1
+        if count + len(stack) > limit:
+            return limit + 1
+    return count
+
+
+def _check_geometry(r: _Reader, robot: Robot) -> None:
+    """Anchors distinct, and the structure matrix (2.10) of full rank n at home: else no wrench
+    (2.39) can be balanced in every direction (e.g. every b_i = 0 leaves rank 3)."""
+    for i in range(robot.m):
+        for j in range(i):
+            if np.allclose(robot.a[i], robot.a[j], atol=1e-9):
+                raise r.error(f"geometry.a[{i}]", f"same anchor point as geometry.a[{j}]: {robot.a[i].tolist()}")
+    AT = inverse_kinematics(robot, robot.home).AT
+    rank = np.linalg.matrix_rank(AT, tol=1e-9 * np.abs(AT).max())
+    if rank < robot.n:
+        raise r.error("geometry.b", f"the structure matrix A^T (2.10) at home has rank {rank} < {robot.n}: "
+                      "the cables cannot balance every wrench (are the platform points b_i all alike?)")
+
+
 def _read_robot(r: _Reader) -> Robot:
     name = r.raw("name")
     if not isinstance(name, str) or not name:
-        raise r.error("name", f"expected a non-empty string, got {name!r}")
+        raise r.error("name", f"expected a non-empty string, got {_short(name)}")
     m = r.integer("m", minimum=1)
     n = r.integer("n", minimum=1)
     if n != 6:
@@ -268,6 +338,8 @@ def _read_robot(r: _Reader) -> Robot:
         ),
         friction=_read_friction(r, m),
     )
+    _check_geometry(r, robot)
+    r.check_unknown()
     return robot
 
 
@@ -360,4 +432,6 @@ def load_robot(name_or_path: str | Path) -> Robot:
         raise RobotFileError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):
         raise RobotFileError(f"{path}: expected a mapping at the top level")
+    if _count_values(data, MAX_VALUES) > MAX_VALUES:
+        raise RobotFileError(f"{path}: expands to more than {MAX_VALUES} values (YAML aliases nested too deep?)")
     return _read_robot(_Reader(data, path))
