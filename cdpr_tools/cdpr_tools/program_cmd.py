@@ -8,6 +8,7 @@ from cdpr_control.gcode import parse_gcode
 from cdpr_control.gcode_program import GCodeError
 from cdpr_control.program_check import check_program
 from cdpr_control.robot import load_robot
+from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 
 
 def add_parser(sub) -> None:
@@ -27,6 +28,8 @@ def add_parser(sub) -> None:
     run.add_argument("program", help="G-code file or shipped program name")
     run.add_argument("--action", default="/run_program", help="action name (default /run_program)")
     run.add_argument("--timeout", type=float, default=3600.0, help="wall-clock limit [s]")
+    run.add_argument("--server-timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
+                     help=f"wait up to SEC seconds for the graph's action server (default {DISCOVERY_TIMEOUT:g})")
     run.set_defaults(run=_run)
 
 
@@ -64,7 +67,7 @@ def _run(args) -> int:
     from cdpr_tools.program_client import run_program
 
     name, text = _text(args.program)
-    result = run_program(text, name, action=args.action, timeout=args.timeout,
+    result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
                          feedback=lambda line, progress: print(f"\r line {line:5d}  {100 * progress:5.1f} %", end="", flush=True))
     print()
     print(f"{name}: {'done' if result.success else 'failed'} after {result.duration:.2f} s {result.message}")
