@@ -61,10 +61,10 @@ def test_cli_check_reports_line_col_and_exit_code(tmp_path, capsys):
     assert "ok for IPAnema 3" in capsys.readouterr().out
 
 
-def test_run_without_a_graph_says_so_quickly(capsys):
+def test_run_without_a_graph_says_so_quickly(capfd):
     import time
 
     t0 = time.monotonic()
     assert cdpr(["program", "run", "rectangle", "--action", "/no_graph_here", "--server-timeout", "1"]) == 1
     assert time.monotonic() - t0 < 10
-    assert "no RunProgram action server at /no_graph_here after 1 s: is a graph running?" in capsys.readouterr().err
+    assert "no RunProgram action server at /no_graph_here after 1 s: is a graph running?" in capfd.readouterr().err
