@@ -1,5 +1,5 @@
-"""Property-based tests: the parser and planner return a planned Program or a GCodeError with line:col on any input,
-and whatever parses interpolates within the limits to the programmed end point."""
+"""Property-based tests: on any input the parser and planner return a planned Program or a
+GCodeError with line:col, and whatever parses interpolates within the limits to its end point."""
 import os
 import re
 
