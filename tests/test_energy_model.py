@@ -133,3 +133,20 @@ def test_reference_trip_of_fig_4_34_is_feasible_and_returns_to_its_height():
     assert te.feasible.all()
     E = te.flow.energies()
     assert abs(E["E_mech"]) < 0.01 * E["E_el"]     # lifted and lowered by the same height
+
+
+def test_winch_efficiency_4_15_reaches_85_percent_at_high_forces():
+    """Fig. 4.32: up to about 85 % at high forces; paying out light loads the friction exceeds the
+    cable power, the motor must drive and eta_w is undefined."""
+    r = IPANEMA3
+    f = np.linspace(100.0, 3000.0, 30)[:, None]
+    v = np.linspace(-1.7, 1.7, 35)[None, :]
+    eta = energy.winch_efficiency(r, f, v)
+    assert 0.8 < np.nanmax(eta) < 0.92
+    assert np.all(eta[np.isfinite(eta)] < 1.0)
+    assert np.isnan(energy.winch_efficiency(r, 100.0, 0.3))              # generator, light load
+    assert np.all(np.isfinite(energy.winch_efficiency(r, f[:, 0], -0.5)))  # motor: always defined
+    # by hand, motor operation: f_w = 3000 N hauled in at 0.3 m/s: eta = P_w / P_s
+    alphadot = -0.3 / 0.004338
+    tau = energy.motor_torque(r, 3000.0, alphadot, 0.0)
+    assert energy.winch_efficiency(r, 3000.0, -0.3) == pytest.approx(3000.0 * 0.3 / (tau * -alphadot))

@@ -3,6 +3,7 @@
     cdpr analyze energy BAG [--robot NAME] [--sensor] [--plot PNG] [--json FILE]
     cdpr analyze energy --trajectory PROGRAM [--start X Y Z [A B C]] [--payload KG]
                         [--v-max V] [--a-max A] [--j-max J] [--plot PNG] [--json FILE]
+    cdpr analyze energy --winch-map PNG [--robot NAME]
 
 A bag needs ``winch/state`` (theta) and ``ground_truth/pose`` or ``setpoint``; the forces at the
 platform come from ``ground_truth/cable_forces`` when recorded (the simulator), else (or with
@@ -85,10 +86,18 @@ def main(argv=None) -> int:
     p.add_argument("--j-max", type=float, default=20.0, help="path jerk limit [m/s^3] (default 20)")
     p.add_argument("--plot", metavar="PNG", help="power over time and losses per subsystem")
     p.add_argument("--json", metavar="FILE", help="write the summary as JSON")
+    p.add_argument("--winch-map", metavar="PNG", help="winch efficiency map (4.15), Fig. 4.32")
     args = p.parse_args(argv)
+    from cdpr_control.analysis.energy import LEVELS, plot, plot_winch_efficiency, program_motion, trajectory_power
+
+    if args.winch_map:
+        robot = load_robot(args.robot or "ipanema3")
+        plot_winch_efficiency(robot, args.winch_map)
+        print(f"wrote {args.winch_map}")
+        if args.bag is None and args.trajectory is None:
+            return 0
     if (args.bag is None) == (args.trajectory is None):
         p.error("give either a BAG or --trajectory PROGRAM")
-    from cdpr_control.analysis.energy import LEVELS, plot, program_motion, trajectory_power
 
     results, flows = {}, {}
     if args.bag:

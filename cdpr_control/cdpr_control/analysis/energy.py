@@ -159,6 +159,31 @@ def summary(flow: PowerFlow) -> dict:
     }
 
 
+def plot_winch_efficiency(robot, path) -> None:
+    """PNG of the winch efficiency map (4.15) over cable force and velocity (Fig. 4.32)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..energy import winch_efficiency
+
+    v_max = robot.drive.v_max
+    f = np.linspace(float(np.min(robot.cable.f_min)), float(np.max(robot.cable.f_max)), 120)
+    v = np.linspace(-v_max, v_max, 161)
+    eta = winch_efficiency(robot, f[:, None], v[None, :])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    # hauling in (motor operation) on the right, as in Fig. 4.32
+    im = ax.contourf(-v, f, 100 * eta, levels=np.arange(0, 101, 5), cmap="viridis")
+    fig.colorbar(im, ax=ax, label="eta_w [%]")
+    ax.set_xlabel("hauling-in cable velocity -thetadot [m/s] (left: generator)")
+    ax.set_ylabel("cable force f_w [N]")
+    ax.set_title(f"{robot.name}: winch efficiency (4.15), blank: undefined", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=72)
+    plt.close(fig)
+
+
 def plot(flows: dict, path, title: str = "") -> None:
     """Power over time (Fig. 4.35) and the losses per subsystem (Fig. 4.31) of labelled PowerFlows."""
     import matplotlib
