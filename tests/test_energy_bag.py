@@ -53,3 +53,13 @@ def test_cli_trajectory_at_three_tension_levels(tmp_path):
                  "--payload", "100", "--json", str(out)]) == 0
     r = json.loads(out.read_text())
     assert r["minimal"]["E_el_Wh"] < r["medium"]["E_el_Wh"] < r["maximal"]["E_el_Wh"]
+
+
+def test_sensor_forces_through_the_friction_compensation_give_the_same_energy(lift_bag):
+    """Without ground truth (a real robot): F_s through (3.44) instead of the reference forces."""
+    robot = load_robot("ipanema3")
+    reference, _, _ = bag_power(BagReader(lift_bag), robot)
+    sensor, _, _ = bag_power(BagReader(lift_bag), robot, sensor=True)
+    idle = robot.energy.P_0 * (reference.t[-1] - reference.t[0])
+    assert sensor.energy("P_el") - idle == pytest.approx(reference.energy("P_el") - idle, rel=0.05)
+    assert sensor.energy("P_mech") == pytest.approx(reference.energy("P_mech"), rel=0.05)

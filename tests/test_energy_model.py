@@ -150,3 +150,37 @@ def test_winch_efficiency_4_15_reaches_85_percent_at_high_forces():
     alphadot = -0.3 / 0.004338
     tau = energy.motor_torque(r, 3000.0, alphadot, 0.0)
     assert energy.winch_efficiency(r, 3000.0, -0.3) == pytest.approx(3000.0 * 0.3 / (tau * -alphadot))
+
+
+def _robot_file(tmp_path, edit):
+    import yaml
+
+    from cdpr_control.robot import robot_path
+
+    data = yaml.safe_load(robot_path("ipanema3").read_text())
+    edit(data)
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_energy_section_is_validated_and_optional(tmp_path):
+    from cdpr_control.robot import RobotFileError
+
+    def efficiency_above_one(d):
+        d["energy"]["c_m"] = 1.2
+
+    def negative_inertia(d):
+        d["energy"]["J_w"] = -0.1
+
+    def short_pulley_list(d):
+        d["energy"]["pulley_mu"] = [0.01, 0.01]
+
+    for edit, key in ((efficiency_above_one, "energy.c_m"), (negative_inertia, "energy.J_w"),
+                      (short_pulley_list, "energy.pulley_mu")):
+        with pytest.raises(RobotFileError, match=key.replace(".", r"\.")):
+            load_robot(_robot_file(tmp_path, edit))
+    robot = load_robot(_robot_file(tmp_path, lambda d: d.pop("energy")))
+    assert robot.energy is None
+    with pytest.raises(ValueError, match="no 'energy' section"):
+        energy.motor_speed(robot, 1.0)
