@@ -10,6 +10,7 @@ from cdpr_control.analysis.stability import (THESIS_CFC_MARGINS, THESIS_OSPC_PHA
                                              ospc_open_loop, platform_model, stiffness_ratio)
 from cdpr_control.cable_force_control import CFCParams
 from cdpr_control.control_loop import ControlLoopParams
+from cdpr_control.force_setpoint import ForceSetpointParams
 from cdpr_control.ospc import OSPCParams
 from cdpr_control.robot import load_robot
 from cdpr_sim.closed_loop import run
@@ -65,18 +66,22 @@ def _envelope(signal, early, late):
 
 @pytest.mark.parametrize("name", ROBOTS)
 def test_cfc_gain_margin_predicts_the_simulated_loop(name):
-    """Hold at home with K_p at 0.7 and 1.6 times the critical gain of the margins: the forces keep a
-    ripple below 10 % of the PI's output range, resp. end in a limit cycle across half of it."""
+    """A step of the force set-point at home (tension level 0 -> 0.1 at t = 0) with K_p at 0.7 and
+    1.6 times the critical gain of the margins: the forces settle to a ripple below 10 % of the PI's
+    output range, resp. end in a limit cycle across half of it."""
     robot = ROBOTS[name]
     cfc, ospc, dt = controller_params(robot)
     critical = cfc.K_p * margins(cfc_open_loop(robot, cfc, dt=dt)).gain
     amplitude = {}
     for factor in (0.7, 1.6):
-        params = ControlLoopParams(cfc=CFCParams(**{**cfc.__dict__, "K_p": factor * critical}), ospc=ospc)
-        r = run(robot, lambda t: (robot.home, np.zeros(6), np.zeros(6)), 1.2, params)
+        params = ControlLoopParams(cfc=CFCParams(**{**cfc.__dict__, "K_p": factor * critical}), ospc=ospc,
+                                   force=ForceSetpointParams(tension_level=0.1, tension_rate=0.0))
+        r = run(robot, lambda t: (robot.home, np.zeros(6), np.zeros(6)), 1.2, params, tension_level=0.0)
+        assert np.mean(r.f_d[0] - r.f[0]) > 0.02 * np.max(robot.cable.f_max - robot.cable.f_min)
         amplitude[factor] = _envelope(r.f, slice(100, 400), slice(900, 1200))
     output_range = cfc.F_sat_n + cfc.F_sat_p
-    assert max(amplitude[0.7]) < 0.1 * output_range, amplitude
+    early, late = amplitude[0.7]
+    assert late < 0.1 * output_range and late < early, amplitude
     assert amplitude[1.6][1] > 0.5 * output_range, amplitude
 
 
