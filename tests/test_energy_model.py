@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from cdpr_control import energy
-from cdpr_control.analysis.energy import (REFERENCE_TRIP, hold_motion, program_motion, summary,
-                                          trajectory_power)
+from cdpr_control.analysis.energy import (REFERENCE_TRIP, THESIS_REFERENCE_TRIP, hold_motion, program_motion,
+                                          summary, trajectory_power)
 from cdpr_control.friction import pulley_force
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.robot import load_robot
@@ -126,13 +126,17 @@ def test_reference_trip_of_fig_4_34_is_feasible_and_returns_to_its_height():
     r = IPANEMA3
     s = REFERENCE_TRIP
     motion = program_motion(s.program, s.start, s.velocity, s.acceleration, s.jerk)
-    np.testing.assert_allclose(motion.x[-1, :3] - motion.x[0, :3], [2.4, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(motion.x[-1, :3] - motion.x[0, :3], [0.0, 2.4, 0.0], atol=1e-6)
     assert np.max(np.linalg.norm(motion.xdot[:, :3], axis=1)) == pytest.approx(1.5, rel=1e-3)
     assert np.max(np.linalg.norm(motion.xddot[:, :3], axis=1)) <= 5.0 * (1 + 1e-3)
     te = trajectory_power(r, motion, 0.0, s.payload)
     assert te.feasible.all()
     E = te.flow.energies()
     assert abs(E["E_mech"]) < 0.01 * E["E_el"]     # lifted and lowered by the same height
+    # beside the thesis' model figures (section 4.4.3): 4.12 Wh, peak about 8 kW (docs/analysis.md)
+    s = summary(te.flow)
+    assert s["E_el_Wh"] == pytest.approx(THESIS_REFERENCE_TRIP["energy_Wh"], rel=0.25)
+    assert s["P_el_peak_W"] == pytest.approx(THESIS_REFERENCE_TRIP["peak_power_W"], rel=0.25)
 
 
 def test_winch_efficiency_4_15_reaches_85_percent_at_high_forces():

@@ -88,7 +88,8 @@ def main(argv=None) -> int:
     p.add_argument("--json", metavar="FILE", help="write the summary as JSON")
     p.add_argument("--winch-map", metavar="PNG", help="winch efficiency map (4.15), Fig. 4.32")
     args = p.parse_args(argv)
-    from cdpr_control.analysis.energy import LEVELS, plot, plot_winch_efficiency, program_motion, trajectory_power
+    from cdpr_control.analysis.energy import (LEVELS, REFERENCE_TRIP, THESIS_REFERENCE_TRIP, plot,
+                                              plot_winch_efficiency, program_motion, trajectory_power)
 
     if args.winch_map:
         robot = load_robot(args.robot or "ipanema3")
@@ -122,6 +123,10 @@ def main(argv=None) -> int:
             if not te.feasible.all():
                 print(f"{name} tension: no feasible forces at {int((~te.feasible).sum())} of {len(te.feasible)} samples")
             results[name], flows[name] = _report(f"{name} tension (level {level})", te.flow), te.flow
+        if args.trajectory == REFERENCE_TRIP.program:
+            thesis = THESIS_REFERENCE_TRIP
+            print(f"thesis, reference trip at minimal tension (section 4.4.3): {thesis['energy_Wh']} Wh, "
+                  f"peak about {thesis['peak_power_W'] / 1e3:g} kW")
         medium = results["medium"]["E_el_Wh"]
         print("relative to medium tension (Fig. 4.33): " + ", ".join(
             f"{k} {100 * (r['E_el_Wh'] / medium - 1):+.1f} %" for k, r in results.items()))

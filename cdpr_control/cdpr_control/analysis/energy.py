@@ -48,9 +48,9 @@ class TripSpec:
     jerk: float                   # m/s^3
 
 
-# Fig. 4.34: start point ASSUMPTION (the thesis shows it only in a picture): the lift starts 0.5 m
-# above the floor level of the workspace centre, the move is centred on it.
-REFERENCE_TRIP = TripSpec("reference_trip", (-1.2, 0.0, 0.5, 0.0, 0.0, 0.0), 100.0, 1.5, 5.0, 20.0)
+# Fig. 4.34: start point and direction ASSUMPTION (the thesis shows them only in a picture): the
+# lift starts at the height of the workspace centre, the 2.4 m move along y is centred on it.
+REFERENCE_TRIP = TripSpec("reference_trip", (0.0, -1.2, 0.5, 0.0, 0.0, 0.0), 100.0, 1.5, 5.0, 20.0)
 THESIS_REFERENCE_TRIP = {"energy_Wh": 4.12, "peak_power_W": 8000.0}     # section 4.4.3
 
 
