@@ -88,6 +88,28 @@ class FrictionParams:
 
 
 @dataclass(frozen=True)
+class EnergyParams:
+    """Energy consumption model of the actuator units, thesis (4.9)-(4.14), table 4.6."""
+
+    pulley_mu: np.ndarray    # (m,) -, Coulomb coefficient of the pulleys (4.9)
+    pulley_F_pv: np.ndarray  # (m,) N s/m, viscous pulley friction (4.9)
+    r_w: float               # m, drum radius over gear ratio (4.10)
+    J_w: float               # kg m^2, winch, gear box and rotor inertia at the motor (4.11)
+    mu_w: float              # -, Coulomb friction coefficient of the winch (4.11)
+    F_wv: float              # N m s, viscous friction (4.11)
+    F_s: float               # N m, static friction (4.11)
+    alphadot_s: float        # rad/s, Stribeck velocity (4.11)
+    c_m: float               # -, efficiency of the servo amplifier (4.12)
+    R: float                 # Ohm, winding resistance (4.12)
+    Psi_m: float             # N m/A, torque constant (4.12)
+    c_n1: float              # W s, re-magnetisation losses (4.12)
+    c_n2: float              # W s^2, eddy current losses (4.12)
+    P_0: float               # W, idle power of the control cabinet (4.14)
+    c_pm: float              # -, supply efficiency in motor operation (4.14)
+    c_pg: float              # -, supply efficiency in generator operation, 0 = brake resistor (4.14)
+
+
+@dataclass(frozen=True)
 class Robot:
     """A cable robot with m cables and n DOF; arrays are read-only, units SI."""
 
@@ -111,6 +133,7 @@ class Robot:
     platform: PlatformParams
     sensor: SensorParams
     friction: FrictionParams
+    energy: EnergyParams | None = None   # optional section ``energy`` of the robot file
 
     def with_payload(self, mass: float, center_of_gravity=(0.0, 0.0, 0.0), inertia=None) -> "Robot":
         """The same robot carrying a point-like (or given-inertia) payload rigidly on the platform.
@@ -337,6 +360,7 @@ def _read_robot(r: _Reader) -> Robot:
             beta_1=float(np.deg2rad(r.scalar("sensor.beta_1_deg", "nonnegative"))),
         ),
         friction=_read_friction(r, m),
+        energy=_read_energy(r, m) if "energy" in r.data else None,
     )
     _check_geometry(r, robot)
     r.check_unknown()
@@ -396,6 +420,19 @@ def _read_friction(r: _Reader, m: int) -> FrictionParams:
         sigma=r.array("friction.sigma", (m,), "positive"),
         F_pv=r.array("friction.F_pv", (m,), "nonnegative"),
     )
+
+
+def _read_energy(r: _Reader, m: int) -> EnergyParams:
+    efficiencies = ("c_m", "c_pm", "c_pg")
+    values = {key: r.scalar(f"energy.{key}", "positive") for key in
+              ("r_w", "J_w", "alphadot_s", "c_m", "R", "Psi_m", "c_pm")}
+    values.update({key: r.scalar(f"energy.{key}", "nonnegative") for key in
+                   ("mu_w", "F_wv", "F_s", "c_n1", "c_n2", "P_0", "c_pg")})
+    for key in efficiencies:
+        if values[key] > 1.0:
+            raise r.error(f"energy.{key}", f"an efficiency must be <= 1, got {values[key]}")
+    return EnergyParams(pulley_mu=r.array("energy.pulley_mu", (m,), "nonnegative"),
+                        pulley_F_pv=r.array("energy.pulley_F_pv", (m,), "nonnegative"), **values)
 
 
 # --- public API ------------------------------------------------------------------------------
