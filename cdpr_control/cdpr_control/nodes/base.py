@@ -8,11 +8,11 @@ arguments of ``rclpy.node.Node`` (``parameter_overrides``, ``cli_args``, ``names
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.node import Node
 from std_msgs.msg import Header
 
 from cdpr_control.robot import load_robot
 
+from .intraprocess import IntraProcessNode
 from .parameters import ParamSpec
 from .qos import DIAGNOSTICS
 from .runner import run_node
@@ -26,7 +26,9 @@ COMMON_PARAMS = (
 )
 
 
-class CdprNode(Node):
+class CdprNode(IntraProcessNode):
+    """Publishers and subscriptions deliver in-process to the nodes of the same context (intraprocess.py)."""
+
     def __init__(self, name: str, **kwargs):
         kwargs.setdefault("automatically_declare_parameters_from_overrides", False)
         super().__init__(name, **kwargs)
