@@ -48,10 +48,12 @@ class CdprNode(IntraProcessNode):
         h.stamp.sec, h.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
         return h
 
-    def report(self, level: bytes, message: str, values: dict | None = None, stamp_ns: int | None = None) -> None:
-        """Publish this node's status on /diagnostics when it changed (level or message)."""
+    def report(self, level: bytes, message: str, values: dict | None = None, stamp_ns: int | None = None,
+               always: bool = False) -> None:
+        """Publish this node's status on /diagnostics when it changed (level or message), or ``always``
+        (a periodic report whose values matter, e.g. timing)."""
         key = (level, message)
-        if key == self._last_diagnostic:
+        if key == self._last_diagnostic and not always:
             return
         self._last_diagnostic = key
         status = DiagnosticStatus(level=level, name=self.get_fully_qualified_name(), message=message,

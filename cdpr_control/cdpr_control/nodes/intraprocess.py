@@ -7,7 +7,8 @@ same to every tool, but the nodes of one rclpy ``Context`` also register them in
 ``Publisher.topic_name`` reports):
 
 - ``publish(msg)`` hands the message object to the local subscriptions of that topic, in
-  publication order (no serialization, no DDS, no executor), and publishes it over DDS as well
+  publication order (no serialization, no DDS, no executor), and publishes it over DDS as well,
+  before the local deliveries so that outside a message comes before those it causes,
   only when a subscription that is *not* local matches (``get_subscription_count()`` counts the
   local ones too, the registry knows how many those are). A ``cdpr topic echo``, a recorder in
   another process or a node on another host therefore sees every message, while a composed graph
@@ -258,13 +259,12 @@ class IntraProcessPublisher(Publisher):
         if self._ipc_version != topic.version:      # the local subscriptions changed: match again
             self._ipc_version = topic.version
             self._ipc_matched = [s for s in topic.subscriptions if compatible(self.qos_profile, s.qos)]
-        matched = self._ipc_matched
+        matched, items = self._ipc_matched, []
         if obj is not None:
             if self.history is not None:
                 self.history.append(obj)
             if matched:
                 data = None
-                items = []
                 for s in matched:
                     if s.raw:
                         data = serialize_message(obj) if data is None else data
@@ -272,9 +272,10 @@ class IntraProcessPublisher(Publisher):
                     else:
                         items.append((s.callback, obj))
                 topic.recent.append(obj)
-                self._ipc_registry.post(items)
         if self.get_subscription_count() > len(matched):
-            super().publish(msg)
+            super().publish(msg)    # first: outside, a message is seen before those it causes
+        if obj is not None and matched:
+            self._ipc_registry.post(items)
 
 
 class IntraProcessNode(Node):
