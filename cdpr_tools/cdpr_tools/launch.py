@@ -31,7 +31,7 @@ import sys
 import tempfile
 import threading
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import yaml
@@ -193,6 +193,26 @@ def _substitute(value, arguments: dict, path: Path):
     full = _SUBSTITUTION.fullmatch(value.strip())
     text = _SUBSTITUTION.sub(replace, value)
     return yaml.safe_load(text) if full and text.strip() else text
+
+
+def select_nodes(description: LaunchDescription, only: list[str] | None = None,
+                 exclude: list[str] | None = None) -> LaunchDescription:
+    """The graph restricted to some nodes, to run the parts of one graph on several hosts/processes.
+
+    A pattern (regular expression) selects a node when it matches its label (``ns/name``) or its
+    module/entry point in full or as a dotted suffix, e.g. ``winch_platform_sim``.
+    """
+    def matches(spec: NodeSpec, patterns) -> bool:
+        names = [spec.label, spec.module or spec.entry_point or ""]
+        names += [n.rpartition(".")[2] for n in names]
+        return any(re.fullmatch(p, n) for p in patterns for n in names)
+
+    nodes = [n for n in description.nodes
+             if (not only or matches(n, only)) and not (exclude and matches(n, exclude))]
+    if not nodes:
+        raise ValueError(f"no node of the graph is selected (only {only or '-'}, exclude {exclude or '-'}); "
+                         f"nodes: {', '.join(n.label for n in description.nodes)}")
+    return replace(description, nodes=nodes)
 
 
 # -- the arguments every node gets ------------------------------------------------------------------
