@@ -193,3 +193,23 @@ def test_transient_local_history_reaches_a_late_local_subscriber(spaces):
     node.create_subscription(Int64, "/ipc_latched/lossy", reliable.append, CONTROL)
     lossy.publish(Int64(data=7))
     assert reliable == []                   # DDS would not match these QoS either
+
+
+def test_clock_reaches_every_sim_time_node_in_one_delivery(spaces):
+    """/clock sets every local node's ROS clock (use_sim_time), converted once per message."""
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    graph = spaces()
+    sim_time = [Parameter("use_sim_time", value=True)]
+    nodes = [graph.node(f"ipc_clocked_{i}", parameter_overrides=sim_time) for i in range(3)]
+    clock_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    publisher = graph.node("ipc_clock_source").create_publisher(Clock, "/clock", clock_qos)
+    registry = IntraProcess.of(graph.context)
+    for sec in (7, 8):
+        before = registry.deliveries
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = sec, 250_000_000
+        publisher.publish(msg)
+        assert registry.deliveries == before + 1
+        assert [n.get_clock().now().nanoseconds for n in nodes] == [sec * 10**9 + 250_000_000] * 3

@@ -23,6 +23,8 @@ same to every tool, but the nodes of one rclpy ``Context`` also register them in
   is the executor's thread (or no executor spins yet, e.g. during construction); any other thread
   only appends and wakes the executor. After ``BUDGET_S`` of draining the rest of the queue is
   handed to the executor (a one-shot timer), so timers, services and DDS messages keep their turn.
+- The nodes' TimeSources (``use_sim_time``) take /clock as one delivery per message: the time is
+  converted once and set on every node's clock (rather than one callback per node and period).
 - Transient-local publishers keep their last ``depth`` messages for local subscriptions that
   join later, as DDS would; QoS that DDS would not match (best-effort publisher to a reliable
   subscription, volatile publisher to a transient-local one) is not matched here either.
@@ -44,6 +46,8 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.time import Time
+from rclpy.time_source import TimeSource
 
 BUDGET_S = 0.005        # longest time one drain keeps the executor from other events [s]
 RECENT = 64             # local messages per topic remembered to recognise their DDS copies
@@ -77,6 +81,23 @@ class LocalSubscription:
             if topic.seen_locally(msg, self.raw):
                 return
         self.registry.post(((self.callback, msg),))
+
+
+def clock_fanout(sources: list[TimeSource]):
+    """One callback for the /clock subscriptions of several TimeSources (rclpy 7.1
+    ``TimeSource.clock_callback``, with the conversion done once)."""
+    def deliver(msg) -> None:
+        t = Time.from_msg(msg.clock)
+        for source in sources:
+            source._last_time_set = t
+            for clock in source._associated_clocks:
+                clock.set_ros_time_override(t)
+    return deliver
+
+
+def time_source_of(callback) -> TimeSource | None:
+    source = getattr(callback, "__self__", None)
+    return source if isinstance(source, TimeSource) and callback.__func__ is TimeSource.clock_callback else None
 
 
 class Topic:
@@ -244,7 +265,17 @@ class IntraProcessPublisher(Publisher):
     _ipc_node: Node | None = None
     _ipc_version = -1
     _ipc_matched: list = []
+    _ipc_others: list = []          # matched, but for the TimeSources
+    _ipc_clocks = None              # the matched TimeSources' callback (clock_fanout)
     history: deque | None = None
+
+    def _rematch(self, topic: Topic) -> None:
+        self._ipc_version = topic.version
+        self._ipc_matched = [s for s in topic.subscriptions if compatible(self.qos_profile, s.qos)]
+        sources = [time_source_of(s.callback) for s in self._ipc_matched]
+        self._ipc_others = [s for s, source in zip(self._ipc_matched, sources) if source is None]
+        sources = [source for source in sources if source is not None]
+        self._ipc_clocks = clock_fanout(sources) if sources else None
 
     def publish(self, msg) -> None:
         topic = self._ipc_topic
@@ -257,15 +288,16 @@ class IntraProcessPublisher(Publisher):
         else:
             raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
         if self._ipc_version != topic.version:      # the local subscriptions changed: match again
-            self._ipc_version = topic.version
-            self._ipc_matched = [s for s in topic.subscriptions if compatible(self.qos_profile, s.qos)]
+            self._rematch(topic)
         matched, items = self._ipc_matched, []
         if obj is not None:
             if self.history is not None:
                 self.history.append(obj)
             if matched:
                 data = None
-                for s in matched:
+                if self._ipc_clocks is not None:
+                    items.append((self._ipc_clocks, obj))
+                for s in self._ipc_others:
                     if s.raw:
                         data = serialize_message(obj) if data is None else data
                         items.append((s.callback, data))
