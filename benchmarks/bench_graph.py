@@ -134,7 +134,7 @@ class CallbackCpu:
 
     def __init__(self, nodes, registry: IntraProcess | None):
         self.ns: dict[str, int] = {}
-        self._stack: list[list] = []  # [name, start of its current slice]
+        self._local = threading.local()  # per thread (a recorder over DDS spins its own): the stack
         for node in nodes:
             name = node.get_name()
             self.ns[name] = 0
@@ -147,9 +147,10 @@ class CallbackCpu:
                         local.callback = self._timed(local.node.get_name(), local.callback)
 
     def _timed(self, name: str, callback):
-        stack, ns = self._stack, self.ns
+        local, ns = self._local, self.ns
 
         def timed(*args):
+            stack = local.__dict__.setdefault("stack", [])  # [name, start of its current slice]
             t0 = time.thread_time_ns()
             if stack:                       # pause the caller
                 ns[stack[-1][0]] += t0 - stack[-1][1]
@@ -270,6 +271,8 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
         "us_per_period": wall * 1e6 / periods,
         "cpu_s": own_cpu + sum(child_cpu.values()),
         "cpu_cores_busy": (own_cpu + sum(child_cpu.values())) / wall,
+        # CPU per period: what the loop costs, less dependent on the other load of a shared machine than rtf
+        "cpu_us_per_period": (own_cpu + sum(child_cpu.values())) * 1e6 / periods,
         "launcher_process_cpu_us_per_period": own_cpu * 1e6 / periods,
         "node_cpu_us_per_period": per_node,
         "startup_s": startup_s,
@@ -308,11 +311,12 @@ def slowdown_pct(plain: dict, recording: dict) -> float:
 
 
 def table(result: dict) -> str:
-    rows = [f"{'configuration':<28} {'rtf':>6} {'us_per_period':>14} {'periods':>8} {'wall_s':>7} {'cpu_cores':>9} "
-            f"{'msgs/period':>11}"]
+    rows = [f"{'configuration':<28} {'rtf':>6} {'us_per_period':>14} {'cpu_us/period':>14} {'periods':>8} "
+            f"{'wall_s':>7} {'cpu_cores':>9} {'msgs/period':>11}"]
     for name, r in {**result["configs"], "baseline (no ROS)": result["baseline_in_process"]}.items():
         recorded = r.get("recorded_messages_per_period")
-        rows.append(f"{name:<28} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r['periods']:8d} {r['wall_s']:7.2f} "
+        rows.append(f"{name:<28} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r.get('cpu_us_per_period', float('nan')):14.0f} "
+                    f"{r['periods']:8d} {r['wall_s']:7.2f} "
                     f"{r.get('cpu_cores_busy', float('nan')):9.2f} {'' if recorded is None else f'{recorded:.2f}':>11}")
     slowdown = result["recording_slowdown_pct"]
     rows.append("recording slowdown: " + ", ".join(f"{k} {v:+.1f} %" for k, v in slowdown.items()))

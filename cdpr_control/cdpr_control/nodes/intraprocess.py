@@ -65,11 +65,12 @@ def compatible(pub_qos, sub_qos) -> bool:
 class LocalSubscription:
     """The in-process side of one subscription: its callback and the DDS subscription beside it."""
 
-    def __init__(self, registry: "IntraProcess", topic: "Topic", msg_type, callback, qos, raw: bool):
-        self.registry, self.topic = registry, topic
-        self.msg_type, self.callback, self.qos, self.raw = msg_type, callback, qos, raw
+    def __init__(self, registry: "IntraProcess", callback, raw: bool):
+        self.registry, self.callback, self.raw = registry, callback, raw
+        self.topic: Topic | None = None
+        self.qos = None
         self.dds = None   # the rclpy Subscription and its node, set once created
-        self.node = None
+        self.node: Node | None = None
 
     def from_dds(self, msg) -> None:
         """The DDS subscription's callback: deliver what no local publisher delivered already."""
@@ -108,16 +109,13 @@ class Topic:
         self.version = 0          # changes with the subscriptions (publishers cache their matches)
         self.recent: deque = deque(maxlen=RECENT)
 
-    def matched_local(self, publisher) -> int:
-        return sum(1 for s in self.subscriptions if compatible(publisher.qos_profile, s.qos))
-
     def seen_locally(self, msg, raw: bool) -> bool:
-        """Whether ``msg`` (from DDS) equals a message delivered locally lately (and forget it)."""
-        for i, local in enumerate(self.recent):
-            if (serialize_message(local) == msg) if raw else (local == msg):
-                del self.recent[i]
-                return True
-        return False
+        """Whether ``msg`` (from DDS) equals a message delivered locally lately: its DDS copy (each
+        local subscription gets one). A remote message equal to a recent local one (same stamp and
+        content) is taken for a copy too."""
+        if raw:
+            return any(serialize_message(local) == msg for local in self.recent)
+        return any(local == msg for local in self.recent)
 
 
 class IntraProcess:
@@ -338,7 +336,7 @@ class IntraProcessNode(Node):
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
-        local = LocalSubscription(registry, None, msg_type, callback, None, raw)
+        local = LocalSubscription(registry, callback, raw)
         subscription = super().create_subscription(msg_type, topic, local.from_dds, qos_profile, raw=raw, **kwargs)
         local.dds, local.node, local.qos = subscription, self, subscription.qos_profile
         local.topic = registry.topic(subscription.topic_name)

@@ -56,6 +56,7 @@ from ..startup import startup_state
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 HANDSHAKE_PERIOD = 0.5     # s, repeat of the t = 0 state until the first command
 MAX_CATCH_UP = 20          # periods one free-running timer tick may advance
+LATENCY_WINDOW = 1000      # free running: published states awaiting their command, at most
 
 
 def _specs(robot) -> list[ParamSpec]:
@@ -126,7 +127,7 @@ class WinchPlatformSimNode(CdprNode):
         self.theta_d = self.sim.output.theta.copy()     # hold the start until commanded
         self.step_lateness = DurationStats("step_lateness")       # free running: wall clock vs schedule
         self.command_latency = DurationStats("command_latency")   # winch/state -> its winch/command
-        self._state_sent = (-1, 0.0)                    # (stamp, perf_counter) of the last winch/state
+        self._states_sent: dict[int, float] = {}        # stamp -> perf_counter of recent winch/states
 
         self.state_pub = self.create_publisher(JointState, "winch/state", CONTROL)
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
@@ -204,8 +205,9 @@ class WinchPlatformSimNode(CdprNode):
         stamp = stamp_ns(msg)
         t_ns = self.sim.steps * self.period_ns
         if not self.lockstep:
-            if stamp == self._state_sent[0] and not self.fresh_command:
-                self.command_latency.add(time.perf_counter() - self._state_sent[1])
+            sent = self._states_sent.pop(stamp, None)   # the first command answering that state
+            if sent is not None:
+                self.command_latency.add(time.perf_counter() - sent)
             self.fresh_command = True
         elif stamp >= t_ns:
             self._advance()
@@ -289,7 +291,10 @@ class WinchPlatformSimNode(CdprNode):
         clock = Clock()
         clock.clock = header.stamp
         self.clock_pub.publish(clock)
-        self._state_sent = (t_ns, time.perf_counter())
+        if not self.lockstep:
+            self._states_sent[t_ns] = time.perf_counter()
+            if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
+                del self._states_sent[next(iter(self._states_sent))]
         self.state_pub.publish(JointState(header=header, name=self.names, position=out.theta.tolist(),
                                           velocity=out.thetadot.tolist(), effort=out.F_s.tolist()))
         if not self.publish_truth:
