@@ -358,13 +358,18 @@ def main() -> None:
     args = parser.parse_args()
     window = 5.0 if args.quick else WINDOW_S
     free_window = 15.0 if args.quick else FREE_WINDOW_S
-    configs = {}
+    configs, failed = {}, {}
     for name, kwargs in CONFIGS.items():
         if args.only and name not in args.only:
             continue
         print(f"[bench_graph] {name} ...", flush=True)
         w = free_window if name == "free_running" else window
-        configs[name] = measure(**kwargs, window_s=w)
+        try:
+            configs[name] = measure(**kwargs, window_s=w)
+        except (TimeoutError, RuntimeError) as exc:   # recorded, and the other configurations still run
+            failed[name] = f"{type(exc).__name__}: {exc}"
+            print(f"[bench_graph] {name}: failed: {failed[name]}", flush=True)
+            continue
         print(f"[bench_graph] {name}: rtf {configs[name]['rtf']:.3f}", flush=True)
     reference = configs.get("composed") or next(iter(configs.values()))
     result = {
@@ -384,6 +389,7 @@ def main() -> None:
                            if name in configs and base in configs},
         "recording_slowdown_pct": {plain: slowdown_pct(configs[plain], configs[rec])
                                    for plain, rec in RECORDING_PAIRS.items() if plain in configs and rec in configs},
+        "failed": failed,
         "targets": TARGETS,
     }
     OUT.parent.mkdir(exist_ok=True)
