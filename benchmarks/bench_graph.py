@@ -1,28 +1,43 @@
-"""Real-time factor of the whole node graph (graphs/closed_loop.yaml), the main job's transport.
+"""Real-time factor and timing of the whole node graph (graphs/closed_loop.yaml), the main job's transport.
 
-The IPAnema 3 Mini holds still at home at 1 kHz in lockstep (no program: the interpreter holds the
-set-point and the loop runs anyway), in four configurations measured in the same run: composed
-(one process, one EventsExecutor) and processes (one process per node), each with and without
-recording every topic. A probe node in a context of its own subscribes to /clock; after a warm-up
-the real-time factor is the simulated time advanced over the wall time between two /clock
-receptions a fixed window apart. Per period: wall time, CPU time of the processes involved, and the
-CPU time of each node (composed: thread CPU time inside its callbacks; processes: the child's CPU
-time from /proc). Baseline in the same run: the same control stages and simulator in one Python
-loop without ROS (cdpr_sim.closed_loop.run holding home) for as many periods as the composed graph
-ran in its window. ``sim_missed_deadlines`` is the simulator's count from its last /diagnostics
-status (it reports on change; null: none came while the probe listened, so the count did not change).
+The IPAnema 3 Mini at 1 kHz, every configuration measured in the same run (the machine is shared,
+so only figures of one run compare):
 
-Targets of the issue: rtf >= 3 composed, >= 1 processes, recording slowing by <= 10 %.
+- lockstep, holding still at home (no program: the interpreter holds the set-point and the loop
+  runs anyway): ``composed`` (one process, in-process delivery), ``composed_dds`` (one process,
+  every message over DDS: the transport before intra-process delivery, the baseline),
+  ``processes`` (one process per node), ``two_processes`` (simulator | controllers, each composed,
+  DDS between them), each plain and (but two_processes) recording every topic;
+- lockstep on the cuboid program (cuboid_mini), composed and composed_dds;
+- free-running at wall-clock 1 kHz (``sync_mode: latest``), composed and composed_dds: the
+  simulator's step lateness against its schedule and the latency from publishing winch/state to
+  receiving the winch/command of that stamp (p50/p99/max), and missed periods (a step without a
+  fresh command, or skipped because the loop fell behind).
 
-Writes bench/graph.json. Run: .venv/bin/python benchmarks/bench_graph.py
+A probe node in a context of its own subscribes to /clock; after a warm-up the real-time factor
+is the simulated time advanced over the wall time between two /clock receptions a fixed window
+apart. Per period: wall time, CPU time of the processes involved, and the CPU time of each node
+(composed: thread CPU time inside its callbacks, exclusive of the callbacks its publications run
+in-process; processes: the child's CPU time from /proc). ``baseline_in_process``: the same
+control stages and simulator in one Python loop without ROS (cdpr_sim.closed_loop.run holding
+home). ``sim_missed_deadlines`` is the simulator's count from its last /diagnostics status.
+
+Targets of the issue: rtf >= 3 composed, >= 1 processes, recording slowing by <= 10 %,
+free-running <= 0.1 % missed periods and p99 latency <= 500 us.
+
+Writes bench/graph.json. Run: .venv/bin/python benchmarks/bench_graph.py [--quick]
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import pathlib
 import platform
 import random
+import signal
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -36,19 +51,25 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 
+from cdpr_control import programs  # noqa: E402
+from cdpr_control.nodes.intraprocess import IntraProcess  # noqa: E402
 from cdpr_control.nodes.qos import DIAGNOSTICS  # noqa: E402
+from cdpr_control.nodes.timing import DurationStats  # noqa: E402
 from cdpr_control.nodes.runner import spin  # noqa: E402
 from cdpr_control.robot import load_robot  # noqa: E402
 from cdpr_sim.closed_loop import hold, run  # noqa: E402
 from cdpr_tools.bag import BagReader  # noqa: E402
 from cdpr_tools.demo_cmd import GRAPH  # noqa: E402
-from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file  # noqa: E402
+from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file, select_nodes  # noqa: E402
+from cdpr_tools.program_client import run_program  # noqa: E402
 from cdpr_tools.ros_graph import new_context  # noqa: E402
 
 ROBOT = "ipanema3_mini"
 PERIOD_S = 1e-3
 WARMUP_S = 5.0           # wall time after the loop runs, before the window
-WINDOW_S = 15.0          # wall time measured
+WINDOW_S = 15.0          # wall time measured (lockstep)
+FREE_WINDOW_S = 60.0     # wall time measured free-running (the issue's 60 s)
+PROGRAM = "cuboid_mini"
 START_TIMEOUT_S = 180.0  # wall time for the graph to start looping (processes: imports, discovery)
 SIM_NODE = "/winch_platform_sim"
 # one message per control period each; the recorder must hold them all before the window starts
@@ -57,7 +78,8 @@ LOOP_TOPICS = ("/winch/state", "/winch/command", "/setpoint", "/cable_forces", "
                "/cable_force_controller/state", "/ospc/state", "/ground_truth/pose", "/ground_truth/twist",
                "/ground_truth/cable_forces", "/ground_truth/external_wrench")
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "graph.json"
-TARGETS = {"composed_rtf_min": 3.0, "processes_rtf_min": 1.0, "recording_slowdown_max_pct": 10.0}
+TARGETS = {"composed_rtf_min": 3.0, "processes_rtf_min": 1.0, "recording_slowdown_max_pct": 10.0,
+           "free_running_missed_pct_max": 0.1, "free_running_latency_p99_us_max": 500.0}
 
 
 class ClockProbe:
@@ -102,26 +124,44 @@ class ClockProbe:
 
 
 class CallbackCpu:
-    """Thread CPU time spent in each composed node's subscription and timer callbacks.
+    """Thread CPU time spent in each composed node's callbacks, exclusive of nested ones.
 
-    The EventsExecutor looks ``callback`` up on every event, so wrapping it on a running graph works.
+    In-process deliveries run inside the callback whose publication started them, so a callback's
+    time excludes the callbacks it runs meanwhile (a stack of the running ones). The EventsExecutor
+    looks ``callback`` up on every event and the in-process registry on every delivery, so
+    wrapping them on a running graph works.
     """
 
-    def __init__(self, nodes):
+    def __init__(self, nodes, registry: IntraProcess | None):
         self.ns: dict[str, int] = {}
+        self._local = threading.local()  # per thread (a recorder over DDS spins its own): the stack
         for node in nodes:
             name = node.get_name()
             self.ns[name] = 0
             for entity in [*node.subscriptions, *node.timers]:
                 entity.callback = self._timed(name, entity.callback)
+        if registry is not None:
+            for topic in registry.topics.values():
+                for local in topic.subscriptions:
+                    if local.node in nodes:
+                        local.callback = self._timed(local.node.get_name(), local.callback)
 
     def _timed(self, name: str, callback):
+        local, ns = self._local, self.ns
+
         def timed(*args):
+            stack = local.__dict__.setdefault("stack", [])  # [name, start of its current slice]
             t0 = time.thread_time_ns()
+            if stack:                       # pause the caller
+                ns[stack[-1][0]] += t0 - stack[-1][1]
+            stack.append([name, t0])
             try:
                 return callback(*args)
             finally:
-                self.ns[name] += time.thread_time_ns() - t0
+                t1 = time.thread_time_ns()
+                ns[name] += t1 - stack.pop()[1]
+                if stack:
+                    stack[-1][1] = t1
         return timed
 
 
@@ -131,37 +171,87 @@ def process_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def measure(mode: str, record: bool) -> dict:
-    description = load_launch_file(GRAPH, {"robot": ROBOT})
+def sim_node(launch):
+    return next(n for n in launch.nodes if n.get_name() == SIM_NODE.strip("/"))
+
+
+def start_part(select: list[str], arguments: dict) -> subprocess.Popen:
+    """``cdpr launch closed_loop.yaml <select>`` composed, in a process of its own."""
+    cmd = [sys.executable, "-c", "import sys; from cdpr_tools.cli import main; sys.exit(main(sys.argv[1:]))",
+           "launch", str(GRAPH), *select, *(f"{k}:={v}" for k, v in arguments.items())]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    return subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+def stop_part(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGINT)
+    try:
+        process.wait(30)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+
+
+def measure(mode: str, record: bool = False, intra_process: bool = True, program: str | None = None,
+            sync_mode: str = "exact", split: bool = False, window_s: float = WINDOW_S) -> dict:
+    """One configuration: the window's RTF, CPU per period and node; free-running: timing too."""
+    arguments = {"robot": ROBOT, "sync_mode": sync_mode}
+    description = load_launch_file(GRAPH, arguments)
+    part = None
+    if split:                               # the simulator in a process of its own
+        description = select_nodes(description, exclude=["winch_platform_sim"])
+        part = start_part(["--only", "winch_platform_sim"], arguments)
     probe = ClockProbe()
-    with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
-        bag = pathlib.Path(tmp) / "bag"
-        description.record = RecordSpec(output=str(bag)) if record else None
-        wall_launch = time.perf_counter()
-        with Launcher(description, mode=mode) as launch:
-            probe.wait_running(START_TIMEOUT_S)
-            startup_s = time.perf_counter() - wall_launch
-            time.sleep(WARMUP_S)
-            if record:  # the window must not start before every loop topic is recorded
-                deadline = time.monotonic() + START_TIMEOUT_S
-                while not set(LOOP_TOPICS) <= set(launch.recorder.recorded_topics):
-                    if time.monotonic() > deadline:
-                        raise TimeoutError("the recorder did not subscribe to every loop topic")
-                    time.sleep(0.05)
-            composed = launch.nodes + ([launch.recorder] if record else [])
-            callbacks = CallbackCpu(composed) if mode == "composed" else None
-            children = {label: p.pid for label, p in launch.processes.items()}
-            cpu0 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
-            loadavg = os.getloadavg()[0]
-            wall0, sim0 = probe.latest
-            time.sleep(WINDOW_S)
-            wall1, sim1 = probe.latest
-            cpu1 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
-            node_ns = dict(callbacks.ns) if callbacks else None
-            errors = list(launch.errors)
-        recorded = sum(1 for _ in BagReader(bag).messages(start_ns=sim0, end_ns=sim1)) if record else None
-    missed = probe.missed_deadlines
-    probe.close()
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
+            bag = pathlib.Path(tmp) / "bag"
+            description.record = RecordSpec(output=str(bag)) if record else None
+            wall_launch = time.perf_counter()
+            with Launcher(description, mode=mode, intra_process=intra_process) as launch:
+                probe.wait_running(START_TIMEOUT_S)
+                startup_s = time.perf_counter() - wall_launch
+                time.sleep(WARMUP_S)
+                if record:  # the window must not start before every loop topic is recorded
+                    deadline = time.monotonic() + START_TIMEOUT_S
+                    while not set(LOOP_TOPICS) <= set(launch.recorder.recorded_topics):
+                        if time.monotonic() > deadline:
+                            raise TimeoutError("the recorder did not subscribe to every loop topic")
+                        time.sleep(0.05)
+                composed = launch.nodes + ([launch.recorder] if record and mode == "composed" else [])
+                registry = IntraProcess.of(launch.nodes[0].context) if mode == "composed" and intra_process else None
+                callbacks = CallbackCpu(composed, registry) if mode == "composed" else None
+                children = {label: p.pid for label, p in launch.processes.items()}
+                if part is not None:
+                    children["winch_platform_sim"] = part.pid
+                sim = sim_node(launch) if mode == "composed" and not split else None
+                if sim is not None:
+                    counts0 = sim.missed_deadlines, sim.overruns, sim.sim.steps
+                    samples0 = len(sim.step_lateness.run), len(sim.command_latency.run)
+                cpu0 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
+                loadavg = os.getloadavg()[0]
+                wall0, sim0 = probe.latest
+                if program is not None:
+                    result = run_program(programs.read(program), program, timeout=900.0)
+                    if not result.success:
+                        raise RuntimeError(f"program {program} failed: {result.message}")
+                else:
+                    time.sleep(window_s)
+                wall1, sim1 = probe.latest
+                cpu1 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
+                node_ns = dict(callbacks.ns) if callbacks else None
+                if sim is not None:
+                    counts1 = sim.missed_deadlines, sim.overruns, sim.sim.steps
+                    lateness = list(sim.step_lateness.run)[samples0[0]:]
+                    latency = list(sim.command_latency.run)[samples0[1]:]
+                errors = list(launch.errors)
+            recorded = sum(1 for _ in BagReader(bag).messages(start_ns=sim0, end_ns=sim1)) if record else None
+    finally:
+        missed = probe.missed_deadlines
+        probe.close()
+        if part is not None:
+            stop_part(part)
     if errors:
         raise RuntimeError(f"{mode}: the graph reported errors: {errors}")
     periods = round((sim1 - sim0) * 1e-9 / PERIOD_S)
@@ -171,7 +261,8 @@ def measure(mode: str, record: bool) -> dict:
     if node_ns is not None:
         per_node = {k: v * 1e-3 / periods for k, v in node_ns.items()}
     else:
-        per_node = {k.rpartition("/")[2]: v * 1e6 / periods for k, v in child_cpu.items()}
+        per_node = {}
+    per_node.update({k.rpartition("/")[2]: v * 1e6 / periods for k, v in child_cpu.items()})
     result = {
         "rtf": periods * PERIOD_S / wall,
         "wall_s": wall,
@@ -180,6 +271,8 @@ def measure(mode: str, record: bool) -> dict:
         "us_per_period": wall * 1e6 / periods,
         "cpu_s": own_cpu + sum(child_cpu.values()),
         "cpu_cores_busy": (own_cpu + sum(child_cpu.values())) / wall,
+        # CPU per period: what the loop costs, less dependent on the other load of a shared machine than rtf
+        "cpu_us_per_period": (own_cpu + sum(child_cpu.values())) * 1e6 / periods,
         "launcher_process_cpu_us_per_period": own_cpu * 1e6 / periods,
         "node_cpu_us_per_period": per_node,
         "startup_s": startup_s,
@@ -188,6 +281,19 @@ def measure(mode: str, record: bool) -> dict:
     }
     if record:
         result["recorded_messages_per_period"] = recorded / periods
+    if program is not None:
+        result["program"] = program
+    if sim is not None and sync_mode == "latest":
+        missed_steps, overruns, steps = (b - a for a, b in zip(counts0, counts1))
+        result["free_running"] = {
+            "steps": steps,
+            "missed_periods": missed_steps + overruns,
+            "missed_pct": 100.0 * (missed_steps + overruns) / max(1, steps + overruns),
+            "steps_without_fresh_command": missed_steps,
+            "periods_skipped_behind": overruns,
+            "step_lateness": DurationStats.summary(lateness),
+            "latency_state_to_command": DurationStats.summary(latency),
+        }
     return result
 
 
@@ -205,39 +311,85 @@ def slowdown_pct(plain: dict, recording: dict) -> float:
 
 
 def table(result: dict) -> str:
-    rows = [f"{'configuration':<22} {'rtf':>6} {'us_per_period':>14} {'periods':>8} {'wall_s':>7} {'cpu_cores':>9} "
-            f"{'msgs/period':>11}"]
+    rows = [f"{'configuration':<28} {'rtf':>6} {'us_per_period':>14} {'cpu_us/period':>14} {'periods':>8} "
+            f"{'wall_s':>7} {'cpu_cores':>9} {'msgs/period':>11}"]
     for name, r in {**result["configs"], "baseline (no ROS)": result["baseline_in_process"]}.items():
         recorded = r.get("recorded_messages_per_period")
-        rows.append(f"{name:<22} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r['periods']:8d} {r['wall_s']:7.2f} "
+        rows.append(f"{name:<28} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r.get('cpu_us_per_period', float('nan')):14.0f} "
+                    f"{r['periods']:8d} {r['wall_s']:7.2f} "
                     f"{r.get('cpu_cores_busy', float('nan')):9.2f} {'' if recorded is None else f'{recorded:.2f}':>11}")
     slowdown = result["recording_slowdown_pct"]
     rows.append("recording slowdown: " + ", ".join(f"{k} {v:+.1f} %" for k, v in slowdown.items()))
+    for name, r in result["configs"].items():
+        if "free_running" in r:
+            f = r["free_running"]
+            lat, late = f["latency_state_to_command"], f["step_lateness"]
+            fmt = lambda s: "/".join("-" if s[k] is None else f"{s[k]:.0f}" for k in ("p50_us", "p99_us", "max_us"))  # noqa: E731
+            rows.append(f"{name}: missed {f['missed_periods']} of {f['steps']} ({f['missed_pct']:.2f} %), "
+                        f"latency state->command p50/p99/max {fmt(lat)} us, step lateness {fmt(late)} us")
     for name, r in result["configs"].items():
         nodes = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r["node_cpu_us_per_period"].items(), key=lambda kv: -kv[1]))
         rows.append(f"{name} node CPU [us/period]: {nodes}")
     return "\n".join(rows)
 
 
+CONFIGS = {  # name -> measure() arguments, in the order run
+    "composed_dds": dict(mode="composed", intra_process=False),
+    "composed_dds_recording": dict(mode="composed", intra_process=False, record=True),
+    "composed": dict(mode="composed"),
+    "composed_recording": dict(mode="composed", record=True),
+    "processes": dict(mode="processes"),
+    "processes_recording": dict(mode="processes", record=True),
+    "two_processes": dict(mode="composed", split=True),
+    "composed_dds_cuboid": dict(mode="composed", intra_process=False, program=PROGRAM),
+    "composed_cuboid": dict(mode="composed", program=PROGRAM),
+    "composed_cuboid_recording": dict(mode="composed", program=PROGRAM, record=True),
+    "free_running_dds": dict(mode="composed", intra_process=False, sync_mode="latest"),
+    "free_running": dict(mode="composed", sync_mode="latest"),
+}
+RECORDING_PAIRS = {"composed": "composed_recording", "composed_dds": "composed_dds_recording",
+                   "processes": "processes_recording", "composed_cuboid": "composed_cuboid_recording"}
+
+
 def main() -> None:
-    configs = {}
-    for mode in ("composed", "processes"):
-        for record in (False, True):
-            name = mode + ("_recording" if record else "")
-            print(f"[bench_graph] {name} ...", flush=True)
-            configs[name] = measure(mode, record)
-            print(f"[bench_graph] {name}: rtf {configs[name]['rtf']:.3f}", flush=True)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="shorter windows (free-running 15 s), for a check")
+    parser.add_argument("--only", nargs="+", choices=sorted(CONFIGS), help="run only these configurations")
+    args = parser.parse_args()
+    window = 5.0 if args.quick else WINDOW_S
+    free_window = 15.0 if args.quick else FREE_WINDOW_S
+    configs, failed = {}, {}
+    for name, kwargs in CONFIGS.items():
+        if args.only and name not in args.only:
+            continue
+        print(f"[bench_graph] {name} ...", flush=True)
+        w = free_window if name == "free_running" else window
+        try:
+            configs[name] = measure(**kwargs, window_s=w)
+        except (TimeoutError, RuntimeError) as exc:   # recorded, and the other configurations still run
+            failed[name] = f"{type(exc).__name__}: {exc}"
+            print(f"[bench_graph] {name}: failed: {failed[name]}", flush=True)
+            continue
+        print(f"[bench_graph] {name}: rtf {configs[name]['rtf']:.3f}", flush=True)
+    reference = configs.get("composed") or next(iter(configs.values()))
     result = {
         "machine": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
         "robot": ROBOT,
+        "plant": "winch_platform_sim as graphs/closed_loop.yaml configures it; controllers on the nominal robot file",
         "control_period_s": PERIOD_S,
         "warmup_s": WARMUP_S,
-        "window_s": WINDOW_S,
+        "window_s": window,
+        "free_running_window_s": free_window,
         "configs": configs,
-        "baseline_in_process": baseline(configs["composed"]["periods"]),
-        "recording_slowdown_pct": {m: slowdown_pct(configs[m], configs[f"{m}_recording"])
-                                   for m in ("composed", "processes")},
+        "baseline_in_process": baseline(reference["periods"]),
+        "speedup_vs_dds": {name: configs[name]["rtf"] / configs[base]["rtf"]
+                           for name, base in (("composed", "composed_dds"), ("composed_recording", "composed_dds_recording"),
+                                              ("composed_cuboid", "composed_dds_cuboid"))
+                           if name in configs and base in configs},
+        "recording_slowdown_pct": {plain: slowdown_pct(configs[plain], configs[rec])
+                                   for plain, rec in RECORDING_PAIRS.items() if plain in configs and rec in configs},
+        "failed": failed,
         "targets": TARGETS,
     }
     OUT.parent.mkdir(exist_ok=True)

@@ -79,7 +79,8 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
         pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
         pubs["offset"].publish(ControllerState(header=header, controller="probe_offset", enabled=True,
                                                output=x_probe.tolist()))
-        assert _spin_until(executor, lambda: len(commands) >= k), f"no command for period {k}"
+        # (in-process, the command may reach the probe before the CFC state it was computed from)
+        assert _spin_until(executor, lambda: len(commands) >= k and len(cfc_states) >= k), f"no command for period {k}"
     last = commands[-1]
     assert last.header.stamp.nanosec == 3_000_000
     theta_d = np.asarray(last.position)

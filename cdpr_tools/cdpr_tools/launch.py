@@ -6,11 +6,14 @@ entry point) with name, namespace, parameters (inline or standard parameter file
 remappings. Every node gets the same ``--ros-args`` in both modes:
 
 - ``composed``: one process, every node built with ``cli_args=<its ros args>`` in one context and
-  spun by one ``EventsExecutor`` (about 17 us a hop);
+  spun by one ``EventsExecutor``; messages between the nodes are delivered in-process as Python
+  objects (cdpr_control.nodes.intraprocess) and over DDS only to subscribers outside the process
+  (``intra_process=False``: DDS for everything, about 24 us a hop);
 - ``processes``: one subprocess per node, ``main([module, --ros-args ...])``; DDS connects them, so
   they may as well run on other machines.
 
-Optionally every topic is recorded to a bag meanwhile. ``stop()`` (Ctrl-C in ``cdpr launch``)
+Optionally every topic is recorded to a bag meanwhile; composed, the recorder is one more node of
+the graph and takes the in-process messages, serialized once each. ``stop()`` (Ctrl-C in ``cdpr launch``)
 ends everything cleanly: executors stop, nodes are destroyed, children get SIGINT (then SIGTERM,
 then SIGKILL if they hang), the bag is closed.
 """
@@ -28,7 +31,7 @@ import sys
 import tempfile
 import threading
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import yaml
@@ -38,6 +41,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
+from cdpr_control.nodes.intraprocess import IntraProcess
 from cdpr_control.nodes.runner import spin
 from cdpr_tools.ros_graph import keep_discovery_local, new_context
 
@@ -191,6 +195,26 @@ def _substitute(value, arguments: dict, path: Path):
     return yaml.safe_load(text) if full and text.strip() else text
 
 
+def select_nodes(description: LaunchDescription, only: list[str] | None = None,
+                 exclude: list[str] | None = None) -> LaunchDescription:
+    """The graph restricted to some nodes, to run the parts of one graph on several hosts/processes.
+
+    A pattern (regular expression) selects a node when it matches its label (``ns/name``) or its
+    module/entry point in full or as a dotted suffix, e.g. ``winch_platform_sim``.
+    """
+    def matches(spec: NodeSpec, patterns) -> bool:
+        names = [spec.label, spec.module or spec.entry_point or ""]
+        names += [n.rpartition(".")[2] for n in names]
+        return any(re.fullmatch(p, n) for p in patterns for n in names)
+
+    nodes = [n for n in description.nodes
+             if (not only or matches(n, only)) and not (exclude and matches(n, exclude))]
+    if not nodes:
+        raise ValueError(f"no node of the graph is selected (only {only or '-'}, exclude {exclude or '-'}); "
+                         f"nodes: {', '.join(n.label for n in description.nodes)}")
+    return replace(description, nodes=nodes)
+
+
 # -- the arguments every node gets ------------------------------------------------------------------
 def ros_arguments(spec: NodeSpec, common: dict, tmpdir: Path) -> list[str]:
     """``--ros-args`` for one node: remaps, then parameters (common, then the node's, in order)."""
@@ -231,8 +255,9 @@ class Launcher:
     ...     launch.wait()            # until Ctrl-C, stop(), or the graph ends by itself
     """
 
-    def __init__(self, description: LaunchDescription, mode: str | None = None):
+    def __init__(self, description: LaunchDescription, mode: str | None = None, intra_process: bool = True):
         self.description = description
+        self.intra_process = intra_process  # composed: in-process delivery (False: DDS only, the old transport)
         self.mode = mode or description.mode
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
@@ -244,6 +269,7 @@ class Launcher:
         self._done = threading.Event()
         self._threads: list[threading.Thread] = []
         self._contexts: list[Context] = []
+        self._graph: tuple[Context, EventsExecutor] | None = None  # composed: the context and executor
         self._tmpdir = tempfile.TemporaryDirectory(prefix="cdpr_launch_")
         self._output_lock = threading.Lock()
         self._started = self._stopped = False
@@ -269,7 +295,9 @@ class Launcher:
 
     def _start_composed(self) -> None:
         context = self._new_context()
+        IntraProcess.set_enabled(context, self.intra_process)
         executor = EventsExecutor(context=context)
+        self._graph = context, executor
         for spec in self.description.nodes:
             module, _ = spec.target()
             cls = node_class(module)
@@ -303,7 +331,8 @@ class Launcher:
                                                   name=f"cdpr-launch-{label}", daemon=True))
 
     def _start_recorder(self, record: RecordSpec) -> None:
-        context = self._new_context()
+        in_graph = self._graph is not None and self.intra_process
+        context = self._graph[0] if in_graph else self._new_context()
         overrides = [Parameter("output", value=record.output or default_bag_name()),
                      Parameter("exclude", value=record.exclude),
                      Parameter("include_hidden_topics", value=bool(record.include_hidden_topics)),
@@ -311,6 +340,9 @@ class Launcher:
         if record.topics:
             overrides.append(Parameter("topics", value=[str(t) for t in record.topics]))
         self.recorder = BagRecorder(context=context, parameter_overrides=overrides)
+        if in_graph:  # a node of the composed graph: in-process messages, the graph's executor
+            self._graph[1].add_node(self.recorder)
+            return
         executor = EventsExecutor(context=context)
         executor.add_node(self.recorder)
         self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "recorder"),

@@ -1,7 +1,8 @@
 """``cdpr launch FILE [NAME:=VALUE ...]``: start a node graph from a YAML launch file.
 
-The graph runs composed in one process (EventsExecutor) or as one process per node
-(``--mode processes``), optionally recording every topic to a bag (``--record``). Ctrl-C stops it
+The graph runs composed in one process (EventsExecutor; messages between its nodes are passed
+in-process and go over DDS only to subscribers outside it, ``--no-intra-process``: DDS for all) or
+as one process per node (``--mode processes``), optionally recording every topic to a bag (``--record``). Ctrl-C stops it
 cleanly. The launch file schema is in docs/tools.md.
 """
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import asdict
 
 import yaml
 
-from cdpr_tools.launch import MODES, Launcher, RecordSpec, load_launch_file
+from cdpr_tools.launch import MODES, Launcher, RecordSpec, load_launch_file, select_nodes
 from cdpr_control.nodes.runner import stop_on_signals
 
 
@@ -24,6 +25,11 @@ def add_parser(sub) -> None:
     p.add_argument("--mode", choices=MODES, help="override the file's mode")
     p.add_argument("--record", nargs="?", const="", metavar="BAG",
                    help="record every topic (to BAG, default bags/rosbag2_<date>-<time>)")
+    p.add_argument("--only", nargs="+", metavar="NODE", help="start only these nodes (name or module, regex); "
+                   "the rest of the graph may run in another process or on another host")
+    p.add_argument("--exclude", nargs="+", metavar="NODE", help="start every node but these")
+    p.add_argument("--no-intra-process", dest="intra_process", action="store_false",
+                   help="composed: deliver every message over DDS, as between processes (for comparison)")
     p.add_argument("--show", action="store_true", help="print the resolved launch description, start nothing")
     p.set_defaults(run=run)
 
@@ -40,6 +46,8 @@ def parse_arguments(items: list[str]) -> dict[str, str]:
 
 def run(args) -> int:
     description = load_launch_file(args.file, parse_arguments(args.arguments))
+    if args.only or args.exclude:
+        description = select_nodes(description, args.only, args.exclude)
     if args.record is not None:
         record = description.record or RecordSpec()
         record.output = args.record or record.output
@@ -47,7 +55,7 @@ def run(args) -> int:
     mode = args.mode or description.mode
     if args.show:
         return show(description, mode)
-    launcher = Launcher(description, mode)
+    launcher = Launcher(description, mode, intra_process=args.intra_process)
     with stop_on_signals(threading.Event()) as stop:  # SIGINT and SIGTERM stop cleanly, also while stopping
         try:
             launcher.start()

@@ -19,17 +19,24 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from .intraprocess import IntraProcess
+
 SPIN_PERIOD = 0.1  # s: longest time between checks of the stop flag
 
 
 def spin(executor, stop: threading.Event | None = None) -> None:
     """Run callbacks until ``stop`` is set or the executor's context shuts down."""
     context = executor.context
-    while context.ok() and not (stop is not None and stop.is_set()):
-        try:
-            executor.spin_once(timeout_sec=SPIN_PERIOD)
-        except ExternalShutdownException:
-            return
+    registry = IntraProcess.of(context)
+    registry.owner = threading.get_ident()  # in-process deliveries from other threads wake this one
+    try:
+        while context.ok() and not (stop is not None and stop.is_set()):
+            try:
+                executor.spin_once(timeout_sec=SPIN_PERIOD)
+            except ExternalShutdownException:
+                return
+    finally:
+        registry.owner = None
 
 
 @contextlib.contextmanager

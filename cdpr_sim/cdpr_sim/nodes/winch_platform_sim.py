@@ -16,7 +16,10 @@ no step); after ``lockstep_timeout`` of wall time it advances with the last comm
 missed deadline (0 waits forever). Until the first command the state of
 t = 0 is repeated every 0.5 s, so that late subscribers start the loop. ``latest`` runs free at
 ``realtime_factor`` times real time on a wall timer, holds the newest command and counts the
-periods without a fresh one. Messages are stamped with simulation time in both modes (run the
+periods without a fresh one; it reports on /diagnostics the lateness of each step against its
+wall-clock schedule (``step_lateness_*``) and the latency from publishing ``winch/state`` to
+receiving the ``winch/command`` stamped like it (``command_latency_*``): p50/p99/max [us] of the
+last second. Messages are stamped with simulation time in both modes (run the
 other nodes with use_sim_time).
 
 Start-up: the platform rests at ``initial_pose`` with the cable forces of the force distribution
@@ -43,6 +46,7 @@ from cdpr_control.nodes.conversions import pose_to_msg, twist_to_msg, wrench_fro
 from cdpr_control.nodes.parameters import ParameterSet, ParamSpec
 from cdpr_control.nodes.qos import CONTROL
 from cdpr_control.nodes.sync import stamp_ns
+from cdpr_control.nodes.timing import DurationStats
 
 from ..contacts import ContactMaterial, Cylinder, Plane, PlatformShape, default_tool
 from ..simulator import SimConfig, Simulator
@@ -52,6 +56,7 @@ from ..startup import startup_state
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 HANDSHAKE_PERIOD = 0.5     # s, repeat of the t = 0 state until the first command
 MAX_CATCH_UP = 20          # periods one free-running timer tick may advance
+LATENCY_WINDOW = 1000      # free running: published states awaiting their command, at most
 
 
 def _specs(robot) -> list[ParamSpec]:
@@ -120,6 +125,9 @@ class WinchPlatformSimNode(CdprNode):
         self.got_command = False
         self.fresh_command = False
         self.theta_d = self.sim.output.theta.copy()     # hold the start until commanded
+        self.step_lateness = DurationStats("step_lateness")       # free running: wall clock vs schedule
+        self.command_latency = DurationStats("command_latency")   # winch/state -> its winch/command
+        self._states_sent: dict[int, float] = {}        # stamp -> perf_counter of recent winch/states
 
         self.state_pub = self.create_publisher(JointState, "winch/state", CONTROL)
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
@@ -197,6 +205,9 @@ class WinchPlatformSimNode(CdprNode):
         stamp = stamp_ns(msg)
         t_ns = self.sim.steps * self.period_ns
         if not self.lockstep:
+            sent = self._states_sent.pop(stamp, None)   # the first command answering that state
+            if sent is not None:
+                self.command_latency.add(time.perf_counter() - sent)
             self.fresh_command = True
         elif stamp >= t_ns:
             self._advance()
@@ -266,6 +277,8 @@ class WinchPlatformSimNode(CdprNode):
             if self.got_command and not self.fresh_command:
                 self.missed_deadlines += 1
             self.fresh_command = False
+            scheduled = self._wall_start + (self.sim.steps + 1 - self._steps_at_start) * self.dt / self.realtime_factor
+            self.step_lateness.add(max(0.0, time.monotonic() - scheduled))
             self.sim.step(self.theta_d)
             self._publish()
 
@@ -278,6 +291,10 @@ class WinchPlatformSimNode(CdprNode):
         clock = Clock()
         clock.clock = header.stamp
         self.clock_pub.publish(clock)
+        if not self.lockstep:
+            self._states_sent[t_ns] = time.perf_counter()
+            if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
+                del self._states_sent[next(iter(self._states_sent))]
         self.state_pub.publish(JointState(header=header, name=self.names, position=out.theta.tolist(),
                                           velocity=out.thetadot.tolist(), effort=out.F_s.tolist()))
         if not self.publish_truth:
@@ -298,10 +315,13 @@ class WinchPlatformSimNode(CdprNode):
                   "late_commands": self.late_commands, "invalid_commands": self.invalid_commands,
                   "overruns": self.overruns, "cable_overloads": sim.cables.overloads,
                   "realtime_factor": f"{(sim.steps - self._steps_at_start) * self.dt / wall:.2f}" if wall > 0 else "0"}
+        if not self.lockstep:
+            values.update(self.step_lateness.report())
+            values.update(self.command_latency.report())
         level = DiagnosticStatus.WARN if self.missed_deadlines or self.overruns or sim.cables.overloads else DiagnosticStatus.OK
         mode = "lockstep" if self.lockstep else "free running"
         self.report(level, f"{mode}: {self.missed_deadlines} missed deadlines, {sim.cables.overloads} cable overloads",
-                    values, stamp_ns=sim.steps * self.period_ns)
+                    values, stamp_ns=sim.steps * self.period_ns, always=not self.lockstep)
 
     def destroy_node(self):
         self.sim.close()

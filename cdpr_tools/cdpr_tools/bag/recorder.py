@@ -3,7 +3,9 @@
 Like ``ros2 bag record``: serialized (raw) subscriptions, the QoS adapted to the publishers'
 offers, those offers stored per topic, the receive time on the node's clock as log time (sim time
 with ``use_sim_time``; also the publish time, since the EventsExecutor passes no message info).
-Hidden topics are left out unless asked for. Follows the node convention of docs/tools.md, so the launcher can compose it.
+Hidden topics are left out unless asked for. Follows the node convention of docs/tools.md, so the launcher can compose it;
+composed with the graph's nodes (one context), it gets their messages in-process, serialized once
+for the bag (cdpr_control.nodes.intraprocess), and the nodes need not publish over DDS for it.
 """
 from __future__ import annotations
 
@@ -13,11 +15,11 @@ from datetime import datetime
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.writer import BagWriter
 from cdpr_tools.message_convert import message_class
+from cdpr_control.nodes.intraprocess import IntraProcessNode
 from cdpr_control.nodes.runner import run_node
 from cdpr_tools.ros_graph import adapted_qos, fully_qualified, topic_types
 
@@ -29,7 +31,7 @@ def default_bag_name() -> str:
     return datetime.now().strftime("bags/rosbag2_%Y_%m_%d-%H_%M_%S")
 
 
-class BagRecorder(Node):
+class BagRecorder(IntraProcessNode):
     """Parameters: ``output`` (bag path), ``topics`` (empty: all), ``exclude`` (regex),
     ``include_hidden_topics``, ``discovery_period`` [s], ``queue_depth``, ``compression``."""
 

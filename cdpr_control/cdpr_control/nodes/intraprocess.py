@@ -1,0 +1,358 @@
+"""Intra-process delivery: nodes that share a process pass messages as Python objects.
+
+In the spirit of rclcpp's intra-process communication. Every publisher and subscription a
+:class:`IntraProcessNode` creates is still an ordinary rclpy (DDS) entity, so the graph looks the
+same to every tool, but the nodes of one rclpy ``Context`` also register them in a per-context
+:class:`IntraProcess` registry keyed by the resolved topic name (after remapping, the name
+``Publisher.topic_name`` reports):
+
+- ``publish(msg)`` hands the message object to the local subscriptions of that topic, in
+  publication order (no serialization, no DDS, no executor), and publishes it over DDS as well,
+  before the local deliveries so that outside a message comes before those it causes,
+  only when a subscription that is *not* local matches (``get_subscription_count()`` counts the
+  local ones too, the registry knows how many those are). A ``cdpr topic echo``, a recorder in
+  another process or a node on another host therefore sees every message, while a composed graph
+  alone never serializes.
+- A local subscription drops what DDS brings it from local publishers (it already has those
+  messages): when every publisher matched to it is local, everything DDS brings is such a copy;
+  otherwise (local and remote publishers on one topic) a DDS message equal to one of the last
+  local deliveries is such a copy. Messages of remote publishers are delivered as usual.
+- Deliveries go through one FIFO queue per process drained in a loop, not by recursion: a
+  callback that publishes appends to the queue, so the lockstep ring (simulator -> controllers ->
+  simulator) runs without growing the stack. The thread that publishes drains the queue when it
+  is the executor's thread (or no executor spins yet, e.g. during construction); any other thread
+  only appends and wakes the executor. After ``BUDGET_S`` of draining the rest of the queue is
+  handed to the executor (a one-shot timer), so timers, services and DDS messages keep their turn.
+- The nodes' TimeSources (``use_sim_time``) take /clock as one delivery per message: the time is
+  converted once and set on every node's clock (rather than one callback per node and period).
+- Transient-local publishers keep their last ``depth`` messages for local subscriptions that
+  join later, as DDS would; QoS that DDS would not match (best-effort publisher to a reliable
+  subscription, volatile publisher to a transient-local one) is not matched here either.
+
+Subscribers share the published object: a callback must not modify a received message, and a
+publisher must not modify a message after publishing it (build a new one each period). The
+EventsExecutor of these rclpy wheels supports no guard conditions, hence the timer for waking it.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+import weakref
+from collections import deque
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.time import Time
+from rclpy.time_source import TimeSource
+
+BUDGET_S = 0.005        # longest time one drain keeps the executor from other events [s]
+RECENT = 64             # local messages per topic remembered to recognise their DDS copies
+ENV = "CDPR_INTRA_PROCESS"  # "0": every node of the process uses DDS only (the baseline transport)
+
+
+def compatible(pub_qos, sub_qos) -> bool:
+    """Whether DDS would match these QoS (reliability and durability, the policies used here)."""
+    if pub_qos.reliability == ReliabilityPolicy.BEST_EFFORT and sub_qos.reliability == ReliabilityPolicy.RELIABLE:
+        return False
+    return not (pub_qos.durability == DurabilityPolicy.VOLATILE
+                and sub_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class LocalSubscription:
+    """The in-process side of one subscription: its callback and the DDS subscription beside it."""
+
+    def __init__(self, registry: "IntraProcess", callback, raw: bool):
+        self.registry, self.callback, self.raw = registry, callback, raw
+        self.topic: Topic | None = None
+        self.qos = None
+        self.dds = None   # the rclpy Subscription and its node, set once created
+        self.node: Node | None = None
+
+    def from_dds(self, msg) -> None:
+        """The DDS subscription's callback: deliver what no local publisher delivered already."""
+        topic = self.topic
+        if topic.publishers:
+            local = sum(1 for p in topic.publishers if compatible(p.qos_profile, self.qos))
+            if self.dds.get_publisher_count() <= local:
+                return                                  # every publisher is local: a copy
+            if topic.seen_locally(msg, self.raw):
+                return
+        self.registry.post(((self.callback, msg),))
+
+
+def clock_fanout(sources: list[TimeSource]):
+    """One callback for the /clock subscriptions of several TimeSources (rclpy 7.1
+    ``TimeSource.clock_callback``, with the conversion done once)."""
+    def deliver(msg) -> None:
+        t = Time.from_msg(msg.clock)
+        for source in sources:
+            source._last_time_set = t
+            for clock in source._associated_clocks:
+                clock.set_ros_time_override(t)
+    return deliver
+
+
+def time_source_of(callback) -> TimeSource | None:
+    source = getattr(callback, "__self__", None)
+    return source if isinstance(source, TimeSource) and callback.__func__ is TimeSource.clock_callback else None
+
+
+class Topic:
+    def __init__(self, name: str):
+        self.name = name
+        self.publishers: list[IntraProcessPublisher] = []
+        self.subscriptions: list[LocalSubscription] = []
+        self.version = 0          # changes with the subscriptions (publishers cache their matches)
+        self.recent: deque = deque(maxlen=RECENT)
+
+    def seen_locally(self, msg, raw: bool) -> bool:
+        """Whether ``msg`` (from DDS) equals a message delivered locally lately: its DDS copy (each
+        local subscription gets one). A remote message equal to a recent local one (same stamp and
+        content) is taken for a copy too."""
+        if raw:
+            return any(serialize_message(local) == msg for local in self.recent)
+        return any(local == msg for local in self.recent)
+
+
+class IntraProcess:
+    """The registry of one rclpy Context (one per process for a composed graph)."""
+
+    _registries: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+    _lock = threading.Lock()
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.topics: dict[str, Topic] = {}
+        self.queue: deque = deque()
+        self.lock = threading.Lock()
+        self.busy = False
+        self.owner: int | None = None       # thread ident of the executor spinning these nodes
+        self.wake_timer = None
+        self.wake_node: Node | None = None
+        self.nodes: list[Node] = []
+        self.deliveries = 0                 # messages handed over in-process (for tests, benchmarks)
+
+    @classmethod
+    def of(cls, context) -> "IntraProcess":
+        with cls._lock:
+            registry = cls._registries.get(context)
+            if registry is None:
+                registry = cls._registries[context] = cls(os.environ.get(ENV, "1") != "0")
+            return registry
+
+    @classmethod
+    def set_enabled(cls, context, enabled: bool) -> None:
+        """Before the nodes of ``context`` are created: in-process delivery on (default) or off."""
+        cls.of(context).enabled = enabled
+
+    def topic(self, name: str) -> Topic:
+        topic = self.topics.get(name)
+        if topic is None:
+            topic = self.topics[name] = Topic(name)
+        return topic
+
+    # -- the queue ---------------------------------------------------------------------------
+    def post(self, items) -> None:
+        """Append (callback, message) pairs; drain now when this thread may run callbacks."""
+        with self.lock:
+            self.queue.extend(items)
+            if self.busy:
+                return                          # the running drain delivers them, in order
+            if self.owner is not None and self.owner != threading.get_ident():
+                self.wake()                     # another thread: let the executor's thread run them
+                return
+            self.busy = True
+        self._drain()
+
+    def _drain(self) -> None:
+        queue, deadline = self.queue, time.perf_counter() + BUDGET_S
+        try:
+            while True:
+                try:
+                    callback, msg = queue.popleft()
+                except IndexError:
+                    with self.lock:
+                        if not queue:
+                            self.busy = False
+                            return
+                    continue
+                self.deliveries += 1
+                callback(msg)
+                if queue and time.perf_counter() > deadline:
+                    with self.lock:
+                        self.busy = False
+                        self.wake()
+                    return
+        except BaseException:
+            with self.lock:
+                self.busy = False
+            raise
+
+    def wake(self) -> None:
+        """Have the executor drain the queue soon (a one-shot timer: no guard conditions here)."""
+        if self.wake_timer is not None:
+            self.wake_timer.reset()
+
+    def _on_wake(self) -> None:
+        self.wake_timer.cancel()
+        with self.lock:
+            if self.busy or not self.queue:
+                return
+            self.busy = True
+        self._drain()
+
+    # -- registration ------------------------------------------------------------------------
+    def add_node(self, node: Node) -> None:
+        if node in self.nodes:
+            return
+        self.nodes.append(node)
+        if self.wake_timer is None:
+            self._make_wake_timer(node)
+
+    def _make_wake_timer(self, node: Node) -> None:
+        self.wake_node = node
+        self.wake_timer = Node.create_timer(node, 1e-6, self._on_wake, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.wake_timer.cancel()
+
+    def remove_node(self, node: Node) -> None:
+        for topic in list(self.topics.values()):
+            topic.publishers = [p for p in topic.publishers if p._ipc_node is not node]
+            topic.subscriptions = [s for s in topic.subscriptions if s.node is not node]
+            topic.version += 1
+        if node in self.nodes:
+            self.nodes.remove(node)
+        if node is self.wake_node:
+            self.wake_timer = self.wake_node = None
+            if self.nodes:
+                self._make_wake_timer(self.nodes[0])
+
+    def add_subscription(self, local: LocalSubscription) -> None:
+        topic = local.topic
+        topic.subscriptions.append(local)
+        topic.version += 1
+        # transient local: what a DDS reader joining now would get from the publishers' history
+        late = [(local.callback, self._as(local, msg)) for p in topic.publishers
+                if p.history is not None and compatible(p.qos_profile, local.qos) for msg in p.history]
+        if late and local.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+            self.post(late)
+
+    @staticmethod
+    def _as(local: LocalSubscription, msg):
+        return serialize_message(msg) if local.raw else msg
+
+    def remove_subscription(self, subscription) -> None:
+        for topic in self.topics.values():
+            topic.subscriptions = [s for s in topic.subscriptions if s.dds is not subscription]
+            topic.version += 1
+
+    def remove_publisher(self, publisher) -> None:
+        topic = self.topics.get(publisher.topic_name)
+        if topic is not None and publisher in topic.publishers:
+            topic.publishers.remove(publisher)
+
+
+class IntraProcessPublisher(Publisher):
+    """A publisher that delivers to local subscriptions first and to DDS when someone else listens."""
+
+    _ipc_registry: IntraProcess | None = None
+    _ipc_topic: Topic | None = None
+    _ipc_node: Node | None = None
+    _ipc_version = -1
+    _ipc_matched: list = []
+    _ipc_others: list = []          # matched, but for the TimeSources
+    _ipc_clocks = None              # the matched TimeSources' callback (clock_fanout)
+    history: deque | None = None
+
+    def _rematch(self, topic: Topic) -> None:
+        self._ipc_version = topic.version
+        self._ipc_matched = [s for s in topic.subscriptions if compatible(self.qos_profile, s.qos)]
+        sources = [time_source_of(s.callback) for s in self._ipc_matched]
+        self._ipc_others = [s for s, source in zip(self._ipc_matched, sources) if source is None]
+        sources = [source for source in sources if source is not None]
+        self._ipc_clocks = clock_fanout(sources) if sources else None
+
+    def publish(self, msg) -> None:
+        topic = self._ipc_topic
+        if topic is None:
+            return super().publish(msg)
+        if isinstance(msg, bytes):
+            obj = deserialize_message(msg, self.msg_type) if topic.subscriptions or self.history is not None else None
+        elif isinstance(msg, self.msg_type):
+            obj = msg
+        else:
+            raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
+        if self._ipc_version != topic.version:      # the local subscriptions changed: match again
+            self._rematch(topic)
+        matched, items = self._ipc_matched, []
+        if obj is not None:
+            if self.history is not None:
+                self.history.append(obj)
+            if matched:
+                data = None
+                if self._ipc_clocks is not None:
+                    items.append((self._ipc_clocks, obj))
+                for s in self._ipc_others:
+                    if s.raw:
+                        data = serialize_message(obj) if data is None else data
+                        items.append((s.callback, data))
+                    else:
+                        items.append((s.callback, obj))
+                topic.recent.append(obj)
+        if self.get_subscription_count() > len(matched):
+            super().publish(msg)    # first: outside, a message is seen before those it causes
+        if obj is not None and matched:
+            self._ipc_registry.post(items)
+
+
+class IntraProcessNode(Node):
+    """An rclpy Node whose publishers and subscriptions use intra-process delivery in its context."""
+
+    def _intra_process(self) -> IntraProcess | None:
+        registry = IntraProcess.of(self.context)
+        if not registry.enabled:
+            return None
+        registry.add_node(self)
+        return registry
+
+    def create_publisher(self, msg_type, topic, qos_profile, **kwargs):
+        registry = self._intra_process()
+        if registry is None or kwargs.get("publisher_class", Publisher) is not Publisher:
+            return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
+        publisher = super().create_publisher(msg_type, topic, qos_profile, publisher_class=IntraProcessPublisher,
+                                             **kwargs)
+        qos = publisher.qos_profile
+        publisher.history = (deque(maxlen=max(1, qos.depth)) if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                             else None)
+        publisher._ipc_registry, publisher._ipc_node = registry, self
+        publisher._ipc_topic = topic_entry = registry.topic(publisher.topic_name)
+        topic_entry.publishers.append(publisher)
+        return publisher
+
+    def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False, **kwargs):
+        registry = self._intra_process()
+        if registry is None:
+            return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
+        local = LocalSubscription(registry, callback, raw)
+        subscription = super().create_subscription(msg_type, topic, local.from_dds, qos_profile, raw=raw, **kwargs)
+        local.dds, local.node, local.qos = subscription, self, subscription.qos_profile
+        local.topic = registry.topic(subscription.topic_name)
+        registry.add_subscription(local)
+        return subscription
+
+    def destroy_publisher(self, publisher) -> bool:
+        if isinstance(publisher, IntraProcessPublisher) and publisher._ipc_registry is not None:
+            publisher._ipc_registry.remove_publisher(publisher)
+            publisher._ipc_topic = None
+        return super().destroy_publisher(publisher)
+
+    def destroy_subscription(self, subscription) -> bool:
+        IntraProcess.of(self.context).remove_subscription(subscription)
+        return super().destroy_subscription(subscription)
+
+    def destroy_node(self):
+        IntraProcess.of(self.context).remove_node(self)
+        return super().destroy_node()
