@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from cdpr_control.control_loop import ControlLoop
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.kernels import inverse_kinematics
 from cdpr_control.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator
 from cdpr_sim.startup import startup_state

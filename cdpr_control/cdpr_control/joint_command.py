@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinematics import inverse_kinematics
+from . import kernels
 
 
 class JointCommand:
@@ -37,7 +37,7 @@ class JointCommand:
         x = np.array(x_d, dtype=float)
         for offset in offsets:
             x += offset
-        q = inverse_kinematics(self.robot, x).q
+        q = kernels.cable_lengths(self.robot, x)
         return q if dq_cfc is None else q - dq_cfc
 
     def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False) -> np.ndarray:

@@ -1,0 +1,121 @@
+"""Compiled per-period numerics of the control loop (numba, cached on disk).
+
+The controller's stages (friction compensation, forward kinematics, force set-point, CFC, OSPC,
+joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cost mostly call
+overhead. This package holds the numeric cores of one period compiled with numba: the inverse
+kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
+(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44) and the PI
+arithmetic (3.16)/(3.19). The control flow and the state stay in the stage classes, which call the
+functions below at their call sites.
+
+The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_control) stay the readable
+reference: each function below is the same computation, and the tests compare the two on random
+poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the environment variable
+``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to check a suspicion
+against it; :func:`numpy_reference` switches it off for a block. Friction compensation chooses
+when it builds its friction model (the first sample after a parameter change).
+
+Compiled code is cached in ``__pycache__`` (``cache=True``): the first import on a machine compiles
+for some tens of seconds, later processes load it in well under a second; :func:`warm_up` runs each
+kernel once so that a node pays the loading before its first period, not in it.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+
+import numba
+import numpy as np
+
+from .. import dynamics, kinematics
+from .control import pi_update as _pi_update
+from .dynamics import platform_wrench as _platform_wrench
+from .forward_kinematics import elastic_cable_state, elastic_frozen
+from .kinematics import cable_lengths as _cable_lengths
+from .kinematics import inverse_kinematics as _inverse_kinematics
+from .kinematics import measured_wrench as _measured_wrench
+from .robot_data import RobotData, robot_data
+
+ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
+
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "elastic_cable_state", "elastic_frozen",
+           "friction_jit", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
+           "platform_wrench", "robot_data", "warm_up"]
+
+
+@contextlib.contextmanager
+def numpy_reference():
+    """Run the block on the numpy reference implementations (ENABLED False), then restore."""
+    global ENABLED
+    before, ENABLED = ENABLED, False
+    try:
+        yield
+    finally:
+        ENABLED = before
+
+
+def inverse_kinematics(robot, x) -> kinematics.InverseKinematics:
+    """kinematics.inverse_kinematics of one pose x (6,) with the robot's pulley model."""
+    if ENABLED:
+        return _inverse_kinematics(robot, x)
+    return kinematics.inverse_kinematics(robot, x)
+
+
+def cable_lengths(robot, x) -> np.ndarray:
+    """q (m,) of the inverse kinematics of one pose x (6,), (2.7)."""
+    if ENABLED:
+        return _cable_lengths(robot, x)
+    return kinematics.inverse_kinematics(robot, x).q
+
+
+def measured_wrench(robot, x, f) -> np.ndarray:
+    """w = -A^T(x) f (2.11): the wrench that the cable forces f (m,) balance at pose x (6,)."""
+    if ENABLED:
+        return _measured_wrench(robot, x, f)
+    return -kinematics.inverse_kinematics(robot, x).AT @ f
+
+
+def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
+    """dynamics.platform_wrench of one pose with twist xdot and acceleration xddot (6,)."""
+    if ENABLED:
+        return _platform_wrench(robot, x, xdot, xddot)
+    return dynamics.platform_wrench(robot, x, xdot, xddot)
+
+
+def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
+    """Compiled PI period (see :mod:`.control`); the caller checks ENABLED (PIController.update).
+    Scalar limits u_neg, u_pos apply to every channel."""
+    if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
+        u_neg, u_pos = (np.broadcast_to(np.asarray(v, dtype=float), e.shape) for v in (u_neg, u_pos))
+    return _pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos)
+
+
+@functools.cache
+def _njit(fn):
+    return numba.njit(cache=True)(fn)
+
+
+def friction_jit():
+    """The ``jit`` argument for :class:`cdpr_control.friction.PulleyFriction`: numba (disk-cached,
+    one dispatcher per function and process) when ENABLED, else None (numpy)."""
+    return _njit if ENABLED else None
+
+
+def warm_up(robot) -> None:
+    """Load (or, the first time on a machine, compile) every kernel for this robot's types."""
+    from ..friction import PulleyFriction
+
+    x = np.array(robot.home, dtype=float)
+    zero = np.zeros(6)
+    ik = _inverse_kinematics(robot, x)
+    _cable_lengths(robot, x)
+    f = np.full(robot.m, float(np.mean(robot.cable.f_min)))
+    _measured_wrench(robot, x, f)
+    _platform_wrench(robot, x, zero, zero)
+    d = robot_data(robot)
+    q_hat, k_l = elastic_cable_state(ik.q, f, d.l_0, d.k0, d.k1, d.k2)
+    elastic_frozen(x, ik.q, ik.AT, ik.c, ik.beta, d.b, d.r_p, q_hat, k_l, 1e-9, 30)
+    ones = np.ones(6)
+    _pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
+    PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, ik.q, np.zeros(robot.m), ik.beta)

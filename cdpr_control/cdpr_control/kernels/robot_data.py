@@ -1,0 +1,48 @@
+"""The robot's constants as plain contiguous arrays and floats, the arguments of the kernels.
+
+numba cannot take the :class:`cdpr_control.robot.Robot` dataclass; :func:`robot_data` flattens it
+once per robot object (cached by identity, robots are immutable) into a :class:`RobotData`.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..kinematics import pulley_frames
+
+
+class RobotData(NamedTuple):
+    """Per-robot constants of the kernels (SI units, shapes for m cables)."""
+
+    a: np.ndarray            # (m, 3) base vectors a_i
+    b: np.ndarray            # (m, 3) platform vectors b_i
+    R_A: np.ndarray          # (m, 3, 3) pulley frames K_A (2.3)
+    r_p: np.ndarray          # (m,) pulley radius
+    pulleys: bool            # swivelling pulleys (2.3)-(2.9) or fixed anchors (2.1)
+    l_0: np.ndarray          # (m,) winch-to-pulley length (2.14)
+    k0: float                # cable model (2.16)
+    k1: float
+    k2: float
+    mass: float              # platform (2.33)
+    cog: np.ndarray          # (3,) centre of gravity, platform frame
+    inertia: np.ndarray      # (3, 3) about the centre of gravity, platform frame
+    gravity: np.ndarray      # (3,) base frame
+
+
+_CACHE: dict[int, tuple] = {}
+
+
+def robot_data(robot) -> RobotData:
+    """The :class:`RobotData` of ``robot``, built on first use and cached per robot object."""
+    entry = _CACHE.get(id(robot))
+    if entry is None or entry[0] is not robot:
+        def arr(v):
+            return np.ascontiguousarray(v, dtype=float).copy()      # writeable: one numba type
+        c, p = robot.cable, robot.platform
+        data = RobotData(arr(robot.a), arr(robot.b), arr(pulley_frames(robot)), arr(robot.r_p),
+                         bool(robot.swivelling_pulleys), arr(robot.l_0), float(c.k0), float(c.k1),
+                         float(c.k2), float(p.mass), arr(p.center_of_gravity), arr(p.inertia),
+                         arr(robot.gravity))
+        entry = _CACHE[id(robot)] = (robot, data)
+    return entry[1]
