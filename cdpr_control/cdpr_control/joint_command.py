@@ -48,5 +48,6 @@ class JointCommand:
         self.held = target is None or not np.all(np.isfinite(target))
         if not self.held:
             step = self.v_max * self.dt
-            self.theta_d = self.theta_d + np.clip(target - self.theta_d, -step, step)
+            # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
+            self.theta_d = self.theta_d + np.minimum(np.maximum(target - self.theta_d, -step), step)
         return self.theta_d.copy()

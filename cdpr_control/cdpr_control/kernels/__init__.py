@@ -28,10 +28,11 @@ import os
 import numba
 import numpy as np
 
-from .. import dynamics, kinematics
+from .. import cable, dynamics, kinematics
 from .control import pi_update as _pi_update
+from .control import widened_saturation_kernel
 from .dynamics import platform_wrench as _platform_wrench
-from .forward_kinematics import elastic_cable_state, elastic_frozen
+from .forward_kinematics import elastic_cable_state, elastic_frozen, secant_stiffness
 from .kinematics import cable_lengths as _cable_lengths
 from .kinematics import inverse_kinematics as _inverse_kinematics
 from .kinematics import measured_wrench as _measured_wrench
@@ -39,9 +40,9 @@ from .robot_data import RobotData, robot_data
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "elastic_cable_state", "elastic_frozen",
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
            "friction_jit", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
-           "platform_wrench", "robot_data", "warm_up"]
+           "platform_wrench", "robot_data", "warm_up", "widened_saturation"]
 
 
 @contextlib.contextmanager
@@ -83,12 +84,26 @@ def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
     return dynamics.platform_wrench(robot, x, xdot, xddot)
 
 
+def cable_stiffness(robot, f, l_t) -> np.ndarray:
+    """cable.stiffness: the secant stiffness k_spec(f) / l_t (2.15) of forces f and lengths l_t (m,)."""
+    if ENABLED:
+        d = robot_data(robot)
+        return secant_stiffness(np.asarray(f, dtype=float), np.asarray(l_t, dtype=float), d.k0, d.k1, d.k2)
+    return cable.stiffness(robot, f, l_t)
+
+
 def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     """Compiled PI period (see :mod:`.control`); the caller checks ENABLED (PIController.update).
     Scalar limits u_neg, u_pos apply to every channel."""
     if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
         u_neg, u_pos = (np.broadcast_to(np.asarray(v, dtype=float), e.shape) for v in (u_neg, u_pos))
     return _pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos)
+
+
+def widened_saturation(params, f, f_min, f_max):
+    """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
+    return widened_saturation_kernel(f, f_min, f_max, float(params.F_sat_n), float(params.F_sat_p),
+                                     float(params.widen_band), float(params.widen_factor))
 
 
 @functools.cache
@@ -114,8 +129,9 @@ def warm_up(robot) -> None:
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     d = robot_data(robot)
-    q_hat, k_l = elastic_cable_state(ik.q, f, d.l_0, d.k0, d.k1, d.k2)
-    elastic_frozen(x, ik.q, ik.AT, ik.c, ik.beta, d.b, d.r_p, q_hat, k_l, 1e-9, 30)
+    elastic_frozen(x, ik.q, ik.AT, ik.c, ik.beta, d.b, d.r_p, ik.q, f, d.l_0, d.k0, d.k1, d.k2, 1e-9, 30)
     ones = np.ones(6)
     _pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
+    widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0)
+    secant_stiffness(f, f, d.k0, d.k1, d.k2)
     PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, ik.q, np.zeros(robot.m), ik.beta)

@@ -35,6 +35,17 @@ def elastic_cable_state(theta, f, l_0, k0, k1, k2):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def secant_stiffness(f, l_t, k0, k1, k2):
+    """k_spec(f) / l_t (2.15)-(2.16) (m,), k_spec = k0 + f (k1 + k2 f) with f <= 0 giving k0
+    (cable.stiffness)."""
+    k = np.empty(f.shape[0])
+    for i in range(f.shape[0]):
+        fp = max(f[i], 0.0)
+        k[i] = (k0 + fp * (k1 + k2 * fp)) / l_t[i]
+    return k
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _frozen_residual(x, c, b, q_free, k_l, res, JT, R, S, Rb):
     """Psi = k_l (|c_i - r - R b_i| - q_free) into res (m,) and (dPsi/dx)^T into JT (6, m); returns
     |Psi|^2. dq_i/dr = -u_i, dq_i/dphi_k = -u_i . ([h_k] R b_i), h_k column k of H(phi)."""
@@ -111,14 +122,16 @@ def _normal_equations(JT, res, lam, A, g):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def elastic_frozen(x_d, q_d, AT_d, c, beta, b, r_p, q_hat, k_l, xtol, max_iterations):
-    """Levenberg-Marquardt on Psi = K_l (IK_frozen(x) - q_hat) (3.8)-(3.9) from x_d.
+def elastic_frozen(x_d, q_d, AT_d, c, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations):
+    """Levenberg-Marquardt on Psi = K_l (IK_frozen(x) - q_hat) (3.8)-(3.9) from x_d, with q_hat
+    and K_l from the winch lengths theta and forces f (m,) (:func:`elastic_cable_state`).
 
     q_d (m,), AT_d (6, m), c (m, 3), beta (m,): the pulley IK at x_d; the frozen model is
     IK(x) = |c_i - r - R b_i| + beta_i r_p, which at x_d is the pulley IK itself, so the first
     residual comes from q_d and A^T_d. Returns (x, termination code, iterations, |Psi|).
     """
     m = c.shape[0]
+    q_hat, k_l = elastic_cable_state(theta, f, l_0, k0, k1, k2)
     x = x_d.copy()
     res, JT = np.empty(m), np.empty((6, m))
     res_new, JT_new, q_free = np.empty(m), np.empty((6, m)), np.empty(m)

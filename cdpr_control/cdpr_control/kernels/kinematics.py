@@ -79,6 +79,30 @@ def ik(x, a, b, R_A, r_p, pulleys):
     return q, l, u, AT, c, beta, gamma, l_f, Rb, R, n, kappa
 
 
+# rows of the packed result of ik_packed (one array: every returned array costs ~0.5 us to box)
+_Q, _BETA, _GAMMA, _L_F, _KAPPA, _AT, _L, _C, _RB, _N, _ROWS = 0, 1, 2, 3, 4, 5, 11, 14, 17, 20, 23
+
+
+@numba.njit(cache=True, error_model="numpy")
+def ik_packed(x, a, b, R_A, r_p, pulleys):
+    """:func:`ik` as one (23 + 3, m) array: rows q, beta, gamma, l_f, kappa, A^T (6), l^T, c^T, Rb^T,
+    n^T (3 each), then R in the first three columns of the last three rows (needs m >= 3)."""
+    q, l, u, AT, c, beta, gamma, l_f, Rb, R, n, kappa = ik(x, a, b, R_A, r_p, pulleys)
+    m = q.shape[0]
+    out = np.zeros((_ROWS + 3, m))
+    out[_Q], out[_BETA], out[_GAMMA], out[_L_F], out[_KAPPA] = q, beta, gamma, l_f, kappa
+    out[_AT:_AT + 6] = AT
+    out[_L:_L + 3], out[_C:_C + 3], out[_RB:_RB + 3], out[_N:_N + 3] = l.T, c.T, Rb.T, n.T
+    out[_ROWS:, :3] = R
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def cable_lengths_kernel(x, a, b, R_A, r_p, pulleys):
+    """q (m,) of :func:`ik`."""
+    return ik(x, a, b, R_A, r_p, pulleys)[0]
+
+
 @numba.njit(cache=True, error_model="numpy")
 def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys):
     """w = -A^T(x) f (2.11)."""
@@ -90,19 +114,24 @@ def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys):
     return w
 
 
-_make = InverseKinematics._make
-
-
 def inverse_kinematics(robot, x) -> InverseKinematics:
-    """Inverse kinematics of one pose x (6,) with the robot's pulley model, compiled."""
+    """Inverse kinematics of one pose x (6,) with the robot's pulley model, compiled.
+
+    The fields are views of one array (u of A^T, as in the reference); shapes as the reference's.
+    """
     d = robot_data(robot)
-    return _make(ik(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys))
+    if d.a.shape[0] < 3:                     # R does not fit the packed layout
+        return InverseKinematics._make(ik(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys))
+    P = ik_packed(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys)
+    AT = P[_AT:_AT + 6]
+    return InverseKinematics(P[_Q], P[_L:_L + 3].T, AT[:3].T, AT, P[_C:_C + 3].T, P[_BETA], P[_GAMMA],
+                             P[_L_F], P[_RB:_RB + 3].T, P[_ROWS:, :3], P[_N:_N + 3].T, P[_KAPPA])
 
 
 def cable_lengths(robot, x) -> np.ndarray:
     """q (m,) of the inverse kinematics (2.7) of one pose x (6,), compiled."""
     d = robot_data(robot)
-    return ik(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys)[0]
+    return cable_lengths_kernel(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys)
 
 
 def measured_wrench(robot, x, f) -> np.ndarray:
