@@ -35,6 +35,28 @@ def test_the_kernels_are_enabled_and_numpy_reference_switches_them_off():
     assert kernels.ENABLED
 
 
+def test_numpy_reference_runs_the_numpy_modules(robot, monkeypatch):
+    """Under numpy_reference() the dispatchers call the numpy modules, otherwise never."""
+    calls = []
+    for module, name in ((kinematics, "inverse_kinematics"), (dynamics, "platform_wrench"), (cable, "stiffness")):
+        original = getattr(module, name)
+        monkeypatch.setattr(module, name, lambda *a, _f=original, _n=name: calls.append(_n) or _f(*a))
+    x, f = np.array(robot.home), np.full(robot.m, 100.0)
+
+    def call_all():
+        kernels.inverse_kinematics(robot, x)
+        kernels.cable_lengths(robot, x)
+        kernels.measured_wrench(robot, x, f)
+        kernels.platform_wrench(robot, x, np.zeros(6), np.zeros(6))
+        kernels.cable_stiffness(robot, f, np.ones(robot.m))
+
+    call_all()
+    assert calls == []
+    with kernels.numpy_reference():
+        call_all()
+    assert calls == ["inverse_kinematics"] * 3 + ["platform_wrench", "stiffness"]
+
+
 @pytest.mark.parametrize("pulleys", [True, False])
 def test_inverse_kinematics_kernel_equals_the_reference(robot, pulleys):
     robot = robot if pulleys else replace(robot, swivelling_pulleys=False)

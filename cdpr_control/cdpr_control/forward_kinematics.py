@@ -193,8 +193,9 @@ class ForwardKinematics:
         d = kernels.robot_data(robot)
         if ik_d is None:
             ik_d = kernels.inverse_kinematics(robot, x_d)
+        v = kernels.vector
         x, code, iterations, norm = kernels.elastic_frozen(
-            x_d, ik_d.q, ik_d.AT, ik_d.c, ik_d.beta, d.b, d.r_p, theta, np.asarray(f, dtype=float), d.l_0,
+            v(x_d), v(ik_d.q), v(ik_d.AT), v(ik_d.c), v(ik_d.beta), d.b, d.r_p, v(theta), v(f), d.l_0,
             d.k0, d.k1, d.k2, self.xtol, self.max_iterations)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
 

@@ -28,7 +28,11 @@ import os
 import numba
 import numpy as np
 
-from .. import cable, dynamics, kinematics
+# the numpy references, under names that the submodules of this package (kernels.kinematics, ...)
+# do not shadow
+from .. import cable as np_cable
+from .. import dynamics as np_dynamics
+from .. import kinematics as np_kinematics
 from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
 from .dynamics import platform_wrench as _platform_wrench
@@ -36,13 +40,13 @@ from .forward_kinematics import elastic_cable_state, elastic_frozen, secant_stif
 from .kinematics import cable_lengths as _cable_lengths
 from .kinematics import inverse_kinematics as _inverse_kinematics
 from .kinematics import measured_wrench as _measured_wrench
-from .robot_data import RobotData, robot_data
+from .robot_data import RobotData, robot_data, vector
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
            "friction_jit", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
-           "platform_wrench", "robot_data", "warm_up", "widened_saturation"]
+           "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
 @contextlib.contextmanager
@@ -56,53 +60,53 @@ def numpy_reference():
         ENABLED = before
 
 
-def inverse_kinematics(robot, x) -> kinematics.InverseKinematics:
+def inverse_kinematics(robot, x) -> np_kinematics.InverseKinematics:
     """kinematics.inverse_kinematics of one pose x (6,) with the robot's pulley model."""
     if ENABLED:
         return _inverse_kinematics(robot, x)
-    return kinematics.inverse_kinematics(robot, x)
+    return np_kinematics.inverse_kinematics(robot, x)
 
 
 def cable_lengths(robot, x) -> np.ndarray:
     """q (m,) of the inverse kinematics of one pose x (6,), (2.7)."""
     if ENABLED:
         return _cable_lengths(robot, x)
-    return kinematics.inverse_kinematics(robot, x).q
+    return np_kinematics.inverse_kinematics(robot, x).q
 
 
 def measured_wrench(robot, x, f) -> np.ndarray:
     """w = -A^T(x) f (2.11): the wrench that the cable forces f (m,) balance at pose x (6,)."""
     if ENABLED:
         return _measured_wrench(robot, x, f)
-    return -kinematics.inverse_kinematics(robot, x).AT @ f
+    return -np_kinematics.inverse_kinematics(robot, x).AT @ f
 
 
 def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
     """dynamics.platform_wrench of one pose with twist xdot and acceleration xddot (6,)."""
     if ENABLED:
         return _platform_wrench(robot, x, xdot, xddot)
-    return dynamics.platform_wrench(robot, x, xdot, xddot)
+    return np_dynamics.platform_wrench(robot, x, xdot, xddot)
 
 
 def cable_stiffness(robot, f, l_t) -> np.ndarray:
     """cable.stiffness: the secant stiffness k_spec(f) / l_t (2.15) of forces f and lengths l_t (m,)."""
     if ENABLED:
         d = robot_data(robot)
-        return secant_stiffness(np.asarray(f, dtype=float), np.asarray(l_t, dtype=float), d.k0, d.k1, d.k2)
-    return cable.stiffness(robot, f, l_t)
+        return secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2)
+    return np_cable.stiffness(robot, f, l_t)
 
 
 def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     """Compiled PI period (see :mod:`.control`); the caller checks ENABLED (PIController.update).
     Scalar limits u_neg, u_pos apply to every channel."""
     if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
-        u_neg, u_pos = (np.broadcast_to(np.asarray(v, dtype=float), e.shape) for v in (u_neg, u_pos))
+        u_neg, u_pos = (np.full(e.shape, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
     return _pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos)
 
 
 def widened_saturation(params, f, f_min, f_max):
     """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
-    return widened_saturation_kernel(f, f_min, f_max, float(params.F_sat_n), float(params.F_sat_p),
+    return widened_saturation_kernel(f, vector(f_min), vector(f_max), float(params.F_sat_n), float(params.F_sat_p),
                                      float(params.widen_band), float(params.widen_factor))
 
 
@@ -118,20 +122,20 @@ def friction_jit():
 
 
 def warm_up(robot) -> None:
-    """Load (or, the first time on a machine, compile) every kernel for this robot's types."""
+    """Load (or, the first time on a machine, compile) every kernel with the argument types the
+    control loop passes (see :func:`.robot_data.vector`), so that its first period does not."""
     from ..friction import PulleyFriction
 
-    x = np.array(robot.home, dtype=float)
-    zero = np.zeros(6)
+    d = robot_data(robot)
+    x, zero, ones = vector(robot.home), np.zeros(6), np.ones(6)
     ik = _inverse_kinematics(robot, x)
-    _cable_lengths(robot, x)
     f = np.full(robot.m, float(np.mean(robot.cable.f_min)))
+    _cable_lengths(robot, x)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
-    d = robot_data(robot)
-    elastic_frozen(x, ik.q, ik.AT, ik.c, ik.beta, d.b, d.r_p, ik.q, f, d.l_0, d.k0, d.k1, d.k2, 1e-9, 30)
-    ones = np.ones(6)
+    elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
+                   d.l_0, d.k0, d.k1, d.k2, 1e-9, 30)
     _pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
     widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0)
     secant_stiffness(f, f, d.k0, d.k1, d.k2)
-    PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, ik.q, np.zeros(robot.m), ik.beta)
+    PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, vector(ik.q), np.zeros(robot.m), ik.beta)

@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from .kinematics import rotation
-from .robot_data import robot_data
+from .robot_data import robot_data, vector
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -70,5 +70,4 @@ def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity):
 def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
     """The w of (2.10) for one pose: gravity - w_dyn (2.33), compiled (dynamics.platform_wrench)."""
     d = robot_data(robot)
-    return platform_wrench_kernel(np.asarray(x, dtype=float), np.asarray(xdot, dtype=float),
-                                  np.asarray(xddot, dtype=float), d.mass, d.cog, d.inertia, d.gravity)
+    return platform_wrench_kernel(vector(x), vector(xdot), vector(xddot), d.mass, d.cog, d.inertia, d.gravity)

@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from ..kinematics import InverseKinematics
-from .robot_data import robot_data
+from .robot_data import robot_data, vector
 
 
 @numba.njit(cache=True)
@@ -121,8 +121,8 @@ def inverse_kinematics(robot, x) -> InverseKinematics:
     """
     d = robot_data(robot)
     if d.a.shape[0] < 3:                     # R does not fit the packed layout
-        return InverseKinematics._make(ik(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys))
-    P = ik_packed(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys)
+        return InverseKinematics._make(ik(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys))
+    P = ik_packed(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys)
     AT = P[_AT:_AT + 6]
     return InverseKinematics(P[_Q], P[_L:_L + 3].T, AT[:3].T, AT, P[_C:_C + 3].T, P[_BETA], P[_GAMMA],
                              P[_L_F], P[_RB:_RB + 3].T, P[_ROWS:, :3], P[_N:_N + 3].T, P[_KAPPA])
@@ -131,11 +131,11 @@ def inverse_kinematics(robot, x) -> InverseKinematics:
 def cable_lengths(robot, x) -> np.ndarray:
     """q (m,) of the inverse kinematics (2.7) of one pose x (6,), compiled."""
     d = robot_data(robot)
-    return cable_lengths_kernel(np.asarray(x, dtype=float), d.a, d.b, d.R_A, d.r_p, d.pulleys)
+    return cable_lengths_kernel(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys)
 
 
 def measured_wrench(robot, x, f) -> np.ndarray:
     """w = -A^T(x) f (2.11) of the cable forces f (m,) at pose x (6,), compiled."""
     d = robot_data(robot)
-    return measured_wrench_kernel(np.asarray(x, dtype=float), np.asarray(f, dtype=float), d.a, d.b, d.R_A,
+    return measured_wrench_kernel(vector(x), vector(f), d.a, d.b, d.R_A,
                                   d.r_p, d.pulleys)

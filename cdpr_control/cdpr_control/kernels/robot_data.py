@@ -2,6 +2,11 @@
 
 numba cannot take the :class:`cdpr_control.robot.Robot` dataclass; :func:`robot_data` flattens it
 once per robot object (cached by identity, robots are immutable) into a :class:`RobotData`.
+
+numba compiles one machine-code version per combination of argument types, and an array's type
+includes its layout and whether it is read-only (the robot's arrays are). The wrappers hand every
+array over as a writeable C-contiguous float64 array (:func:`vector`), so that one version serves
+every caller and :func:`cdpr_control.kernels.warm_up` loads the only one that runs.
 """
 from __future__ import annotations
 
@@ -28,6 +33,11 @@ class RobotData(NamedTuple):
     cog: np.ndarray          # (3,) centre of gravity, platform frame
     inertia: np.ndarray      # (3, 3) about the centre of gravity, platform frame
     gravity: np.ndarray      # (3,) base frame
+
+
+def vector(v) -> np.ndarray:
+    """A writeable C-contiguous float64 copy of v (the array type the kernels are compiled for)."""
+    return np.array(v, dtype=float, order="C")
 
 
 _CACHE: dict[int, tuple] = {}
