@@ -169,14 +169,14 @@ def test_frozen_residual_jacobian_by_finite_differences(robot):
     ik_d = kinematics.inverse_kinematics(robot, x_d)
     k_l = rng.uniform(1e4, 1e5, robot.m)
     q_free = ik_d.l_f + rng.uniform(-1e-3, 1e-3, robot.m)
-    c = np.ascontiguousarray(ik_d.c)
-    ref = solver._frozen_residual(np.ascontiguousarray(c.T), q_free, k_l)
+    cT = np.ascontiguousarray(ik_d.c.T)
+    ref = solver._frozen_residual(cT, q_free, k_l)
     m = robot.m
     buffers = (np.empty((3, 3)), np.empty((3, 3, 3)), np.empty(3))
 
     def residual(x):
         res, JT = np.empty(m), np.empty((6, m))
-        fk_kernels._frozen_residual(x, c, np.ascontiguousarray(robot.b), q_free, k_l, res, JT, *buffers)
+        fk_kernels._frozen_residual(x, cT, np.ascontiguousarray(robot.b), q_free, k_l, res, JT, *buffers)
         return res, JT
 
     for x in x_d + rng.uniform(-0.01, 0.01, (5, 6)):

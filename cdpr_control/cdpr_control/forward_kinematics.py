@@ -193,10 +193,10 @@ class ForwardKinematics:
         d = kernels.robot_data(robot)
         if ik_d is None:
             ik_d = kernels.inverse_kinematics(robot, x_d)
-        v = kernels.vector
-        x, code, iterations, norm = kernels.elastic_frozen(
-            v(x_d), v(ik_d.q), v(ik_d.AT), v(ik_d.c), v(ik_d.beta), d.b, d.r_p, v(theta), v(f), d.l_0,
-            d.k0, d.k1, d.k2, self.xtol, self.max_iterations)
+        v, x = kernels.vector, np.empty(6)
+        code, iterations, norm = kernels.elastic_frozen(
+            v(x_d), v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta), d.b, d.r_p, v(theta), v(f), d.l_0,
+            d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
 
     def _jacobian_T(self, AT, x, k_l):

@@ -45,7 +45,7 @@ class JointCommand:
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
         target = None if hold else self.target(x_d, offsets, dq_cfc)
-        self.held = target is None or not np.all(np.isfinite(target))
+        self.held = target is None or not np.isfinite(target).all()
         if not self.held:
             step = self.v_max * self.dt
             # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz

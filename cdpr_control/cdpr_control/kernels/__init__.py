@@ -92,22 +92,29 @@ def cable_stiffness(robot, f, l_t) -> np.ndarray:
     """cable.stiffness: the secant stiffness k_spec(f) / l_t (2.15) of forces f and lengths l_t (m,)."""
     if ENABLED:
         d = robot_data(robot)
-        return secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2)
+        k = np.empty(np.shape(f))
+        secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2, k)
+        return k
     return np_cable.stiffness(robot, f, l_t)
 
 
 def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
-    """Compiled PI period (see :mod:`.control`); the caller checks ENABLED (PIController.update).
-    Scalar limits u_neg, u_pos apply to every channel."""
+    """Compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output); the
+    caller checks ENABLED (PIController.update). Scalar limits u_neg, u_pos apply to every channel."""
+    n = e.shape[0]
     if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
-        u_neg, u_pos = (np.full(e.shape, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
-    return _pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos)
+        u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
+    out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
+    _pi_update(vector(e), K_p, T_i, dt, integrator, vector(u_neg), vector(u_pos), *out)
+    return out
 
 
 def widened_saturation(params, f, f_min, f_max):
     """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
-    return widened_saturation_kernel(f, vector(f_min), vector(f_max), float(params.F_sat_n), float(params.F_sat_p),
-                                     float(params.widen_band), float(params.widen_factor))
+    sat = np.empty(np.shape(f)), np.empty(np.shape(f))
+    widened_saturation_kernel(vector(f), vector(f_min), vector(f_max), float(params.F_sat_n),
+                              float(params.F_sat_p), float(params.widen_band), float(params.widen_factor), *sat)
+    return sat
 
 
 @functools.cache
@@ -124,6 +131,7 @@ def friction_jit():
 def warm_up(robot) -> None:
     """Load (or, the first time on a machine, compile) every kernel with the argument types the
     control loop passes (see :func:`.robot_data.vector`), so that its first period does not."""
+    from ..cable_force_control import CFCParams
     from ..friction import PulleyFriction
 
     d = robot_data(robot)
@@ -133,9 +141,9 @@ def warm_up(robot) -> None:
     _cable_lengths(robot, x)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
-    elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
-                   d.l_0, d.k0, d.k1, d.k2, 1e-9, 30)
-    _pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
-    widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0)
-    secant_stiffness(f, f, d.k0, d.k1, d.k2)
+    elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
+                   d.l_0, d.k0, d.k1, d.k2, 1e-9, 30, np.empty(6))
+    pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
+    widened_saturation(CFCParams(), f, f, f)
+    cable_stiffness(robot, f, f)
     PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, vector(ik.q), np.zeros(robot.m), ik.beta)

@@ -2,19 +2,16 @@
 from __future__ import annotations
 
 import numba
-import numpy as np
 
 
 @numba.njit(cache=True, error_model="numpy")
-def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
-    """One PI period as PIController.update: returns new arrays (integrator, saturated, output).
+def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, integ, saturated, output):
+    """One PI period as PIController.update into the (new) arrays integ, saturated, output.
 
     u = clip(K_p e + I, -u_neg, u_pos); I integrates K_p dt / T_i e unless that pushes a saturated
     output further out, and is clamped to the output range (anti-windup).
     """
-    n = e.shape[0]
-    integ, saturated, output = np.empty(n), np.empty(n, dtype=np.bool_), np.empty(n)
-    for i in range(n):
+    for i in range(e.shape[0]):
         lo, hi = -u_neg[i], u_pos[i]
         p = K_p[i] * e[i]
         candidate = integrator[i] + K_p[i] * dt / T_i[i] * e[i]
@@ -26,21 +23,17 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
         integ[i] = v
         saturated[i] = u > hi or u < lo
         output[i] = lo if u < lo else (hi if u > hi else u)
-    return integ, saturated, output
 
 
 @numba.njit(cache=True, error_model="numpy")
-def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor):
-    """(sat_n, sat_p) (m,) of cable_force_control.widened_saturation: F_sat,n and F_sat,p raised
+def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor, sat_n, sat_p):
+    """sat_n, sat_p (m,) of cable_force_control.widened_saturation: F_sat,n and F_sat,p raised
     linearly up to ``factor`` times as f enters the band of width ``band`` at f_max and f_min."""
-    m = f.shape[0]
-    sat_n, sat_p = np.empty(m), np.empty(m)
     gain = factor - 1.0
-    for i in range(m):
+    for i in range(f.shape[0]):
         near_min = (f_min[i] + band - f[i]) / band
         near_min = 0.0 if near_min < 0.0 else (1.0 if near_min > 1.0 else near_min)
         near_max = (f[i] - (f_max[i] - band)) / band
         near_max = 0.0 if near_max < 0.0 else (1.0 if near_max > 1.0 else near_max)
         sat_n[i] = F_sat_n * (1.0 + gain * near_max)
         sat_p[i] = F_sat_p * (1.0 + gain * near_min)
-    return sat_n, sat_p

@@ -20,9 +20,9 @@ def _cross(a, b, out):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity):
+def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity, w):
     """w = w_gravity - w_dyn (6,): [m g; c x m g] - (M(x) xddot + [m w x (w x c); w x J_o w]),
-    c = R c_p, J_o = R J_c R^T - m [c][c] (2.33), twist xdot = [r_dot; omega]."""
+    c = R c_p, J_o = R J_c R^T - m [c][c] (2.33), twist xdot = [r_dot; omega]; into w."""
     R = np.empty((3, 3))
     rotation(x[3], x[4], x[5], R)
     c, t1, t2 = np.empty(3), np.empty(3), np.empty(3)
@@ -39,7 +39,6 @@ def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity):
             CC = c[i] * c[j] - (cc if i == j else 0.0)
             J_o[i, j] = RJ[i, 0] * R[j, 0] + RJ[i, 1] * R[j, 1] + RJ[i, 2] * R[j, 2] - mass * CC
     omega, a, omega_dot = xdot[3:], xddot[:3], xddot[3:]
-    w = np.empty(6)
     fg = np.empty(3)
     for j in range(3):
         fg[j] = mass * gravity[j]
@@ -64,10 +63,11 @@ def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity):
     for j in range(3):
         w[3 + j] -= mass * t1[j] + (J_o[j, 0] * omega_dot[0] + J_o[j, 1] * omega_dot[1]
                                     + J_o[j, 2] * omega_dot[2]) + t2[j]
-    return w
 
 
 def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
     """The w of (2.10) for one pose: gravity - w_dyn (2.33), compiled (dynamics.platform_wrench)."""
     d = robot_data(robot)
-    return platform_wrench_kernel(vector(x), vector(xdot), vector(xddot), d.mass, d.cog, d.inertia, d.gravity)
+    w = np.empty(6)
+    platform_wrench_kernel(vector(x), vector(xdot), vector(xddot), d.mass, d.cog, d.inertia, d.gravity, w)
+    return w

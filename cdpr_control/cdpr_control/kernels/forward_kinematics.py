@@ -35,18 +35,16 @@ def elastic_cable_state(theta, f, l_0, k0, k1, k2):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def secant_stiffness(f, l_t, k0, k1, k2):
-    """k_spec(f) / l_t (2.15)-(2.16) (m,), k_spec = k0 + f (k1 + k2 f) with f <= 0 giving k0
+def secant_stiffness(f, l_t, k0, k1, k2, k):
+    """k = k_spec(f) / l_t (2.15)-(2.16) (m,), k_spec = k0 + f (k1 + k2 f) with f <= 0 giving k0
     (cable.stiffness)."""
-    k = np.empty(f.shape[0])
     for i in range(f.shape[0]):
         fp = max(f[i], 0.0)
         k[i] = (k0 + fp * (k1 + k2 * fp)) / l_t[i]
-    return k
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _frozen_residual(x, c, b, q_free, k_l, res, JT, R, S, Rb):
+def _frozen_residual(x, cT, b, q_free, k_l, res, JT, R, S, Rb):
     """Psi = k_l (|c_i - r - R b_i| - q_free) into res (m,) and (dPsi/dx)^T into JT (6, m); returns
     |Psi|^2. dq_i/dr = -u_i, dq_i/dphi_k = -u_i . ([h_k] R b_i), h_k column k of H(phi)."""
     rotation(x[3], x[4], x[5], R)
@@ -59,10 +57,10 @@ def _frozen_residual(x, c, b, q_free, k_l, res, JT, R, S, Rb):
     S[1, 0, 1], S[1, 0, 2], S[1, 1, 0], S[1, 2, 0] = -sa, ca, sa, -ca
     S[2, 0, 1], S[2, 0, 2], S[2, 1, 0], S[2, 1, 2], S[2, 2, 0], S[2, 2, 1] = -hz, hy, hz, -hx, -hy, hx
     cost = 0.0
-    for i in range(c.shape[0]):
+    for i in range(cT.shape[1]):
         for j in range(3):
             Rb[j] = R[j, 0] * b[i, 0] + R[j, 1] * b[i, 1] + R[j, 2] * b[i, 2]
-        l0, l1, l2 = c[i, 0] - Rb[0] - x[0], c[i, 1] - Rb[1] - x[1], c[i, 2] - Rb[2] - x[2]
+        l0, l1, l2 = cT[0, i] - Rb[0] - x[0], cT[1, i] - Rb[1] - x[1], cT[2, i] - Rb[2] - x[2]
         L = math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
         s = -k_l[i] / L
         JT[0, i], JT[1, i], JT[2, i] = l0 * s, l1 * s, l2 * s                  # -k_l u
@@ -122,15 +120,24 @@ def _normal_equations(JT, res, lam, A, g):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def elastic_frozen(x_d, q_d, AT_d, c, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations):
+def elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations, x_out):
     """Levenberg-Marquardt on Psi = K_l (IK_frozen(x) - q_hat) (3.8)-(3.9) from x_d, with q_hat
     and K_l from the winch lengths theta and forces f (m,) (:func:`elastic_cable_state`).
 
-    q_d (m,), AT_d (6, m), c (m, 3), beta (m,): the pulley IK at x_d; the frozen model is
-    IK(x) = |c_i - r - R b_i| + beta_i r_p, which at x_d is the pulley IK itself, so the first
-    residual comes from q_d and A^T_d. Returns (x, termination code, iterations, |Psi|).
+    q_d (m,), AT_d (6, m), cT (3, m), beta (m,): the pulley IK at x_d (cT the leave points c_i as
+    columns); the frozen model is IK(x) = |c_i - r - R b_i| + beta_i r_p, which at x_d is the
+    pulley IK itself, so the first residual comes from q_d and A^T_d. The pose goes to x_out (6,);
+    returns (termination code, iterations, |Psi|).
     """
-    m = c.shape[0]
+    code, iterations, norm, x = _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol,
+                                                max_iterations)
+    x_out[:] = x
+    return code, iterations, norm
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations):
+    m = cT.shape[1]
     q_hat, k_l = elastic_cable_state(theta, f, l_0, k0, k1, k2)
     x = x_d.copy()
     res, JT = np.empty(m), np.empty((6, m))
@@ -151,26 +158,26 @@ def elastic_frozen(x_d, q_d, AT_d, c, beta, b, r_p, theta, f, l_0, k0, k1, k2, x
     R, S, Rb = np.empty((3, 3)), np.empty((3, 3, 3)), np.empty(3)
     A, L, g, dx, x_new = np.empty((6, 6)), np.zeros((6, 6)), np.empty(6), np.empty(6), np.empty(6)
     if not (math.isfinite(cost) and math.isfinite(JT.sum())):
-        return x, NON_FINITE, 0, math.sqrt(cost) if cost >= 0.0 else math.nan
+        return NON_FINITE, 0, math.sqrt(cost) if cost >= 0.0 else math.nan, x
     lam = _LAMBDA_START
     for it in range(1, max_iterations + 1):
         _normal_equations(JT, res, lam, A, g)
         if not _cholesky_solve(A, g, dx, L):
             lam *= 10.0
             if lam > _LAMBDA_MAX:
-                return x, STALLED, it, math.sqrt(cost)
+                return STALLED, it, math.sqrt(cost), x
             continue
         if math.sqrt(dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2 + dx[3] ** 2 + dx[4] ** 2 + dx[5] ** 2) <= xtol:
             if lam <= _LAMBDA_CONVERGED:
-                return x, CONVERGED, it, math.sqrt(cost)
+                return CONVERGED, it, math.sqrt(cost), x
             _normal_equations(JT, res, 0.0, A, g)           # the undamped (Gauss-Newton) step
             if _cholesky_solve(A, g, x_new, L) and math.sqrt(
                     x_new[0] ** 2 + x_new[1] ** 2 + x_new[2] ** 2 + x_new[3] ** 2 + x_new[4] ** 2
                     + x_new[5] ** 2) <= xtol:
-                return x, CONVERGED, it, math.sqrt(cost)
+                return CONVERGED, it, math.sqrt(cost), x
         for k in range(6):
             x_new[k] = x[k] - dx[k]
-        cost_new = _frozen_residual(x_new, c, b, q_free, k_l, res_new, JT_new, R, S, Rb)
+        cost_new = _frozen_residual(x_new, cT, b, q_free, k_l, res_new, JT_new, R, S, Rb)
         if cost_new <= cost:
             x, x_new = x_new, x
             res, res_new = res_new, res
@@ -180,5 +187,5 @@ def elastic_frozen(x_d, q_d, AT_d, c, beta, b, r_p, theta, f, l_0, k0, k1, k2, x
         else:
             lam *= 10.0
             if lam > _LAMBDA_MAX:
-                return x, STALLED, it, math.sqrt(cost)
-    return x, MAX_ITERATIONS, max_iterations, math.sqrt(cost)
+                return STALLED, it, math.sqrt(cost), x
+    return MAX_ITERATIONS, max_iterations, math.sqrt(cost), x

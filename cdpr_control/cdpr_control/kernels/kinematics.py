@@ -84,34 +84,31 @@ _Q, _BETA, _GAMMA, _L_F, _KAPPA, _AT, _L, _C, _RB, _N, _ROWS = 0, 1, 2, 3, 4, 5,
 
 
 @numba.njit(cache=True, error_model="numpy")
-def ik_packed(x, a, b, R_A, r_p, pulleys):
-    """:func:`ik` as one (23 + 3, m) array: rows q, beta, gamma, l_f, kappa, A^T (6), l^T, c^T, Rb^T,
-    n^T (3 each), then R in the first three columns of the last three rows (needs m >= 3)."""
+def ik_packed(x, a, b, R_A, r_p, pulleys, out):
+    """:func:`ik` into one array out (23 + 3, m): rows q, beta, gamma, l_f, kappa, A^T (6), l^T, c^T,
+    Rb^T, n^T (3 each), then R in the first three columns of the last three rows (needs m >= 3)."""
     q, l, u, AT, c, beta, gamma, l_f, Rb, R, n, kappa = ik(x, a, b, R_A, r_p, pulleys)
-    m = q.shape[0]
-    out = np.zeros((_ROWS + 3, m))
     out[_Q], out[_BETA], out[_GAMMA], out[_L_F], out[_KAPPA] = q, beta, gamma, l_f, kappa
     out[_AT:_AT + 6] = AT
     out[_L:_L + 3], out[_C:_C + 3], out[_RB:_RB + 3], out[_N:_N + 3] = l.T, c.T, Rb.T, n.T
+    out[_ROWS:] = 0.0
     out[_ROWS:, :3] = R
-    return out
 
 
 @numba.njit(cache=True, error_model="numpy")
-def cable_lengths_kernel(x, a, b, R_A, r_p, pulleys):
-    """q (m,) of :func:`ik`."""
-    return ik(x, a, b, R_A, r_p, pulleys)[0]
+def cable_lengths_kernel(x, a, b, R_A, r_p, pulleys, q):
+    """q (m,) of :func:`ik` into q."""
+    q[:] = ik(x, a, b, R_A, r_p, pulleys)[0]
 
 
 @numba.njit(cache=True, error_model="numpy")
-def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys):
-    """w = -A^T(x) f (2.11)."""
+def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys, w):
+    """w = -A^T(x) f (2.11) into w (6,)."""
     AT = ik(x, a, b, R_A, r_p, pulleys)[3]
-    w = np.zeros(6)
     for k in range(6):
+        w[k] = 0.0
         for i in range(f.shape[0]):
             w[k] -= AT[k, i] * f[i]
-    return w
 
 
 def inverse_kinematics(robot, x) -> InverseKinematics:
@@ -122,7 +119,8 @@ def inverse_kinematics(robot, x) -> InverseKinematics:
     d = robot_data(robot)
     if d.a.shape[0] < 3:                     # R does not fit the packed layout
         return InverseKinematics._make(ik(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys))
-    P = ik_packed(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys)
+    P = np.empty((_ROWS + 3, d.a.shape[0]))
+    ik_packed(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
     AT = P[_AT:_AT + 6]
     return InverseKinematics(P[_Q], P[_L:_L + 3].T, AT[:3].T, AT, P[_C:_C + 3].T, P[_BETA], P[_GAMMA],
                              P[_L_F], P[_RB:_RB + 3].T, P[_ROWS:, :3], P[_N:_N + 3].T, P[_KAPPA])
@@ -131,11 +129,14 @@ def inverse_kinematics(robot, x) -> InverseKinematics:
 def cable_lengths(robot, x) -> np.ndarray:
     """q (m,) of the inverse kinematics (2.7) of one pose x (6,), compiled."""
     d = robot_data(robot)
-    return cable_lengths_kernel(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys)
+    q = np.empty(d.a.shape[0])
+    cable_lengths_kernel(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys, q)
+    return q
 
 
 def measured_wrench(robot, x, f) -> np.ndarray:
     """w = -A^T(x) f (2.11) of the cable forces f (m,) at pose x (6,), compiled."""
     d = robot_data(robot)
-    return measured_wrench_kernel(vector(x), vector(f), d.a, d.b, d.R_A,
-                                  d.r_p, d.pulleys)
+    w = np.empty(6)
+    measured_wrench_kernel(vector(x), vector(f), d.a, d.b, d.R_A, d.r_p, d.pulleys, w)
+    return w

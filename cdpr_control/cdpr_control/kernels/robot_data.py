@@ -6,7 +6,9 @@ once per robot object (cached by identity, robots are immutable) into a :class:`
 numba compiles one machine-code version per combination of argument types, and an array's type
 includes its layout and whether it is read-only (the robot's arrays are). The wrappers hand every
 array over as a writeable C-contiguous float64 array (:func:`vector`), so that one version serves
-every caller and :func:`cdpr_control.kernels.warm_up` loads the only one that runs.
+every caller and :func:`cdpr_control.kernels.warm_up` loads the only one that runs. Results come
+back in arrays the wrapper allocates (an array returned by a compiled function costs about 1 us to
+hand over to Python, an argument 0.2 us).
 """
 from __future__ import annotations
 
@@ -35,8 +37,16 @@ class RobotData(NamedTuple):
     gravity: np.ndarray      # (3,) base frame
 
 
+_F64 = np.dtype(float)
+
+
 def vector(v) -> np.ndarray:
-    """A writeable C-contiguous float64 copy of v (the array type the kernels are compiled for)."""
+    """v as a writeable C-contiguous float64 array (the type the kernels are compiled for): v itself
+    when it is one already (the kernels do not write to their inputs), else a copy."""
+    if type(v) is np.ndarray and v.dtype is _F64:
+        flags = v.flags
+        if flags.c_contiguous and flags.writeable:
+            return v
     return np.array(v, dtype=float, order="C")
 
 
