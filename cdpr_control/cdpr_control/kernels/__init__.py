@@ -15,9 +15,10 @@ poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the 
 against it; :func:`numpy_reference` switches it off for a block. Friction compensation chooses
 when it builds its friction model (the first sample after a parameter change).
 
-Compiled code is cached in ``__pycache__`` (``cache=True``): the first import on a machine compiles
-for some tens of seconds, later processes load it in well under a second; :func:`warm_up` runs each
-kernel once so that a node pays the loading before its first period, not in it.
+Compiled code is cached in ``__pycache__`` (``cache=True``): the first use on a machine (or after an
+edit of a kernel's source) compiles for some tens of seconds, later processes load the cache in
+about a second; :func:`warm_up` runs each kernel once so that a process pays that before its first
+period, not in it. See docs/kernels.md.
 """
 from __future__ import annotations
 
@@ -105,7 +106,7 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
         u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
     out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
-    _pi_update(vector(e), K_p, T_i, dt, integrator, vector(u_neg), vector(u_pos), *out)
+    _pi_update(vector(e), K_p, T_i, dt, vector(integrator), vector(u_neg), vector(u_pos), *out)
     return out
 
 
