@@ -61,8 +61,6 @@ class ControlLoop:
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.command = JointCommand(robot, dt)
-        if kernels.ENABLED:
-            kernels.warm_up(robot)           # load the compiled kernels now, not in the first period
 
     def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
         """One period from the set-point (pose, twist, acceleration) and the winch measurements."""

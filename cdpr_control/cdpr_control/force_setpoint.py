@@ -63,6 +63,7 @@ class ForceSetpoint:
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
         self.set_params(params or ForceSetpointParams())
+        kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
 
     def set_params(self, p: ForceSetpointParams) -> None:
         p.validate(self.robot.m)

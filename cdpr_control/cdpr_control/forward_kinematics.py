@@ -282,6 +282,7 @@ class PoseEstimator:
         self.dq_0: np.ndarray | None = None
         self.x: np.ndarray | None = None
         self.result: FKResult | None = None
+        kernels.warm_up(robot)               # the compiled FK loaded now, not in the first period
 
     def update(self, theta, f, x_d, ik_d=None) -> tuple[np.ndarray, np.ndarray]:
         """-> (x, w): the pose estimate and the wrench of the measured forces about its origin.

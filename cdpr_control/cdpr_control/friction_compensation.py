@@ -46,6 +46,7 @@ class FrictionCompensation:
         self.robot = robot
         self.dt = dt
         self.set_params(params or FrictionCompensationParams())
+        kernels.warm_up(robot)               # the compiled friction loaded now, not in the first period
 
     def set_params(self, params: FrictionCompensationParams) -> None:
         self.params = params.resolved(self.robot)

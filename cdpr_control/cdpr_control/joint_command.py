@@ -24,6 +24,7 @@ class JointCommand:
         self.v_max = robot.drive.v_max if v_max is None else v_max
         self.theta_d: np.ndarray | None = None
         self.held = False
+        kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
 
     def reset(self, theta) -> None:
         """Start from the measured cable lengths θ, so that enabling the command does not jump."""

@@ -30,6 +30,7 @@ class PIController:
         self.integrator = np.zeros(n)
         self.saturated = np.zeros(n, dtype=bool)
         self.output = np.zeros(n)
+        kernels.warm_up()                    # the compiled PI loaded now, not in the first period
 
     def set_gains(self, K_p, T_i) -> None:
         K_p = np.broadcast_to(np.asarray(K_p, dtype=float), (self.n,)).copy()

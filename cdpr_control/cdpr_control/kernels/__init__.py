@@ -129,22 +129,38 @@ def friction_jit():
     return _njit if ENABLED else None
 
 
-def warm_up(robot) -> None:
-    """Load (or, the first time on a machine, compile) every kernel with the argument types the
-    control loop passes (see :func:`.robot_data.vector`), so that its first period does not."""
-    from ..cable_force_control import CFCParams
+_warm = {"robot_free": False, "robot": False}
+
+
+def warm_up(robot=None) -> None:
+    """Load (or, the first time on a machine, compile) the kernels with the argument types the
+    control loop passes (see :func:`.robot_data.vector`), so that the first period does not.
+
+    The stage classes call it when they are built: without a robot the robot-free kernels (PI,
+    widened saturation, cable stiffness), with one all of them. Once per process (the compiled
+    code does not depend on the robot's values); nothing when ENABLED is False.
+    """
+    if not ENABLED:
+        return
+    f, ones = np.full(8, 100.0), np.ones(6)
+    if not _warm["robot_free"]:
+        from ..cable_force_control import CFCParams
+
+        pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
+        widened_saturation(CFCParams(), f, f, f)
+        secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
+        _warm["robot_free"] = True
+    if robot is None or _warm["robot"]:
+        return
     from ..friction import PulleyFriction
 
     d = robot_data(robot)
-    x, zero, ones = vector(robot.home), np.zeros(6), np.ones(6)
+    x, zero, f = vector(robot.home), np.zeros(6), np.full(robot.m, float(np.mean(robot.cable.f_min)))
     ik = _inverse_kinematics(robot, x)
-    f = np.full(robot.m, float(np.mean(robot.cable.f_min)))
     _cable_lengths(robot, x)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
                    d.l_0, d.k0, d.k1, d.k2, 1e-9, 30, np.empty(6))
-    pi_update(zero, ones, ones, 1e-3, zero, ones, ones)
-    widened_saturation(CFCParams(), f, f, f)
-    cable_stiffness(robot, f, f)
     PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, vector(ik.q), np.zeros(robot.m), ik.beta)
+    _warm["robot"] = True
