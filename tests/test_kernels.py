@@ -13,7 +13,7 @@ from cdpr_control import cable, dynamics, kernels, kinematics
 from cdpr_control.cable_force_control import CFCParams, widened_saturation
 from cdpr_control.control_loop import ControlLoop
 from cdpr_control.forward_kinematics import CONVERGED, NON_FINITE, ForwardKinematics
-from cdpr_control.friction import PulleyFriction
+from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
 from cdpr_control.kernels import forward_kinematics as fk_kernels
 from cdpr_control.pi_control import PIController
 from cdpr_control.robot import load_robot
@@ -235,19 +235,23 @@ def test_widened_saturation_kernel_equals_the_reference(robot):
 
 def test_friction_compiled_with_changing_wrap_angles_equals_numpy(robot):
     """The controller's friction model sees a new beta every period: the compiled tables of the
-    swivelling pulley (friction.last_pulley_tables) and the Dahl step against numpy."""
+    swivelling pulley (friction.last_pulley_tables) and Dahl step against PulleyFriction's numpy,
+    state included, through direction changes and standstill."""
     rng = np.random.default_rng(18)
     ik = kinematics.inverse_kinematics(robot, robot.home)
     plain = PulleyFriction.from_robot(robot, ik.q, 1e-7)
-    fast = PulleyFriction.from_robot(robot, ik.q, 1e-7, jit=kernels.friction_jit())
+    fast = PulleyFriction.from_robot(robot, ik.q, 1e-7)
     theta = ik.q.copy()
     for k in range(500):
-        v = 0.05 * np.sin(k / 40.0 + np.arange(robot.m))
+        v = 0.05 * np.sin(k / 40.0 + np.arange(robot.m)) * (k % 100 > 10)
         theta = theta + v * 1e-3
         beta = ik.beta + 0.1 * np.sin(k / 70.0)
         F_s = rng.uniform(50.0, 200.0, robot.m)
-        np.testing.assert_allclose(fast.platform_force(F_s, theta, v, beta),
+        f_w = winch_force_from_sensor(F_s, robot.sensor.beta_1)
+        np.testing.assert_allclose(kernels.friction_platform_force(fast, f_w, theta, v, beta),
                                    plain.platform_force(F_s, theta, v, beta), rtol=1e-12)
+        np.testing.assert_allclose(fast.dahl.state, plain.dahl.state, rtol=1e-12, atol=1e-12)
+    assert np.ptp(plain.dahl.state[0]) == 2.0                     # both directions seen
 
 
 def test_control_loop_compiled_equals_numpy_reference_in_closed_loop(robot):

@@ -70,7 +70,7 @@ class PulleySeries:
     P2 .. P_np-1. A cable with n_pulleys = 1 has no pulley after the sensor and no friction.
     """
 
-    def __init__(self, mu, F_pv, n_pulleys, beta_inner: float, jit=None):
+    def __init__(self, mu, F_pv, n_pulleys, beta_inner: float):
         self.mu = np.array(mu, dtype=float)
         self.F_pv = np.array(F_pv, dtype=float)
         n_p = np.asarray(n_pulleys, dtype=int)
@@ -90,15 +90,19 @@ class PulleySeries:
                 alpha, gamma = np.where(inner, a * alpha, alpha), np.where(inner, a * gamma + b, gamma)
             self._alpha_in[row], self._gamma_in[row] = alpha, gamma
         self._cols = np.arange(self.m)
-        self._last_pulley = last_pulley_tables if jit is None else jit(last_pulley_tables)
         self._beta_key = None
         self._beta_seen = None
+
+    @property
+    def inner(self) -> tuple[np.ndarray, np.ndarray]:
+        """alpha, gamma (3, m) of the inner pulleys P2 .. P_np-1 alone, rows s = -1, 0, 1."""
+        return self._alpha_in, self._gamma_in
 
     def tables(self, beta_last) -> tuple[np.ndarray, np.ndarray]:
         """alpha, gamma (3, m) for s = -1, 0, 1 (rows); recomputed only when beta_last changes."""
         if beta_last is not self._beta_seen and (self._beta_key is None or not (self._beta_key == beta_last).all()):
-            self._alpha, self._gamma = self._last_pulley(_floats(beta_last), self.mu, self.F_pv, self.has_last,
-                                                         self._alpha_in, self._gamma_in)
+            self._alpha, self._gamma = last_pulley_tables(_floats(beta_last), self.mu, self.F_pv, self.has_last,
+                                                          self._alpha_in, self._gamma_in)
             self._beta_key = np.array(beta_last, dtype=float)
         # the same read-only array again (the simulator's frozen wrap angles): no comparison needed
         self._beta_seen = beta_last if isinstance(beta_last, np.ndarray) and not beta_last.flags.writeable else None
@@ -126,7 +130,7 @@ class PulleySeries:
 def last_pulley_tables(beta_last, mu, F_pv, has_last, alpha_in, gamma_in):
     """alpha, gamma (3, m) of PulleySeries.tables: the inner pulleys' maps alpha_in, gamma_in (3, m)
     followed by the swivelling pulley P_np (3.35) of wrap angle beta_last (m,), for s = -1, 0, 1.
-    In the array subset numba compiles (PulleySeries' jit)."""
+    In the array subset numba compiles (cdpr_control.kernels runs it compiled)."""
     k = np.sqrt(2.0 * (1.0 - np.cos(beta_last)))         # wrap_factor (3.33), inlined for numba
     smk = np.array([-1.0, 0.0, 1.0]).reshape(3, 1) * (mu * k)
     a = np.where(has_last, (2.0 + smk) / (2.0 - smk), 1.0)
@@ -237,7 +241,7 @@ class PulleyFriction:
 
     def __init__(self, mu, sigma, F_pv, n_pulleys, beta_inner: float, beta_1: float, theta,
                  v_eps: float = 0.0, jit=None):
-        self.series = PulleySeries(mu, F_pv, n_pulleys, beta_inner, jit)
+        self.series = PulleySeries(mu, F_pv, n_pulleys, beta_inner)
         self.dahl = DahlFriction(sigma, theta, v_eps)
         self.beta_1 = float(beta_1)
         self._platform_step = platform_force_step if jit is None else jit(platform_force_step)

@@ -63,7 +63,10 @@ class FrictionCompensation:
         if self.model is None:
             fr, p = self.robot.friction, self.params
             self.model = PulleyFriction(p.mu, p.sigma, p.F_pv, fr.n_pulleys, fr.beta_inner,
-                                        self.robot.sensor.beta_1, theta, jit=kernels.friction_jit())
-        F_D = self.model.platform_force(F_s, theta, thetadot, beta) - f_w     # (3.43)
+                                        self.robot.sensor.beta_1, theta)
+        if kernels.ENABLED:
+            F_D = kernels.friction_platform_force(self.model, f_w, theta, thetadot, beta) - f_w   # (3.43)
+        else:
+            F_D = self.model.platform_force(F_s, theta, thetadot, beta) - f_w     # (3.43)
         self.delayed.append(F_D)
         return f_w + self.delayed[0]                                           # (3.44), shifted

@@ -12,8 +12,7 @@ The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_contro
 reference: each function below is the same computation, and the tests compare the two on random
 poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the environment variable
 ``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to check a suspicion
-against it; :func:`numpy_reference` switches it off for a block. Friction compensation chooses
-when it builds its friction model (the first sample after a parameter change).
+against it; :func:`numpy_reference` switches it off for a block.
 
 Compiled code is cached in ``__pycache__`` (``cache=True``): the first use on a machine (or after an
 edit of a kernel's source) compiles for some tens of seconds, later processes load the cache in
@@ -23,10 +22,8 @@ period, not in it. See docs/kernels.md.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 
-import numba
 import numpy as np
 
 # the numpy references, under names that the submodules of this package (kernels.kinematics, ...)
@@ -38,6 +35,7 @@ from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
 from .dynamics import platform_wrench as _platform_wrench
 from .forward_kinematics import elastic_cable_state, elastic_frozen, secant_stiffness
+from .friction import friction_platform_force
 from .kinematics import cable_lengths as _cable_lengths
 from .kinematics import inverse_kinematics as _inverse_kinematics
 from .kinematics import measured_wrench as _measured_wrench
@@ -46,7 +44,7 @@ from .robot_data import RobotData, robot_data, vector
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
-           "friction_jit", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
+           "friction_platform_force", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
@@ -118,17 +116,6 @@ def widened_saturation(params, f, f_min, f_max):
     return sat
 
 
-@functools.cache
-def _njit(fn):
-    return numba.njit(cache=True)(fn)
-
-
-def friction_jit():
-    """The ``jit`` argument for :class:`cdpr_control.friction.PulleyFriction`: numba (disk-cached,
-    one dispatcher per function and process) when ENABLED, else None (numpy)."""
-    return _njit if ENABLED else None
-
-
 _warm = {"robot_free": False, "robot": False}
 
 
@@ -162,5 +149,5 @@ def warm_up(robot=None) -> None:
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
                    d.l_0, d.k0, d.k1, d.k2, 1e-9, 30, np.empty(6))
-    PulleyFriction.from_robot(robot, ik.q, jit=_njit).platform_force(f, vector(ik.q), np.zeros(robot.m), ik.beta)
+    friction_platform_force(PulleyFriction.from_robot(robot, ik.q), f, vector(ik.q), np.zeros(robot.m), ik.beta)
     _warm["robot"] = True
