@@ -14,7 +14,7 @@ from cdpr_control.cable_force_control import CFCParams, widened_saturation
 from cdpr_control.control_loop import ControlLoop
 from cdpr_control.forward_kinematics import CONVERGED, NON_FINITE, ForwardKinematics
 from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
-from cdpr_control.kernels import forward_kinematics as fk_kernels
+from cdpr_control.kernels import model as fk_kernels
 from cdpr_control.pi_control import PIController
 from cdpr_control.robot import load_robot
 

@@ -32,7 +32,7 @@ CONVERGED = "step"  # the (nearly undamped) LM step fell below xtol
 MAX_ITERATIONS = "max_iterations"  # iteration budget used up
 STALLED = "stalled"  # damping grew past its limit without reducing the cost
 NON_FINITE = "non_finite"  # the model gave NaN/inf at the start pose (e.g. beyond cable range)
-# by the termination codes of cdpr_control.kernels.forward_kinematics
+# by the termination codes of cdpr_control.kernels.model.elastic_frozen
 _TERMINATIONS = (CONVERGED, MAX_ITERATIONS, STALLED, NON_FINITE)
 
 # Marquardt damping, relative to diag(J^T J): warm starts are nearly Gauss-Newton

@@ -26,19 +26,19 @@ import os
 
 import numpy as np
 
-# the numpy references, under names that the submodules of this package (kernels.kinematics, ...)
-# do not shadow
+# the numpy references, under names that the submodules of this package (kernels.friction) do not
+# shadow
 from .. import cable as np_cable
 from .. import dynamics as np_dynamics
 from .. import kinematics as np_kinematics
 from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
-from .dynamics import platform_wrench as _platform_wrench
-from .forward_kinematics import elastic_cable_state, elastic_frozen, secant_stiffness
 from .friction import friction_platform_force
-from .kinematics import cable_lengths as _cable_lengths
-from .kinematics import inverse_kinematics as _inverse_kinematics
-from .kinematics import measured_wrench as _measured_wrench
+from .model import cable_lengths as _cable_lengths
+from .model import elastic_cable_state, elastic_frozen, secant_stiffness
+from .model import inverse_kinematics as _inverse_kinematics
+from .model import measured_wrench as _measured_wrench
+from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
