@@ -101,7 +101,7 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     """Compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output); the
     caller checks ENABLED (PIController.update). Scalar limits u_neg, u_pos apply to every channel."""
     n = e.shape[0]
-    if np.ndim(u_neg) == 0 or np.ndim(u_pos) == 0:
+    if not (type(u_neg) is np.ndarray and u_neg.ndim and type(u_pos) is np.ndarray and u_pos.ndim):
         u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
     out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
     _pi_update(vector(e), K_p, T_i, dt, vector(integrator), vector(u_neg), vector(u_pos), *out)
@@ -110,7 +110,8 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
 
 def widened_saturation(params, f, f_min, f_max):
     """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
-    sat = np.empty(np.shape(f)), np.empty(np.shape(f))
+    m = len(f)
+    sat = np.empty(m), np.empty(m)
     widened_saturation_kernel(vector(f), vector(f_min), vector(f_max), float(params.F_sat_n),
                               float(params.F_sat_p), float(params.widen_band), float(params.widen_factor), *sat)
     return sat
