@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import cable
+from . import cable, kernels
 from .filters import LowPass
 from .pi_control import PIController
 
@@ -107,7 +107,8 @@ class CableForceController:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
-        sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
+        saturation = kernels.widened_saturation if kernels.ENABLED else widened_saturation
+        sat_n, sat_p = saturation(self.params, f_fb, f_min, f_max)
         u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
         self.f_out = f_d + u                                        # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
@@ -148,7 +149,7 @@ class CableForceControl:
     def _stiffness(self, l_t):
         if self.params.stiffness_model == "linear":
             return self.robot.cable.k_spec_nominal / l_t                       # (2.15)
-        return lambda f_out: cable.stiffness(self.robot, np.maximum(f_out, 0.0), l_t)   # (2.17)
+        return lambda f_out: kernels.cable_stiffness(self.robot, np.maximum(f_out, 0.0), l_t)   # (2.17)
 
     def _elongation(self, f, l_t) -> np.ndarray:
         k_l = self._stiffness(l_t)

@@ -12,12 +12,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import kernels
 from .cable_force_control import CableForceControl, CFCParams
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
 from .joint_command import JointCommand
-from .kinematics import inverse_kinematics
 from .ospc import OperationalSpacePositionController, OSPCParams
 from .safety import SafetyConfig, SafetyMonitor
 
@@ -67,7 +67,7 @@ class ControlLoop:
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta)
-        ik_d = inverse_kinematics(robot, x_d)          # once per period, shared by three stages
+        ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)

@@ -12,10 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import platform_wrench
+from . import kernels
 from .filters import LowPass
 from .force_distribution import BACKENDS, METHODS, BorderPolicy, DistributionResult, ForceDistributor
-from .kinematics import inverse_kinematics
 from .wrench_setpoint import WrenchSetpoint
 
 
@@ -64,6 +63,7 @@ class ForceSetpoint:
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
         self.set_params(params or ForceSetpointParams())
+        kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
 
     def set_params(self, p: ForceSetpointParams) -> None:
         p.validate(self.robot.m)
@@ -119,7 +119,7 @@ class ForceSetpoint:
         """
         if self.f_ref_override is None:
             self._ramp_level()
-        w_dyn = platform_wrench(self.robot, x_d, xdot_d, xddot_d)              # (2.33), A^T f = -w
+        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and np.all(np.isfinite(w)):
@@ -128,5 +128,5 @@ class ForceSetpoint:
         else:
             self.w_d = w_dyn                                                  # (3.1)
         if AT is None:
-            AT = inverse_kinematics(self.robot, x_d).AT
+            AT = kernels.inverse_kinematics(self.robot, x_d).AT
         return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)

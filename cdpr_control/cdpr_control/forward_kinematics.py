@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dposv
 
-from . import cable
+from . import cable, kernels
 from .dynamics import gravity_wrench
 from .kinematics import inverse_kinematics, kardan_rate_matrix, rotation_matrix, skew
 from .stiffness import operational_stiffness
@@ -32,6 +32,8 @@ CONVERGED = "step"  # the (nearly undamped) LM step fell below xtol
 MAX_ITERATIONS = "max_iterations"  # iteration budget used up
 STALLED = "stalled"  # damping grew past its limit without reducing the cost
 NON_FINITE = "non_finite"  # the model gave NaN/inf at the start pose (e.g. beyond cable range)
+# by the termination codes of cdpr_control.kernels.model.elastic_frozen
+_TERMINATIONS = (CONVERGED, MAX_ITERATIONS, STALLED, NON_FINITE)
 
 # Marquardt damping, relative to diag(J^T J): warm starts are nearly Gauss-Newton
 _LAMBDA_START = 1e-6
@@ -160,6 +162,8 @@ class ForwardKinematics:
         theta = np.asarray(theta, dtype=float)
         if dq0 is not None:
             theta = theta - dq0
+        if kernels.ENABLED and pulleys == "frozen":
+            return self._elastic_frozen_compiled(theta, f, x_d, ik_d)
         dq = cable.elongation_from_force_and_winch_length(robot, f, theta)
         q_hat = theta + dq
         k_l = cable.stiffness(robot, f, cable.total_free_length(robot, q_hat))
@@ -182,6 +186,18 @@ class ForwardKinematics:
         return self._solve(residual, x_d, first)
 
     # --- internals ----------------------------------------------------------------------------
+
+    def _elastic_frozen_compiled(self, theta, f, x_d, ik_d) -> FKResult:
+        """elastic(pulleys='frozen') as one compiled call (cdpr_control.kernels), same numbers."""
+        robot = self.robot
+        d = kernels.robot_data(robot)
+        if ik_d is None:
+            ik_d = kernels.inverse_kinematics(robot, x_d)
+        v, x = kernels.vector, np.empty(6)
+        code, iterations, norm = kernels.elastic_frozen(
+            v(x_d), v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta), d.b, d.r_p, v(theta), v(f), d.l_0,
+            d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
+        return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
 
     def _jacobian_T(self, AT, x, k_l):
         """(dPsi/dx)^T (6, m) of Psi = k_l (IK(x) - .): dq/dx = -A blockdiag(I, H(phi))."""
@@ -266,6 +282,7 @@ class PoseEstimator:
         self.dq_0: np.ndarray | None = None
         self.x: np.ndarray | None = None
         self.result: FKResult | None = None
+        kernels.warm_up(robot)               # the compiled FK loaded now, not in the first period
 
     def update(self, theta, f, x_d, ik_d=None) -> tuple[np.ndarray, np.ndarray]:
         """-> (x, w): the pose estimate and the wrench of the measured forces about its origin.
@@ -278,4 +295,4 @@ class PoseEstimator:
         if self.result.converged:
             self.x = self.result.x
         x = self.x if self.x is not None else np.asarray(x_d, dtype=float)
-        return x, -inverse_kinematics(self.robot, x).AT @ f                  # (2.11)
+        return x, kernels.measured_wrench(self.robot, x, f)                  # (2.11)

@@ -93,13 +93,16 @@ class PulleySeries:
         self._beta_key = None
         self._beta_seen = None
 
+    @property
+    def inner(self) -> tuple[np.ndarray, np.ndarray]:
+        """alpha, gamma (3, m) of the inner pulleys P2 .. P_np-1 alone, rows s = -1, 0, 1."""
+        return self._alpha_in, self._gamma_in
+
     def tables(self, beta_last) -> tuple[np.ndarray, np.ndarray]:
         """alpha, gamma (3, m) for s = -1, 0, 1 (rows); recomputed only when beta_last changes."""
         if beta_last is not self._beta_seen and (self._beta_key is None or not (self._beta_key == beta_last).all()):
-            smk = np.array([-1.0, 0.0, 1.0])[:, None] * self.mu * wrap_factor(beta_last)
-            a = np.where(self.has_last, (2.0 + smk) / (2.0 - smk), 1.0)
-            b = np.where(self.has_last, 2.0 * self.F_pv / (2.0 - smk), 0.0)
-            self._alpha, self._gamma = a * self._alpha_in, a * self._gamma_in + b
+            self._alpha, self._gamma = last_pulley_tables(_floats(beta_last), self.mu, self.F_pv, self.has_last,
+                                                          self._alpha_in, self._gamma_in)
             self._beta_key = np.array(beta_last, dtype=float)
         # the same read-only array again (the simulator's frozen wrap angles): no comparison needed
         self._beta_seen = beta_last if isinstance(beta_last, np.ndarray) and not beta_last.flags.writeable else None
@@ -122,6 +125,17 @@ class PulleySeries:
         s = np.sign(thetadot) if s is None else s
         alpha, gamma = self.gains(s, beta_last)
         return (F_np - gamma * thetadot) / alpha
+
+
+def last_pulley_tables(beta_last, mu, F_pv, has_last, alpha_in, gamma_in):
+    """alpha, gamma (3, m) of PulleySeries.tables: the inner pulleys' maps alpha_in, gamma_in (3, m)
+    followed by the swivelling pulley P_np (3.35) of wrap angle beta_last (m,), for s = -1, 0, 1.
+    In the array subset numba compiles (cdpr_control.kernels runs it compiled)."""
+    k = np.sqrt(2.0 * (1.0 - np.cos(beta_last)))         # wrap_factor (3.33), inlined for numba
+    smk = np.array([-1.0, 0.0, 1.0]).reshape(3, 1) * (mu * k)
+    a = np.where(has_last, (2.0 + smk) / (2.0 - smk), 1.0)
+    b = np.where(has_last, 2.0 * F_pv / (2.0 - smk), 0.0)
+    return a * alpha_in, a * gamma_in + b
 
 
 # rows of the Dahl state (5, m)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import kernels
 from .friction import PulleyFriction, winch_force_from_sensor
 
 
@@ -45,6 +46,7 @@ class FrictionCompensation:
         self.robot = robot
         self.dt = dt
         self.set_params(params or FrictionCompensationParams())
+        kernels.warm_up(robot)               # the compiled friction loaded now, not in the first period
 
     def set_params(self, params: FrictionCompensationParams) -> None:
         self.params = params.resolved(self.robot)
@@ -62,6 +64,9 @@ class FrictionCompensation:
             fr, p = self.robot.friction, self.params
             self.model = PulleyFriction(p.mu, p.sigma, p.F_pv, fr.n_pulleys, fr.beta_inner,
                                         self.robot.sensor.beta_1, theta)
-        F_D = self.model.platform_force(F_s, theta, thetadot, beta) - f_w     # (3.43)
+        if kernels.ENABLED:
+            F_D = kernels.friction_platform_force(self.model, f_w, theta, thetadot, beta) - f_w   # (3.43)
+        else:
+            F_D = self.model.platform_force(F_s, theta, thetadot, beta) - f_w     # (3.43)
         self.delayed.append(F_D)
         return f_w + self.delayed[0]                                           # (3.44), shifted

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import kernels
+
 
 class PIController:
     """PI per channel: ``u = clip(K_p e + I, -u_neg, u_pos)``, ``I += K_p dt / T_i e``.
@@ -28,6 +30,7 @@ class PIController:
         self.integrator = np.zeros(n)
         self.saturated = np.zeros(n, dtype=bool)
         self.output = np.zeros(n)
+        kernels.warm_up()                    # the compiled PI loaded now, not in the first period
 
     def set_gains(self, K_p, T_i) -> None:
         K_p = np.broadcast_to(np.asarray(K_p, dtype=float), (self.n,)).copy()
@@ -51,6 +54,11 @@ class PIController:
 
     def update(self, e: np.ndarray, u_neg=None, u_pos=None) -> np.ndarray:
         """One control period for the error ``e``; optional per-call limits (e.g. widened ones)."""
+        if kernels.ENABLED:
+            self.integrator, self.saturated, self.output = kernels.pi_update(
+                np.asarray(e, dtype=float), self.K_p, self.T_i, self.dt, self.integrator,
+                self.u_neg if u_neg is None else u_neg, self.u_pos if u_pos is None else u_pos)
+            return self.output
         lo = -(self.u_neg if u_neg is None else u_neg)
         hi = self.u_pos if u_pos is None else u_pos
         p = self.K_p * e

@@ -1,0 +1,154 @@
+"""Compiled per-period numerics of the control loop (numba, cached on disk).
+
+The controller's stages (friction compensation, forward kinematics, force set-point, CFC, OSPC,
+joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cost mostly call
+overhead. This package holds the numeric cores of one period compiled with numba: the inverse
+kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
+(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44) and the PI
+arithmetic (3.16)/(3.19). The control flow and the state stay in the stage classes, which call the
+functions below at their call sites.
+
+The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_control) stay the readable
+reference: each function below is the same computation, and the tests compare the two on random
+poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the environment variable
+``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to check a suspicion
+against it; :func:`numpy_reference` switches it off for a block.
+
+Compiled code is cached in ``__pycache__`` (``cache=True``): the first use on a machine (or after an
+edit of a kernel's source) compiles for some tens of seconds, later processes load the cache in
+about a second; :func:`warm_up` runs each kernel once so that a process pays that before its first
+period, not in it. See docs/kernels.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+
+import numpy as np
+
+# the numpy references, under names that the submodules of this package (kernels.friction) do not
+# shadow
+from .. import cable as np_cable
+from .. import dynamics as np_dynamics
+from .. import kinematics as np_kinematics
+from .control import pi_update as _pi_update
+from .control import widened_saturation_kernel
+from .friction import friction_platform_force
+from .model import cable_lengths as _cable_lengths
+from .model import elastic_cable_state, elastic_frozen, secant_stiffness
+from .model import inverse_kinematics as _inverse_kinematics
+from .model import measured_wrench as _measured_wrench
+from .model import platform_wrench as _platform_wrench
+from .robot_data import RobotData, robot_data, vector
+
+ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
+
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
+           "friction_platform_force", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
+           "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
+
+
+@contextlib.contextmanager
+def numpy_reference():
+    """Run the block on the numpy reference implementations (ENABLED False), then restore."""
+    global ENABLED
+    before, ENABLED = ENABLED, False
+    try:
+        yield
+    finally:
+        ENABLED = before
+
+
+def inverse_kinematics(robot, x) -> np_kinematics.InverseKinematics:
+    """kinematics.inverse_kinematics of one pose x (6,) with the robot's pulley model."""
+    if ENABLED:
+        return _inverse_kinematics(robot, x)
+    return np_kinematics.inverse_kinematics(robot, x)
+
+
+def cable_lengths(robot, x) -> np.ndarray:
+    """q (m,) of the inverse kinematics of one pose x (6,), (2.7)."""
+    if ENABLED:
+        return _cable_lengths(robot, x)
+    return np_kinematics.inverse_kinematics(robot, x).q
+
+
+def measured_wrench(robot, x, f) -> np.ndarray:
+    """w = -A^T(x) f (2.11): the wrench that the cable forces f (m,) balance at pose x (6,)."""
+    if ENABLED:
+        return _measured_wrench(robot, x, f)
+    return -np_kinematics.inverse_kinematics(robot, x).AT @ f
+
+
+def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
+    """dynamics.platform_wrench of one pose with twist xdot and acceleration xddot (6,)."""
+    if ENABLED:
+        return _platform_wrench(robot, x, xdot, xddot)
+    return np_dynamics.platform_wrench(robot, x, xdot, xddot)
+
+
+def cable_stiffness(robot, f, l_t) -> np.ndarray:
+    """cable.stiffness: the secant stiffness k_spec(f) / l_t (2.15) of forces f and lengths l_t (m,)."""
+    if ENABLED:
+        d = robot_data(robot)
+        k = np.empty(np.shape(f))
+        secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2, k)
+        return k
+    return np_cable.stiffness(robot, f, l_t)
+
+
+def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
+    """Compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output); the
+    caller checks ENABLED (PIController.update). Scalar limits u_neg, u_pos apply to every channel."""
+    n = e.shape[0]
+    if not (type(u_neg) is np.ndarray and u_neg.ndim and type(u_pos) is np.ndarray and u_pos.ndim):
+        u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
+    out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
+    _pi_update(vector(e), K_p, T_i, dt, vector(integrator), vector(u_neg), vector(u_pos), *out)
+    return out
+
+
+def widened_saturation(params, f, f_min, f_max):
+    """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
+    m = len(f)
+    sat = np.empty(m), np.empty(m)
+    widened_saturation_kernel(vector(f), vector(f_min), vector(f_max), float(params.F_sat_n),
+                              float(params.F_sat_p), float(params.widen_band), float(params.widen_factor), *sat)
+    return sat
+
+
+_warm = {"robot_free": False, "robot": False}
+
+
+def warm_up(robot=None) -> None:
+    """Load (or, the first time on a machine, compile) the kernels with the argument types the
+    control loop passes (see :func:`.robot_data.vector`), so that the first period does not.
+
+    The stage classes call it when they are built: without a robot the robot-free kernels (PI,
+    widened saturation, cable stiffness), with one all of them. Once per process (the compiled
+    code does not depend on the robot's values); nothing when ENABLED is False.
+    """
+    if not ENABLED:
+        return
+    f, ones = np.full(8, 100.0), np.ones(6)
+    if not _warm["robot_free"]:
+        from ..cable_force_control import CFCParams
+
+        pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
+        widened_saturation(CFCParams(), f, f, f)
+        secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
+        _warm["robot_free"] = True
+    if robot is None or _warm["robot"]:
+        return
+    from ..friction import PulleyFriction
+
+    d = robot_data(robot)
+    x, zero, f = vector(robot.home), np.zeros(6), np.full(robot.m, float(np.mean(robot.cable.f_min)))
+    ik = _inverse_kinematics(robot, x)
+    _cable_lengths(robot, x)
+    _measured_wrench(robot, x, f)
+    _platform_wrench(robot, x, zero, zero)
+    elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
+                   d.l_0, d.k0, d.k1, d.k2, 1e-9, 30, np.empty(6))
+    friction_platform_force(PulleyFriction.from_robot(robot, ik.q), f, vector(ik.q), np.zeros(robot.m), ik.beta)
+    _warm["robot"] = True
