@@ -82,3 +82,13 @@ if ! fresh project "$h"; then
     || { tail -n 30 "$ROOT/build/project-install.log"; die "installing the project failed"; }
   stamp project "$h"
 fi
+
+# the controller's numba kernels compile once per machine into their __pycache__ (then 1-2 s a
+# process); done here so that tests and nodes started in parallel do not all compile at once
+h=$(hash_of cdpr_control/cdpr_control/kernels/*.py)
+if ! fresh kernels "$h"; then
+  say "compiling the controller kernels (first run: about a minute)"
+  "$PY" -c "from cdpr_control import kernels; from cdpr_control.robot import load_robot; kernels.warm_up(load_robot('ipanema3_mini'))" \
+    || die "the compiled controller kernels do not load"
+  stamp kernels "$h"
+fi
