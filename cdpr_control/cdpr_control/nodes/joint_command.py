@@ -25,15 +25,16 @@ from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync, stamp_ns
 
+_S = SafetyConfig()   # the defaults live in the dataclass (one source of truth)
 PARAMS = [
     ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + x_OSPC) - Δq_CFC; ik_only: θ_d = IK(x_d) (2.3.2)",
               choices=("force_control", "ik_only")),
     ParamSpec("v_max", 0.0, "rate limit of θ_d [m/s]; 0 = the robot's drive v_max", range=(0.0, 100.0)),
-    ParamSpec("force_tolerance", 0.0, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
-    ParamSpec("hold_on_force_limit", False, "a force-limit fault holds θ_d (else it is only reported)"),
-    ParamSpec("max_position_lag", 0.05, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
-    ParamSpec("max_orientation_lag", 0.1, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
-    ParamSpec("stale_timeout", 0.05, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("force_tolerance", _S.force_tolerance, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
+    ParamSpec("hold_on_force_limit", _S.hold_on_force_limit, "a force-limit fault holds θ_d (else it is only reported)"),
+    ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
+    ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
+    ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
 ]
 
 

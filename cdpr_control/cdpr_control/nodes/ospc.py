@@ -18,11 +18,12 @@ from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
 
+_D = OSPCParams()     # the defaults live in the dataclass (one source of truth)
 PARAMS = [
     ParamSpec("enabled", True, "operational-space position control on; off = x_OSPC held at 0"),
-    ParamSpec("K_p", [0.07] * 6, "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
-    ParamSpec("T_i", [0.18] * 6, "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
-    ParamSpec("x_sat", [0.02, 0.02, 0.02, 0.02, 0.02, 0.02], "output saturation per DOF [m, m, m, rad, rad, rad]"),
+    ParamSpec("K_p", _D.K_p.tolist(), "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
+    ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
+    ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
 ]
 
 
