@@ -11,7 +11,9 @@ from cdpr_sim.contacts import ContactMaterial, Cylinder, Plane, PlatformShape
 from cdpr_sim.simulator import SimConfig, Simulator, home_calibration_offset, pretension_lengths
 from cdpr_sim.startup import startup_forces, startup_state
 
-QUIET = dict(noise_std=0.0, encoder_counts=0)
+# These tests check the simulator against the model equations with the robot file's parameters:
+# the perfect-model plant (the default plant differs from the robot file, cdpr_sim.plant).
+QUIET = dict(noise_std=0.0, encoder_counts=0, plant="nominal")
 
 
 def _hold(sim, theta_d, n):

@@ -162,9 +162,9 @@ def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps
     from cdpr_sim.startup import startup_state
 
     loaded = robot if payload is None else robot.with_payload(*payload)
-    x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True)
-    sim = Simulator(robot, SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps), x0=x0, theta0=theta0,
-                    encoder_offset=offset)
+    config = SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps)
+    x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True, config=config)
+    sim = Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset)
     if payload is not None:
         sim.set_payload(*payload)
     return sim
