@@ -39,3 +39,28 @@ def test_ipanema3_needs_tension_for_force_control_without_ospc():
         ControlLoop(robot, 1e-3, ControlLoopParams(ospc_enabled=False))
     medium = ControlLoopParams(ospc_enabled=False, force=ForceSetpointParams(tension_level=0.5))
     ControlLoop(robot, 1e-3, medium)
+
+
+def test_ospc_node_states_the_precondition_when_disabled():
+    """The node cannot see the joint command's mode: disabling the OSPC where K_g is indefinite
+    is warned about on /diagnostics with the reason (the node publishes self.precondition)."""
+    from required import import_or_skip
+
+    rclpy = import_or_skip("rclpy")
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from cdpr_control.nodes.ospc import OSPCNode
+
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = OSPCNode(context=context, parameter_overrides=[Parameter("robot", value="ipanema3_mini")])
+        assert node.precondition is None
+        assert node.set_parameters([Parameter("enabled", value=False)])[0].successful
+        assert "positive definite geometric stiffness" in node.precondition
+        node.set_parameters([Parameter("enabled", value=True)])
+        assert node.precondition is None
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

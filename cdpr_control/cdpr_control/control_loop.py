@@ -25,7 +25,7 @@ from .joint_command import JointCommand
 from .kinematics import inverse_kinematics
 from .ospc import OperationalSpacePositionController, OSPCParams
 from .safety import SafetyConfig, SafetyMonitor
-from .stability import check_force_control
+from .stability import check_force_control, planned_home_forces
 
 
 @dataclass
@@ -58,20 +58,6 @@ class LoopState:
     fk_converged: bool
 
 
-def _home_forces(robot, p: ControlLoopParams) -> np.ndarray:
-    """The planned forces at home: the distribution's minimal-tension reference (3.27) at the
-    tension level (the precondition is checked for the forces the loop will command there)."""
-    from .dynamics import gravity_wrench
-    from .force_distribution import ForceDistributor
-
-    c = robot.cable
-    f_min = c.f_min if p.force.f_min is None else np.asarray(p.force.f_min, dtype=float)
-    f_max = c.f_max if p.force.f_max is None else np.asarray(p.force.f_max, dtype=float)
-    d = ForceDistributor(robot.m, f_min, f_max, method=p.force.method, backend=p.force.backend)
-    d.set_reference(f_min + p.force.tension_level * (f_max - f_min))
-    return d.solve(inverse_kinematics(robot, robot.home).AT, gravity_wrench(robot, robot.home), 1e-3).f
-
-
 class ControlLoop:
     def __init__(self, robot, dt: float, params: ControlLoopParams | None = None):
         p = params or ControlLoopParams()
@@ -87,7 +73,7 @@ class ControlLoop:
         self.command = JointCommand(robot, dt)
         force_control = p.mode == "force_control"
         if force_control:
-            reason = check_force_control(robot, robot.home, _home_forces(robot, p), p.ospc_enabled)
+            reason = check_force_control(robot, robot.home, planned_home_forces(robot, p.force), p.ospc_enabled)
             if reason:
                 raise ValueError(reason)
         self.blend_cfc = Blend(p.transfer_time, dt, force_control and p.cfc_enabled)

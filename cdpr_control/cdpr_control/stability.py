@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .dynamics import gravity_wrench
 from .kinematics import inverse_kinematics
 from .stiffness import geometric_stiffness
 
@@ -31,3 +32,18 @@ def check_force_control(robot, x, f, ospc_enabled: bool) -> str | None:
     return (f"cable force control without OSPC needs a positive definite geometric stiffness K_g "
             f"(section 3.1.3); at x = {np.round(np.asarray(x, dtype=float), 3).tolist()} its symmetric part has "
             f"the eigenvalue {lam:.3g} <= 0: enable the OSPC")
+
+
+def planned_home_forces(robot, force_params=None) -> np.ndarray:
+    """The forces the distribution (3.27) plans at home for ``force_params`` (a ForceSetpointParams;
+    None: its defaults, minimal tension with the robot file's limits)."""
+    from .force_distribution import ForceDistributor
+    from .force_setpoint import ForceSetpointParams
+
+    p = force_params or ForceSetpointParams()
+    c = robot.cable
+    f_min = c.f_min if p.f_min is None else np.asarray(p.f_min, dtype=float)
+    f_max = c.f_max if p.f_max is None else np.asarray(p.f_max, dtype=float)
+    d = ForceDistributor(robot.m, f_min, f_max, method=p.method, backend=p.backend)
+    d.set_reference(f_min + p.tension_level * (f_max - f_min))
+    return d.solve(inverse_kinematics(robot, robot.home).AT, gravity_wrench(robot, robot.home), 1e-3).f

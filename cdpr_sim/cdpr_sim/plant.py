@@ -59,7 +59,7 @@ class Plant:
             "kind": self.kind, "seed": self.seed,
             "max |a - a_nom| [mm]": 1e3 * float(np.abs(p.a - n.a).max()),
             "max |b - b_nom| [mm]": 1e3 * float(np.abs(p.b - n.b).max()),
-            "k0 / k0_nom": p.cable.k0 / n.cable.k0,
+            "k0 / k0_nom": float(p.cable.k0 / n.cable.k0),
             "max |mu / mu_nom - 1|": rel(p.friction.mu, n.friction.mu),
             "drive T_d [ms]": 1e3 * p.drive.T_d, "nominal T_d [ms]": 1e3 * n.drive.T_d,
             "max |gamma_1 - 1|": float(np.abs(self.gamma_1 / n.sensor.gamma_1 - 1.0).max()),

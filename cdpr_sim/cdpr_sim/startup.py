@@ -11,6 +11,7 @@ import numpy as np
 
 from cdpr_control.dynamics import gravity_wrench
 from cdpr_control.force_distribution.qp import quadratic_program
+from cdpr_control.friction import sensor_from_winch_force, winch_force_from_sensor
 from cdpr_control.kinematics import inverse_kinematics
 
 from .simulator import SimConfig, home_calibration_offset, plant_of, pretension_lengths
@@ -50,3 +51,15 @@ def startup_state(robot, x0, level: float, calibrate_home: bool, config: SimConf
         return x0, theta0, home_calibration_offset(robot, startup_forces(robot, robot.home, level))
     theta_home = pretension_lengths(true, robot.home, startup_forces(true, robot.home, level))
     return x0, theta0, inverse_kinematics(robot, robot.home).q - theta_home
+
+
+def calibration_forces(sim, level: float) -> np.ndarray:
+    """The platform forces (m,) the controller recorded when the encoders were set at home
+    (section 2.3.2): the plant's QP forces of ``level`` at home as its sensors read them (true
+    sensor line, the robot file's calibration, no noise: an average) and as the friction-free
+    sensor pulley (3.36) turns them into platform forces at rest. For
+    ``ControlLoop.set_home_calibration``."""
+    true = startup_forces(sim.robot, sim.nominal.home, level)
+    beta_1 = sim.nominal.sensor.beta_1
+    reading = sim.sensor.line(sensor_from_winch_force(true, sim.robot.sensor.beta_1))
+    return winch_force_from_sensor(reading, beta_1)

@@ -5,8 +5,9 @@ period), and for safety ``winch/state``, ``cable_forces`` and ``forward_kinemati
 publishes ``winch/command`` (sensor_msgs/JointState, position = θ_d [m]) and ``/diagnostics``.
 
 ``mode`` switches between the thesis's force control and the IK-only reference control
-(section 2.3.2) at run time; the command is rate-limited to the drives' v_max, so the switch is
-smooth. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
+(section 2.3.2) at run time; x_OSPC and Δq_CFC are blended in and out over ``transfer_time``
+(also when a controller reports itself enabled or disabled), and the command is rate-limited to
+the drives' v_max. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
 input, and optionally force limits) hold the last safe θ_d; the command is never NaN.
 """
 from __future__ import annotations
@@ -16,6 +17,8 @@ from cdpr_msgs.msg import CableForces, ControllerState, ForwardKinematicsDiagnos
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
+from cdpr_control.bumpless import Blend
+from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.joint_command import JointCommand
 from cdpr_control.safety import SafetyConfig, SafetyMonitor
 
@@ -35,6 +38,9 @@ PARAMS = [
     ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
     ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
     ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: x_OSPC and Δq_CFC are "
+              "blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
+              range=(0.0, 10.0)),
 ]
 
 
@@ -43,6 +49,7 @@ class JointCommandNode(CdprNode):
         super().__init__("joint_command", **kwargs)
         self.names = [f"cable_{i + 1}" for i in range(self.robot.m)]
         self.command = JointCommand(self.robot, self.dt)
+        self.blends = {"ospc": Blend(0.0, self.dt), "cfc": Blend(0.0, self.dt)}     # bumpless transfer
         self.monitor = SafetyMonitor()
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.latest: dict[str, object] = {}
@@ -73,6 +80,8 @@ class JointCommandNode(CdprNode):
     def _apply(self, v: dict) -> None:
         self.mode = v["mode"]
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
+        for blend in self.blends.values():
+            blend.set_transfer_time(v["transfer_time"])
         self.monitor = SafetyMonitor(self._safety(v))
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
@@ -85,10 +94,11 @@ class JointCommandNode(CdprNode):
         ospc, cfc = msgs["ospc"], msgs["cfc"]
         faults = self._faults(t_ns, ospc)
         hold = any(f.holds for f in faults)
-        if self.mode == "force_control":
-            theta_d = self.command.update(x_d, [np.asarray(ospc.output)], np.asarray(cfc.output), hold=hold)
-        else:
-            theta_d = self.command.update(x_d, hold=hold)
+        active = self.mode == "force_control"
+        s_ospc = self.blends["ospc"].update(active and ospc.enabled)
+        s_cfc = self.blends["cfc"].update(active and cfc.enabled)
+        theta_d = self.command.update(x_d, [s_ospc * np.asarray(ospc.output)], s_cfc * np.asarray(cfc.output),
+                                      hold=hold)             # weights 0: IK only (2.3.2)
         self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN
