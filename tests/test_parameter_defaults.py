@@ -12,7 +12,8 @@ from cdpr_control.ospc import OSPCParams
 from cdpr_control.safety import SafetyConfig
 
 import_or_skip("rclpy")
-from cdpr_control.nodes import cable_force_controller, joint_command, ospc  # noqa: E402
+from cdpr_control.nodes import cable_force_controller, forward_kinematics, joint_command, ospc  # noqa: E402
+from cdpr_control.forward_kinematics import PoseEstimator  # noqa: E402
 
 
 @pytest.mark.parametrize("node, module", [("cable_force_controller", cable_force_controller), ("ospc", ospc),
@@ -46,3 +47,11 @@ def test_control_loop_reads_the_robot_parameter_file(robot):
     assert p.safety.force_tolerance == file["joint_command"]["force_tolerance"]
     assert p.mode == file["joint_command"]["mode"] if "mode" in file["joint_command"] else p.mode == "force_control"
     assert control_loop_params(robot, mode="ik_only").mode == "ik_only"
+
+
+def test_forward_kinematics_node_defaults_are_the_estimator_defaults():
+    import inspect
+
+    defaults = {k: v.default for k, v in inspect.signature(PoseEstimator).parameters.items()}
+    for spec in forward_kinematics.PARAMS:
+        assert spec.default == defaults[spec.name], spec.name

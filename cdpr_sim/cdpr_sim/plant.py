@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from cdpr_control.robot import Robot, _frozen
+from cdpr_control.robot import Robot
 
 MISMATCH_FILE = Path(__file__).parent / "plants" / "mismatch.yaml"
 KINDS = ("mismatched", "nominal")
@@ -66,6 +66,13 @@ class Plant:
             "max |gamma_0| [N]": float(np.abs(self.gamma_0 - n.sensor.gamma_0).max()),
             "settlement ratio": self.settlement_ratio,
         }
+
+
+def _frozen(x) -> np.ndarray:
+    """A read-only float array, as the robot file's arrays are."""
+    x = np.array(x, dtype=float)
+    x.setflags(write=False)
+    return x
 
 
 def mismatch_bounds(robot_name: str, file: Path | str = MISMATCH_FILE) -> dict:
