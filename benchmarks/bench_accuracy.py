@@ -32,6 +32,7 @@ from cdpr_tools.identify import drive, experiments, friction, mass
 
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "accuracy.json"
 PLANTS = ("mismatched", "nominal")
+MOVE, HOLD = 4.0, 10.0      # s: cosine move from home, then held (the OSPC's integral time is about 2.6 s)
 # table 4.3 (x, y, z) [m]; the ones outside the robot file's workspace box are skipped
 TABLE_4_3 = [(x, y, z) for x in (-1.0, -3.0, -5.0) for (y, z) in ((0.0, 2.0), (-3.0, 1.5), (-4.0, 0.0),
                                                                     (-2.0, 0.0), (0.0, 0.0))]
@@ -61,7 +62,7 @@ def static_accuracy(quick: bool) -> dict:
             pos, ori = [], []
             for p in points:
                 x_d = np.r_[p, robot.home[3:]]
-                r = run(robot, _move(robot.home, x_d, 4.0), 7.0, params, tension_level=level,
+                r = run(robot, _move(robot.home, x_d, MOVE), MOVE + HOLD, params, tension_level=level,
                         config=SimConfig(plant=plant))
                 pos.append(1e3 * float(np.linalg.norm(r.x[-1, :3] - x_d[:3])))
                 ori.append(float(np.rad2deg(np.abs(r.x[-1, 3:] - x_d[3:])).max()))
