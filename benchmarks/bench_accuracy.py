@@ -8,7 +8,7 @@ perfect model (cdpr_sim.plant), for the figures the thesis reports on its robots
 * identification accuracy from simulated bags (section 3.7.2, 3.3.1, 4.1): the fits against the
   plant's parameters and against the robot file's.
 
-Writes bench/accuracy.json. Run: .venv/bin/python benchmarks/bench_accuracy.py [--quick]
+Writes bench/accuracy.json. Run: .venv/bin/python benchmarks/bench_accuracy.py [static] [cuboid] [identification] [--quick]
 """
 from __future__ import annotations
 
@@ -128,11 +128,19 @@ def identification(tmp: pathlib.Path) -> dict:
 
 
 def main(argv) -> None:
+    """Parts named on the command line (static, cuboid, identification; default all) are measured
+    and replace their entries in bench/accuracy.json; --quick takes two static points."""
     quick = "--quick" in argv
+    parts = [a for a in argv if not a.startswith("--")] or ["static", "cuboid", "identification"]
+    result = json.loads(OUT.read_text()) if OUT.exists() else {}
+    result["plants"] = {n: plant_of(load_robot(n), SimConfig()).summary() for n in ("ipanema3", "ipanema3_mini")}
     with tempfile.TemporaryDirectory() as tmp:
-        result = {"plants": {n: plant_of(load_robot(n), SimConfig()).summary() for n in ("ipanema3", "ipanema3_mini")},
-                  "static_accuracy_ipanema3": static_accuracy(quick), "cuboid_mini": cuboid(),
-                  "identification": identification(pathlib.Path(tmp))}
+        if "static" in parts:
+            result["static_accuracy_ipanema3"] = static_accuracy(quick)
+        if "cuboid" in parts:
+            result["cuboid_mini"] = cuboid()
+        if "identification" in parts:
+            result["identification"] = identification(pathlib.Path(tmp))
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(result, indent=1, default=float))
     print(f"wrote {OUT}")

@@ -165,9 +165,9 @@ def test_circle_trajectory_has_constant_speed_after_the_ramp():
 def test_stiffness_from_tension_steps(tmp_path, capsys):
     robot = load_robot("ipanema3_mini")
     true = _plant("ipanema3_mini")
-    # the perfect-model plant: this checks the fit of (2.16); on the mismatched plant the cables
-    # settle under the raised tension (section 4.1.3) and tension steps cannot tell settlement from
-    # elastic elongation (the plant's k0 is then missed by tens of percent)
+    # the perfect-model plant: this checks the fit of (2.16). On the mismatched plant the
+    # geometry errors (mm) are as large as the Mini's elongations and the fit misses the plant's k0
+    # by a factor 3 (docs/identify.md): the method needs the geometry identified first
     true = load_robot("ipanema3_mini")
     bag = experiments.record_stiffness_run(tmp_path / "stiffness", "ipanema3_mini", levels=(0.05, 0.5, 0.9),
                                            hold=0.35, ramp=0.2, seed=6, plant="nominal")

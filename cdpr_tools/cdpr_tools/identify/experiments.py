@@ -242,8 +242,8 @@ def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.
                          ramp: float = 0.3, seed: int = 1, level: float = 0.5, plant: str = "mismatched") -> Path:
     """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
     (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16).
-    plant: the simulator's plant (cdpr_sim.plant); on the mismatched one the cables settle under
-    the raised tension (section 4.1.3), which this experiment cannot tell from elastic elongation."""
+    plant: the simulator's plant (cdpr_sim.plant); on the mismatched one the geometry errors are
+    as large as the Mini's elongations and a fit of (2.16) at one pose misses k0 (docs/identify.md)."""
     from cdpr_sim.simulator import pretension_lengths
     from cdpr_sim.startup import startup_forces, startup_state
 
