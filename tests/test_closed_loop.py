@@ -13,6 +13,7 @@ from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.force_setpoint import ForceSetpointParams
 from cdpr_control.robot import load_robot
 from cdpr_sim.closed_loop import hold, run
+from cdpr_sim.simulator import SimConfig
 
 ROBOTS = {"ipanema3_mini": load_robot("ipanema3_mini"), "ipanema3": load_robot("ipanema3")}
 
@@ -53,13 +54,29 @@ CASES = [
 
 
 @pytest.mark.parametrize("name, offset, payload", CASES)
-def test_static_pose_error_with_force_control_below_1mm(name, offset, payload):
-    """From home (where the encoders were calibrated, 2.3.2) to the pose in 1.5 s, then held."""
+def test_static_pose_error_with_force_control_below_1mm_on_the_perfect_model(name, offset, payload):
+    """From home (where the encoders were calibrated, 2.3.2) to the pose in 1.5 s, then held. The
+    perfect-model plant: this checks that the loop's equations remove the elastic sag of an
+    unknown payload when the model is right (on a real robot geometry errors add to it)."""
+    robot = ROBOTS[name]
+    x_d = robot.home + np.r_[offset, np.zeros(3)]
+    r = run(robot, _move(robot.home, x_d, 1.5), 6.0, ControlLoopParams(), payload=payload,
+            config=SimConfig(plant="nominal"))
+    assert _pose_error_mm(r) <= 1.0
+    assert np.linalg.norm(np.rad2deg(r.x[-1, 3:] - x_d[3:])) < 0.1
+
+
+@pytest.mark.parametrize("name, offset, payload", CASES)
+def test_static_pose_error_with_force_control_on_the_mismatched_plant(name, offset, payload):
+    """The same on the default plant, whose geometry is off by up to 3 mm (Mini 2 mm), its sensors
+    by 1 % and its cables settle (cdpr_sim/plants/mismatch.yaml): the error is what the model
+    cannot see, a few millimetres (measured up to 4.8 mm, 0.12 deg; the thesis measured 50 mm and
+    2 deg on the real IPAnema 3, section 4.2.2)."""
     robot = ROBOTS[name]
     x_d = robot.home + np.r_[offset, np.zeros(3)]
     r = run(robot, _move(robot.home, x_d, 1.5), 6.0, ControlLoopParams(), payload=payload)
-    assert _pose_error_mm(r) <= 1.0
-    assert np.linalg.norm(np.rad2deg(r.x[-1, 3:] - x_d[3:])) < 0.1
+    assert _pose_error_mm(r) <= 10.0
+    assert np.linalg.norm(np.rad2deg(r.x[-1, 3:] - x_d[3:])) < 0.5
 
 
 def test_straight_line_to_the_border_section_4_2_3():
@@ -70,7 +87,8 @@ def test_straight_line_to_the_border_section_4_2_3():
     fc = run(robot, line, 3.0, ControlLoopParams(mode="force_control"))
     f_min, f_max = robot.cable.f_min, robot.cable.f_max
     assert ik.f.min() < f_min.min() - 2.0               # slack cable with the rigid model
-    assert fc.f.min() >= f_min.min() - 0.3 and fc.f.max() <= f_max.max()
+    # 0.6 N: the plant's force sensors read up to 0.28 N offset and 1 % gain off (mismatch.yaml)
+    assert fc.f.min() >= f_min.min() - 0.6 and fc.f.max() <= f_max.max()
     assert _pose_error_mm(fc) < 2.0
 
 

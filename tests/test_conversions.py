@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-pytest.importorskip("geometry_msgs")
+from required import import_or_skip  # noqa: E402  (a missing ROS fails in CI)
+
+import_or_skip("geometry_msgs")
 from cdpr_control.kinematics import rotation_matrix  # noqa: E402
 from cdpr_control.nodes.conversions import pose_from_msg, pose_to_msg  # noqa: E402
 

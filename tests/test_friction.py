@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from required import import_or_skip
 from cdpr_control.friction import (
     PulleyFriction,
     PulleySeries,
@@ -167,7 +168,7 @@ def test_sliding_friction_is_the_coulomb_viscous_series():
 
 def test_the_steps_compile_with_numba_and_agree_with_numpy():
     """The simulator runs the friction steps compiled (cdpr_sim.simulator.compiled): same results."""
-    pytest.importorskip("numba")
+    import_or_skip("numba")
     from cdpr_sim.simulator import compiled
 
     robot = load_robot("ipanema3")

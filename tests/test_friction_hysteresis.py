@@ -51,11 +51,11 @@ def simulate_crossing(robot, seed: int = 5) -> dict:
     from cdpr_sim.startup import startup_state
 
     x_d, evaluated = crossing_trajectory(robot.home)
-    x0, theta0, offset = startup_state(robot, robot.home, level=0.5, calibrate_home=True)
+    config = SimConfig(seed=seed, friction=True)               # the default, mismatched plant
+    x0, theta0, offset = startup_state(robot, robot.home, level=0.5, calibrate_home=True, config=config)
     keys = ("F_s", "theta", "thetadot", "x", "f")
     rec = {k: [] for k in keys}
-    with Simulator(robot, SimConfig(seed=seed, friction=True), x0=x0, theta0=theta0,
-                   encoder_offset=offset) as sim:
+    with Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset) as sim:
         for xk in x_d:
             out = sim.step(inverse_kinematics(robot, xk).q)   # encoders read IK{home} at home
             for k in keys:

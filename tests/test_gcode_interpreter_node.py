@@ -5,7 +5,8 @@ import time
 import numpy as np
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
+from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
+rclpy = import_or_skip("rclpy")
 from action_msgs.msg import GoalStatus  # noqa: E402
 from builtin_interfaces.msg import Time  # noqa: E402
 from cdpr_msgs.action import RunProgram  # noqa: E402

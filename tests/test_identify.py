@@ -1,4 +1,7 @@
-"""`cdpr identify` on simulator bags with known parameters (robot files): friction (3.45), drives (3.10), (5.11)."""
+"""`cdpr identify` on simulator bags: friction (3.45), drives (3.10), (5.11), mass, stiffness (2.16).
+
+The bags are recorded on the default, mismatched plant (cdpr_sim.plant): the fits must recover
+the plant's parameters, not the robot file's the controller starts from."""
 import numpy as np
 import pytest
 import yaml
@@ -6,7 +9,13 @@ import yaml
 from cdpr_control.robot import load_robot
 from cdpr_tools import cli
 from cdpr_tools.bag import BagReader
+from cdpr_sim.simulator import SimConfig, plant_of
 from cdpr_tools.identify import drive, experiments, friction, mass, stiffness
+
+
+def _plant(name):
+    """The simulated robot of the identification runs (they use the default plant and plant seed)."""
+    return plant_of(load_robot(name), SimConfig()).robot
 
 # friction_bag: the short identification run of conftest.py
 
@@ -35,7 +44,7 @@ def test_friction_fit_meets_tolerance_and_writes_parameter_file(friction_bag, tm
     p = doc["friction_compensation"]["ros__parameters"]
     assert set(p) == {"mu", "sigma", "F_pv"}
     assert all(len(p[k]) == robot.m and all(isinstance(v, float) for v in p[k]) for k in p)
-    fr = robot.friction
+    fr = _plant("ipanema3_mini").friction
     assert np.max(np.abs(np.array(p["mu"]) / fr.mu - 1.0)) < 0.10
     # not required by the issue, but the run excites them too
     assert np.max(np.abs(np.array(p["F_pv"]) / fr.F_pv - 1.0)) < 0.25
@@ -66,10 +75,11 @@ def test_friction_offset_epsilon_is_identified(friction_bag):
     """A calibration offset between sensor and reference shows up as epsilon (3.45), mu unaffected."""
     robot = load_robot("ipanema3_mini")
     data = friction.load_data(BagReader(friction_bag), robot)
+    plain = friction.fit_cable(robot, data, 4)         # epsilon: the plant's own sensor offset
     data.f_ref = data.f_ref - 0.3                      # the reference sensor reads 0.3 N low
     fit = friction.fit_cable(robot, data, 4)
-    assert fit.epsilon == pytest.approx(-0.3, abs=0.02)
-    assert fit.mu == pytest.approx(robot.friction.mu[4], rel=0.10)
+    assert fit.epsilon - plain.epsilon == pytest.approx(-0.3, abs=0.02)
+    assert fit.mu == pytest.approx(_plant("ipanema3_mini").friction.mu[4], rel=0.10)
     assert fit.rms_with < 0.5 * fit.rms_without
 
 
@@ -88,22 +98,22 @@ def test_drive_fit_meets_tolerance(tmp_path, robot_name, kind, capsys):
     bag = experiments.record_drive_sweep(tmp_path / "sweep", robot_name, cable=2, duration=1.5, f_end=60.0, seed=2)
     data, fit = drive.identify(BagReader(bag), kind)
     assert data.cables == [2]
-    d = robot.drive
+    d = _plant(robot_name).drive
     if kind == "pt1_deadtime":
         assert fit.params["T_1"] == pytest.approx(d.T_1, rel=0.10)
         assert fit.params["T_d"] == pytest.approx(d.T_d, rel=0.10)
     else:
         assert fit.params["T_w"] == pytest.approx(d.T_w, rel=0.10)
         assert fit.params["zeta"] == pytest.approx(d.zeta, rel=0.10)
-        assert fit.params["T_d"] < 0.1 * d.T_w
+        assert fit.params["T_d"] == pytest.approx(d.T_d, abs=0.1 * d.T_w)
     png = tmp_path / "drive.png"
     assert cli.main(["identify", "drive", str(bag), "--model", kind, "--plot", str(png)]) == 0
     assert kind in capsys.readouterr().out and png.stat().st_size > 10_000
 
 
 def test_drive_model_of_the_true_parameters_reproduces_the_encoder(tmp_path):
-    """The fit's forward model with the robot file's values matches the bag to the encoder resolution."""
-    robot = load_robot("ipanema3")
+    """The fit's forward model with the plant's values matches the bag to the encoder resolution."""
+    robot = _plant("ipanema3")
     bag = experiments.record_drive_sweep(tmp_path / "sweep", "ipanema3", duration=0.5, seed=2)
     data = drive.load_data(BagReader(bag))
     theta = drive.simulate("pt1_deadtime", {"T_1": robot.drive.T_1, "T_d": robot.drive.T_d}, data)
@@ -136,8 +146,10 @@ def test_mass_from_circle_run(tmp_path, capsys):
                                         revolutions=2, ramp=0.6)
     fit = mass.identify(BagReader(bag), robot)
     assert fit.frequency == pytest.approx(1.0, rel=1e-3)
-    assert fit.m_circle == pytest.approx(robot.platform.mass, rel=0.03)
-    assert fit.m_static == pytest.approx(robot.platform.mass, rel=0.03)
+    # 5 %: the plant's force sensors are off by up to 1 % in gain and 0.25 % of the range in offset
+    # (the thesis under-estimated a 128 kg load by 5.9 %, section 4.1.3)
+    assert fit.m_circle == pytest.approx(robot.platform.mass, rel=0.05)
+    assert fit.m_static == pytest.approx(robot.platform.mass, rel=0.05)
     assert cli.main(["identify", "mass", str(bag)]) == 0
     assert "(4.3)" in capsys.readouterr().out
 
@@ -152,9 +164,14 @@ def test_circle_trajectory_has_constant_speed_after_the_ramp():
 
 def test_stiffness_from_tension_steps(tmp_path, capsys):
     robot = load_robot("ipanema3_mini")
+    true = _plant("ipanema3_mini")
+    # the perfect-model plant: this checks the fit of (2.16). On the mismatched plant the
+    # geometry errors (mm) are as large as the Mini's elongations and the fit misses the plant's k0
+    # by a factor 3 (docs/identify.md): the method needs the geometry identified first
+    true = load_robot("ipanema3_mini")
     bag = experiments.record_stiffness_run(tmp_path / "stiffness", "ipanema3_mini", levels=(0.05, 0.5, 0.9),
-                                           hold=0.35, ramp=0.2, seed=6)
-    c = robot.cable
+                                           hold=0.35, ramp=0.2, seed=6, plant="nominal")
+    c = true.cable
     ref = stiffness.identify(BagReader(bag), robot, use_reference=True)       # exact forces: the model itself
     assert (ref.k0, ref.k1, ref.k2) == pytest.approx((c.k0, c.k1, c.k2), rel=0.01)
     fit = stiffness.identify(BagReader(bag), robot)                           # compensated sensor forces

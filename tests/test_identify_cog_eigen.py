@@ -4,6 +4,7 @@ import pytest
 
 from cdpr_control import dynamics
 from cdpr_control.robot import load_robot
+from cdpr_sim.simulator import SimConfig, plant_of
 from cdpr_tools import cli
 from cdpr_tools.bag import BagReader
 from cdpr_tools.identify import bag_data, cog, eigenfrequency, experiments, mass
@@ -34,11 +35,14 @@ def _expected_cog(robot):
 def test_circle_run_with_payload_gives_mass_and_centre_of_gravity(circle_payload_bag, capsys):
     robot = load_robot("ipanema3_mini")
     fit = mass.identify(BagReader(circle_payload_bag), robot)             # compensated sensor forces
-    assert fit.m_circle == pytest.approx(robot.platform.mass + PAYLOAD_MASS, rel=0.01)
-    assert fit.m_static == pytest.approx(robot.platform.mass + PAYLOAD_MASS, rel=0.01)
+    # 3 %: the plant's force sensors are off by up to 1 % in gain (section 4.1.3: 5.9 % on the IPAnema 3)
+    assert fit.m_circle == pytest.approx(robot.platform.mass + PAYLOAD_MASS, rel=0.03)
+    assert fit.m_static == pytest.approx(robot.platform.mass + PAYLOAD_MASS, rel=0.03)
     c = _expected_cog(robot)                                              # [6.67, -3.33, 10] mm
-    assert fit.c_mp[:2] == pytest.approx(c[:2], abs=1e-3)
-    assert fit.c_mp[2] == pytest.approx(c[2], abs=2e-3)
+    # 2.5 mm: the plant's sensor gains (up to 1 % off) act on the static torque, see
+    # test_sensor_gain_errors_act_on_the_static_torque (1 mm with the perfect model)
+    assert fit.c_mp[:2] == pytest.approx(c[:2], abs=2.5e-3)
+    assert fit.c_mp[2] == pytest.approx(c[2], abs=2.5e-3)
     assert cli.main(["identify", "mass", str(circle_payload_bag)]) == 0
     assert "c_mp" in capsys.readouterr().out
 
@@ -83,7 +87,7 @@ def test_sensor_gain_errors_act_on_the_static_torque(circle_payload_bag):
 
 
 def test_eigenfrequency_from_a_knock_matches_the_model(pulse_bag, tmp_path, capsys):
-    robot = load_robot("ipanema3_mini")
+    robot = plant_of(load_robot("ipanema3_mini"), SimConfig()).robot    # (4.8) of the simulated robot
     fit = eigenfrequency.identify(BagReader(pulse_bag), robot)
     assert fit.f_n == pytest.approx(fit.f_model, rel=0.01)                 # (4.8), tolerance asked: 5 %
     assert fit.f_d == pytest.approx(fit.f_n * np.sqrt(1.0 - fit.zeta**2), rel=1e-9)
@@ -96,7 +100,7 @@ def test_eigenfrequency_from_a_knock_matches_the_model(pulse_bag, tmp_path, caps
 
 def test_payload_lowers_the_eigenfrequency_as_one_over_root_mass(pulse_bag, tmp_path):
     """Section 4.3: doubling the mass (1 kg on the 1 kg platform) divides f by sqrt(2)."""
-    robot = load_robot("ipanema3_mini")
+    robot = plant_of(load_robot("ipanema3_mini"), SimConfig()).robot    # (4.8) of the simulated robot
     loaded = experiments.record_pulse_response(tmp_path / "pulse", "ipanema3_mini", seed=7, payload_mass=1.0)
     fit = eigenfrequency.identify(BagReader(loaded), robot.with_payload(1.0), use_reference=True)
     empty = eigenfrequency.identify(BagReader(pulse_bag), robot, use_reference=True)

@@ -45,9 +45,27 @@ def test_hold_and_nan_keep_last_command(robot):
     out = jc.update(nan_pose)
     assert jc.held and np.all(np.isfinite(out))
     np.testing.assert_array_equal(out, q0)
-    # outside the geometric model (platform point inside a pulley circle) also holds
-    out = jc.update(np.array([10.0, 10.0, 10.0, 0, 0, 0]))
-    assert np.all(np.isfinite(out))
+    # outside the geometric model: anchor 1 inside the circle of its pulley, the IK is not finite
+    inside = np.r_[robot.a[0] - robot.b[0] + np.array([-0.02, -0.006, 0.0]), 0.0, 0.0, 0.0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        assert not np.all(np.isfinite(inverse_kinematics(robot, inside).q))
+        out = jc.update(inside)
+    assert jc.held
+    np.testing.assert_array_equal(out, q0)
+
+
+def test_far_valid_pose_is_approached_at_v_max_not_held(robot):
+    """A pose far outside the frame still has a finite IK: the command is not held but moves at the
+    drives' v_max (the safety monitor's position-lag fault is what stops a runaway set-point)."""
+    jc = JointCommand(robot, dt=0.001)
+    q0 = inverse_kinematics(robot, robot.home).q
+    jc.reset(q0)
+    far = np.array([10.0, 10.0, 10.0, 0, 0, 0])
+    target = inverse_kinematics(robot, far).q
+    out = jc.update(far)
+    assert not jc.held
+    np.testing.assert_allclose(np.abs(out - q0), robot.drive.v_max * 0.001, rtol=1e-12)
+    assert np.all(np.sign(out - q0) == np.sign(target - q0))
 
 
 def test_reset_rejects_bad_lengths(robot):

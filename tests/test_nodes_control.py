@@ -5,7 +5,8 @@ import time
 import numpy as np
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
+from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
+rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -32,7 +33,7 @@ def graph():
              # a second offset input beside OSPC, published by the probe; no ramp, so that one period
              # already shows the full sum of (5.10) (the ramp is tested in test_offset_inputs.py)
              JointCommandNode(parameter_overrides=overrides + [
-                 Parameter("v_max", value=100.0), Parameter("offset_ramp_time", value=0.0),
+                 Parameter("v_max", value=100.0), Parameter("transfer_time", value=0.0),
                  Parameter("offset_inputs", value=["ospc", "probe_offset"])])]
     probe = rclpy.create_node("probe")
     executor = SingleThreadedExecutor()

@@ -67,8 +67,8 @@ def test_non_finite_or_misshaped_input_holds_and_never_reaches_the_sum(x):
 
 def test_bad_configuration_is_refused_with_the_reason():
     with pytest.raises(ValueError, match="unique"):
-        OffsetInputs(["ospc", "ospc"], DT)
-    offsets = OffsetInputs(["ospc"], DT)
+        OffsetInputs(["ospc", "ospc"], DT, 0.2)
+    offsets = OffsetInputs(["ospc"], DT, 0.2)
     with pytest.raises(ValueError, match="unknown offset inputs"):
         offsets.configure({"hpfc": OffsetConfig()}, 0.2)
     with pytest.raises(ValueError, match="deadline"):

@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from required import import_or_skip
 from cdpr_control.drive_models import DriveModel
 from cdpr_control.robot import load_robot
 
@@ -84,7 +85,7 @@ def test_rejects_bad_parameters():
 @pytest.mark.parametrize("robot_name", ["ipanema3", "ipanema3_mini"])
 def test_the_step_compiles_with_numba_and_agrees_with_numpy(robot_name):
     """The simulator runs drive_step compiled (cdpr_sim.simulator.compiled): the same numbers."""
-    pytest.importorskip("numba")
+    import_or_skip("numba")
     from cdpr_sim.simulator import compiled
 
     robot = load_robot(robot_name)

@@ -4,7 +4,8 @@ import time
 import numpy as np
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
+from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
+rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces  # noqa: E402
 from cdpr_msgs.srv import ApplyWrench, SetPayload  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402

@@ -11,7 +11,9 @@ from cdpr_sim.contacts import ContactMaterial, Cylinder, Plane, PlatformShape
 from cdpr_sim.simulator import SimConfig, Simulator, home_calibration_offset, pretension_lengths
 from cdpr_sim.startup import startup_forces, startup_state
 
-QUIET = dict(noise_std=0.0, encoder_counts=0)
+# These tests check the simulator against the model equations with the robot file's parameters:
+# the perfect-model plant (the default plant differs from the robot file, cdpr_sim.plant).
+QUIET = dict(noise_std=0.0, encoder_counts=0, plant="nominal")
 
 
 def _hold(sim, theta_d, n):
@@ -44,8 +46,9 @@ def test_holding_ik_minus_the_qp_elongation_settles_at_x(name, dx):
 
 def test_startup_state_rests_and_calibrated_encoders_read_the_ik():
     robot = load_robot("ipanema3")
-    x0, theta0, offset = startup_state(robot, robot.home, 0.5, calibrate_home=True)
-    sim = Simulator(robot, SimConfig(**QUIET), x0=x0, theta0=theta0, encoder_offset=offset)
+    config = SimConfig(**QUIET)
+    x0, theta0, offset = startup_state(robot, robot.home, 0.5, calibrate_home=True, config=config)
+    sim = Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset)
     q_home = inverse_kinematics(robot, robot.home).q
     np.testing.assert_allclose(sim.output.theta, q_home, atol=1e-12)     # theta = IK{home} (2.3.2)
     out = _hold(sim, sim.output.theta, 500)                               # hold the encoder values

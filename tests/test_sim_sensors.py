@@ -11,6 +11,8 @@ from cdpr_sim.startup import startup_forces
 
 
 def _sim(name, **config):
+    """The perfect-model plant: these tests check the simulator against the model equations."""
+    config.setdefault("plant", "nominal")
     robot = load_robot(name)
     x = robot.home.copy()
     theta = pretension_lengths(robot, x, startup_forces(robot, x, 0.5))

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cable, kernels
+from .calibration import DEFAULT_WINDOW, StartupCalibration
 from .filters import LowPass
 from .pi_control import PIController
 
@@ -123,15 +124,17 @@ class CableForceControl:
     file's non-linear cable (2.16)-(2.17), so that K_l^-1 f_c,out is the elongation the cable
     really needs; with the linear model the integrator must make up the difference, which on the
     IPAnema 3's progressive 6 mm cable exceeds a few hundred newtons of saturation range. Δq_0 is
-    the elongation of the first measured forces (the encoder calibration's pre-tension) in the same
-    model, so that f = f_d commands no change. Disabled, the output is zero (IK-only control).
+    the elongation of the encoder calibration's forces (:mod:`cdpr_control.calibration`: the home
+    calibration, else the mean of the first samples) in the same model, so that f = f_d commands
+    no change. Disabled, the output is zero (IK-only control).
     """
 
-    def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True):
+    def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True,
+                 calibration_window: int = DEFAULT_WINDOW):
         self.robot = robot
         self.controller = CableForceController(robot.m, params or CFCParams(), dt)
         self.enabled = enabled
-        self.calibration: tuple[np.ndarray, np.ndarray] | None = None    # (f_0, l_t) at start-up
+        self.calibration = StartupCalibration(calibration_window)
 
     @property
     def params(self) -> CFCParams:
@@ -140,8 +143,8 @@ class CableForceControl:
     def set_params(self, params: CFCParams, enabled: bool | None = None) -> None:
         model_changed = params.stiffness_model != self.params.stiffness_model
         self.controller.set_params(params)
-        if model_changed and self.calibration is not None:
-            self.controller.dq_0 = self._elongation(*self.calibration)
+        if model_changed and self.calibration.f_0 is not None:
+            self.controller.dq_0 = self._calibrated_dq_0()
         if enabled is not None and enabled != self.enabled:
             self.enabled = enabled
             self.controller.pi.reset()           # bumpless: the integrator starts from zero
@@ -155,14 +158,19 @@ class CableForceControl:
         k_l = self._stiffness(l_t)
         return f / (k_l(f) if callable(k_l) else k_l)
 
+    def _calibrated_dq_0(self) -> np.ndarray:
+        c = self.calibration
+        return self._elongation(c.f_0, cable.total_free_length(self.robot, c.theta_0))
+
     def update(self, f_d, f, theta, f_min, f_max) -> np.ndarray:
         """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23)."""
         if not self.enabled:
             return np.zeros(self.robot.m)
         l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
-        if self.calibration is None:
-            self.calibration = (np.array(f, dtype=float), l_t)
         c = self.controller
-        if c.dq_0 is None:
-            c.reset(self._elongation(*self.calibration), f=f)
+        if self.calibration.update(f, theta) or c.dq_0 is None:
+            if c.dq_0 is None:
+                c.reset(self._calibrated_dq_0(), f=f)
+            else:
+                c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
         return c.update(f_d, f, self._stiffness(l_t), f_min, f_max)

@@ -2,7 +2,10 @@
 
 Per period: friction compensation (3.44) -> forward kinematics (3.7)-(3.9) and w = -A^T f ->
 force set-point (3.26)-(3.28) -> cable force control (3.19)-(3.23) and OSPC (3.16) -> safety ->
-joint command θ_d = IK{x_d + x_OSPC} - Δq_CFC (5.10). The ROS nodes wrap exactly these stage
+joint command θ_d = IK{x_d + x_OSPC} - Δq_CFC (5.10). Switching between force control and IK-only
+control, or the CFC or OSPC on or off, is bumpless (:mod:`cdpr_control.bumpless`): the outputs
+are blended in and out over ``transfer_time`` and an unused controller's integrator is held at
+zero. The ROS nodes wrap exactly these stage
 objects one per node; this class chains them directly, which is what the closed-loop tests, the
 benchmarks and offline studies use when the ROS transport is not the subject.
 """
@@ -13,13 +16,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels
+from .bumpless import Blend
 from .cable_force_control import CableForceControl, CFCParams
+from .calibration import DEFAULT_WINDOW
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
 from .joint_command import JointCommand
 from .ospc import OperationalSpacePositionController, OSPCParams
 from .safety import SafetyConfig, SafetyMonitor
+from .stability import check_force_control, planned_home_forces
 
 
 @dataclass
@@ -32,6 +38,8 @@ class ControlLoopParams:
     force: ForceSetpointParams = field(default_factory=ForceSetpointParams)
     friction: FrictionCompensationParams = field(default_factory=FrictionCompensationParams)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    transfer_time: float = 0.5           # s, blend of the CFC and OSPC outputs on a switch (bumpless)
+    calibration_window: int = DEFAULT_WINDOW   # samples averaged for the start-up Δq_0 (3.9), (3.23)
 
 
 @dataclass
@@ -55,12 +63,29 @@ class ControlLoop:
         p = params or ControlLoopParams()
         self.robot, self.dt, self.params = robot, dt, p
         self.friction = FrictionCompensation(robot, dt, p.friction)
-        self.estimator = PoseEstimator(robot)
+        self.estimator = PoseEstimator(robot, calibration_window=p.calibration_window)
         self.force = ForceSetpoint(robot, dt, p.force)
-        self.cfc = CableForceControl(robot, dt, p.cfc, enabled=p.cfc_enabled)
+        # the loop runs the CFC in every mode (its filter and calibration stay current) and blends
+        # its output; the stage's own on/off is for the node, which has no blend
+        self.cfc = CableForceControl(robot, dt, p.cfc, enabled=True, calibration_window=p.calibration_window)
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.command = JointCommand(robot, dt)
+        force_control = p.mode == "force_control"
+        if force_control:
+            reason = check_force_control(robot, robot.home, planned_home_forces(robot, p.force), p.ospc_enabled)
+            if reason:
+                raise ValueError(reason)
+        self.blend_cfc = Blend(p.transfer_time, dt, force_control and p.cfc_enabled)
+        self.blend_ospc = Blend(p.transfer_time, dt, force_control and p.ospc_enabled)
+
+    def set_home_calibration(self, f_home) -> None:
+        """Δq_0 from the forces f_home (m,) [N] recorded when the encoders were set at home (2.3.2),
+        for a start away from home (else the first samples are averaged)."""
+        self.estimator.calibration.set_home(self.robot, f_home)
+        self.estimator.dq_0 = None
+        self.cfc.calibration.set_home(self.robot, f_home)
+        self.cfc.controller.dq_0 = None
 
     def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
         """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
@@ -71,14 +96,21 @@ class ControlLoop:
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)
-        dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
-        x_ospc = self.ospc.update(x_d, x) if self.params.ospc_enabled else np.zeros(6)
+        p = self.params
+        force_control = p.mode == "force_control"
+        for blend in (self.blend_cfc, self.blend_ospc):
+            blend.set_transfer_time(p.transfer_time)
+        s_cfc = self.blend_cfc.update(force_control and p.cfc_enabled)
+        s_ospc = self.blend_ospc.update(force_control and p.ospc_enabled)
+        dq_cfc = s_cfc * self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
+        if s_cfc == 0.0:
+            self.cfc.controller.pi.reset()           # track: no wind-up while the output is unused
+        x_ospc = s_ospc * self.ospc.update(x_d, x)
+        if s_ospc == 0.0:
+            self.ospc.reset()
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
                                     fk_converged=self.estimator.result.converged)
         hold = any(fault.holds for fault in faults)
-        if self.params.mode == "force_control":
-            theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)
-        else:
-            theta_d = self.command.update(x_d, hold=hold)
+        theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)      # s = 0: IK only (2.3.2)
         return LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
                          self.estimator.result.converged)

@@ -1,8 +1,9 @@
 """Cable force set-point stage, thesis section 3.6: wrench set-point (3.26) then f_d (3.27)-(3.28).
 
-Per period: the model wrench w_dyn of the desired motion (2.33); the measured wrench w, low-pass
-filtered, enters through the Smith predictor (3.26) with its disturbance part saturated (section
-3.6.1); the distribution is solved for A^T at x_d with the tension level's reference force. A change
+Per period: the model wrench w_dyn of the desired motion (2.33); the measured wrench w enters
+through the Smith predictor (3.26), whose disturbance part w - w_dyn(t - T_d,w) is low-pass filtered
+(``T_wrench_filter``) and saturated (section 3.6.1): the filter acts on the disturbance only, so the
+anticipated inertia wrench reaches w_d without the filter's lag; the distribution is solved for A^T at x_d with the tension level's reference force. A change
 of the tension level is ramped (``tension_rate``, full range per second) so that the internal forces
 move smoothly and the platform does not.
 """
@@ -31,7 +32,7 @@ class ForceSetpointParams:
     wrench_source: str = "measured"       # measured: (3.26); model: w_d = w_dyn (3.1)
     T_d_w: float = 0.01                   # s, Smith predictor delay (3.25)
     wrench_deviation_max: float = 3.0     # saturation of w - w_dyn(t - T_d,w) relative to m g (payloads up to 3 m_p)
-    T_wrench_filter: float = 0.3          # s, PT1 on the measured wrench (0.08 s oscillates on IPAnema 3)
+    T_wrench_filter: float = 0.3          # s, PT1 on the disturbance w - w_dyn(t - T_d,w) (0.08 s oscillates on IPAnema 3)
 
     def validate(self, m: int) -> None:
         if self.method not in METHODS:
@@ -123,8 +124,8 @@ class ForceSetpoint:
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and np.all(np.isfinite(w)):
-            w_f = self.wrench_filter.update(w)
-            self.w_d = self.smith.update(w_f, w_dyn, self.w_dist_max)         # (3.26), saturated
+            self.w_d = self.smith.update(w, w_dyn, self.w_dist_max,             # (3.26), disturbance
+                                         self.wrench_filter.update)            # filtered, saturated
         else:
             self.w_d = w_dyn                                                  # (3.1)
         if AT is None:

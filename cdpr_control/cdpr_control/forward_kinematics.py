@@ -24,6 +24,7 @@ import numpy as np
 from scipy.linalg.lapack import dposv
 
 from . import cable, kernels
+from .calibration import DEFAULT_WINDOW, StartupCalibration
 from .dynamics import gravity_wrench
 from .kinematics import inverse_kinematics, kardan_rate_matrix, rotation_matrix, skew
 from .stiffness import operational_stiffness
@@ -271,14 +272,18 @@ class PoseEstimator:
 
     Per period: the elastic FK (3.7)-(3.9) from θ and f, warm-started at x_d with the pulleys
     frozen there, and the measured wrench w = -A^T(x) f (2.11). The start-up elongation Δq_0 is
-    taken from the first sample. A solve that does not converge keeps the last converged pose
-    (x_d before the first) and says so in ``result``.
+    the encoder calibration's (:mod:`cdpr_control.calibration`): the home calibration when given
+    (``calibration.set_home``), else the mean of the first ``calibration_window`` samples. A solve
+    that does not converge keeps the last converged pose (x_d before the first) and says so in
+    ``result``.
     """
 
-    def __init__(self, robot, pulleys: str = "frozen", max_iterations: int = 30, xtol: float = 1e-9):
+    def __init__(self, robot, pulleys: str = "frozen", max_iterations: int = 30, xtol: float = 1e-9,
+                 calibration_window: int = DEFAULT_WINDOW):
         self.robot = robot
         self.solver = ForwardKinematics(robot, xtol=xtol, max_iterations=max_iterations)
         self.pulleys = pulleys
+        self.calibration = StartupCalibration(calibration_window)
         self.dq_0: np.ndarray | None = None
         self.x: np.ndarray | None = None
         self.result: FKResult | None = None
@@ -289,8 +294,9 @@ class PoseEstimator:
 
         ik_d: inverse_kinematics(robot, x_d) when the caller has it (saves the pulley IK at x_d).
         """
-        if self.dq_0 is None:                                                 # (3.7) at start-up
-            self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, f, theta)
+        if self.calibration.update(f, theta) or self.dq_0 is None:            # (3.7) at calibration
+            c = self.calibration
+            self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, c.f_0, c.theta_0)
         self.result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys, ik_d=ik_d)
         if self.result.converged:
             self.x = self.result.x

@@ -49,9 +49,16 @@ def pulley_force(F_prev, thetadot, mu, F_pv, beta, s=None) -> np.ndarray:
 def winch_force_from_sensor(F_s, beta_1) -> np.ndarray:
     """f_w = F_1 from the sensor force of the sensor pulley P1 without friction, (3.36)-(3.40).
 
-    The force balance (3.36) F_s = F_1 - F_0 cos(beta_1) with F_0 = F_1 gives
-    F_1 = F_s / (1 - cos beta_1); at the wrap angles of the thesis this is (3.40),
-    F_1 = F_s (1 + sin beta_1) / 2: F_s at 90 deg (3.37), F_s / 2 at 180 deg.
+    Geometry: the sensor measures the load of P1 along the cable that leaves P1 towards the
+    platform (force F_1); the cable from the drum (force F_0) wraps P1 by beta_1. The force balance
+    along the sensor axis is (3.36), F_s = F_1 - F_0 cos(beta_1), and with F_0 = F_1 (no friction)
+    F_1 = F_s / (1 - cos beta_1) at every wrap angle. The thesis summarises its two designs by
+    (3.40), F_1 = F_s (1 + sin beta_1) / 2, which equals this only at beta_1 = 90 deg (IPAnema 3,
+    (3.37): F_1 = F_s) and 180 deg (IPAnema 3 Mini, (3.39) without friction: F_s / 2); at other
+    angles (3.40) is not a force balance (135 deg: 0.854 F_s against 0.586 F_s), so the code uses
+    (3.36). A load cell in the pulley axle, measuring the resultant along the bisector, would be
+    F_1 = F_s / (2 sin(beta_1 / 2)) instead: robots with that design need their own beta_1
+    equivalent (sensor calibration), see docs/model.md.
     """
     return np.asarray(F_s, dtype=float) / (1.0 - np.cos(beta_1))
 

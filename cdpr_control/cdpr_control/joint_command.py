@@ -3,7 +3,9 @@
     θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC + x_Adm} - Δq_CFC
 
 Δq_CFC (3.23) is the elongation the cable force controller commands beyond the encoder
-calibration's pre-tension, so the winch is shortened by it. The IK-only reference control of
+calibration's pre-tension, so the winch is shortened by it. The thesis prints (5.1) and (5.10)
+with "+ Δq_d,CFC"; with its own Δq = q - θ > 0 under tension (2.24) only the minus is consistent
+(more force needs a shorter cable), so the code departs from the printed sign (docs/control.md). The IK-only reference control of
 section 2.3.2 is the same with every offset and Δq_CFC zero.
 
 The command is never NaN: a non-finite result, or a holding fault from the safety monitor, keeps

@@ -45,7 +45,7 @@ class OffsetConfig:
 class OffsetInputs:
     """The sum of the offset inputs with per-input enable, deadline and ramped switching."""
 
-    def __init__(self, names, dt: float, ramp_time: float = 0.2, configs: dict | None = None):
+    def __init__(self, names, dt: float, ramp_time: float, configs: dict | None = None):
         names = list(names)
         if len(set(names)) != len(names):
             raise ValueError(f"offset inputs must be unique, got {names}")

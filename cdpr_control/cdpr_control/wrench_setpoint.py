@@ -10,6 +10,11 @@ w_d = w_dyn + w_dist with the disturbance w_dist = w - w_dyn(t - T_d,w) of (3.24
 part can be saturated (section 3.6.1): |w_dist| <= w_dist_max per axis limits how far model errors
 and the platform's own oscillations reach the force set-point (w_dist_max = 0 gives the model
 wrench (3.1), no limit the pure null-space control).
+
+A low-pass filter against sensor noise and platform oscillation belongs on the disturbance
+w_dist, not on the measured wrench w: filtering w before the delayed model wrench is subtracted
+leaves w_d = w_dyn + LPF(w) - w_dyn(t - T_d,w), whose anticipation of the inertia forces lasts one
+delay T_d,w and then falls back to the lag of the filter, the lag of Fig. 3.13 that (3.26) removes.
 """
 from __future__ import annotations
 
@@ -40,15 +45,18 @@ class WrenchSetpoint:
         self._buffer[:] = fill
         self._last = fill.copy()
 
-    def update(self, w, w_dyn, w_dist_max=None) -> np.ndarray:
+    def update(self, w, w_dyn, w_dist_max=None, dist_filter=None) -> np.ndarray:
         """One period: measured wrench w and model wrench w_dyn -> w_d (3.26), optionally with
-        the disturbance w - w_dyn(t - T_d,w) saturated to ±w_dist_max (6,)."""
+        the disturbance w - w_dyn(t - T_d,w) filtered (``dist_filter``, a callable such as
+        LowPass.update) and then saturated to ±w_dist_max (6,)."""
         w_dyn = np.asarray(w_dyn, dtype=float)
         self._buffer[self._index] = w_dyn
         self._index = (self._index + 1) % (self.delay + 1)
         delayed = self._buffer[self._index]        # written `delay` periods ago
         self._last = w_dyn.copy()
         w_dist = np.asarray(w, dtype=float) - delayed                                 # (3.24)
+        if dist_filter is not None:
+            w_dist = dist_filter(w_dist)
         if w_dist_max is not None:
             w_dist = np.clip(w_dist, -w_dist_max, w_dist_max)
         return w_dyn + w_dist

@@ -12,11 +12,12 @@ from typing import Callable
 import numpy as np
 
 from cdpr_control.control_loop import ControlLoop, ControlLoopParams
+from cdpr_control.controller_params import control_loop_params
 from cdpr_control.interpolation import Interpolator
 from cdpr_control.kinematics import twist_from_pose_rates
 
 from .simulator import SimConfig, Simulator
-from .startup import startup_state
+from .startup import calibration_forces, startup_state
 
 
 @dataclass
@@ -54,15 +55,19 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
         config: SimConfig = SimConfig(), before_step: Callable | None = None) -> ClosedLoopRun:
     """Simulate ``duration`` seconds: the platform starts at rest at x0 (default home) under the QP
     forces of ``tension_level`` with the encoders calibrated at home (section 2.3.2); a payload is
-    attached at t = 0 (the controller does not know it). ``before_step(k, loop, sim)`` may change
-    parameters during the run."""
+    attached at t = 0 (the controller does not know it); the loop gets the home calibration's
+    forces for its Δq_0 (3.9), (3.23). ``before_step(k, loop, sim)`` may change
+    parameters during the run. params None: the robot's parameter file (the node graph's
+    configuration, :func:`cdpr_control.controller_params.control_loop_params`). The simulated
+    robot is the plant of ``config`` (by default one that differs from the robot file)."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
-    x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True)
-    loop = ControlLoop(robot, config.period, params)
+    x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True, config=config)
+    loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params)
     n = int(round(duration / config.period))
     rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status")}
     faults = []
     with Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset) as sim:
+        loop.set_home_calibration(calibration_forces(sim, tension_level))     # Δq_0 of the encoders' set-up
         if payload:
             sim.set_payload(payload, payload_com)
         out = sim.output

@@ -42,6 +42,11 @@ class ForceSensor:
     def _noisy(self, F_s) -> np.ndarray:
         return F_s + self.rng.normal(0.0, self.noise_std, self.m) if self.noise_std else np.asarray(F_s, dtype=float)
 
+    def line(self, F_s) -> np.ndarray:
+        """The calibrated reading [N] (m,) of F_s without noise and quantisation: the true line
+        (3.29) read through the robot file's calibration."""
+        return self.cal_gamma_1 * (np.asarray(F_s, dtype=float) / self.gamma_1 + self.gamma_0 - self.cal_gamma_0)
+
     def read(self, F_s) -> np.ndarray:
         """Calibrated reading [N] (m,): quantised signal through the robot file's line (3.29)."""
         return _quantise(self._noisy(F_s), self._k1, self._k0, self._code_min, self._code_max, self._r1, self._r0)

@@ -12,6 +12,10 @@ What is simulated (thesis sections 2.1.3, 3.3, 3.7):
 * the winch force sensors behind the pulleys: the forward pulley friction model (3.30)-(3.43)
   (cdpr_control.friction), the sensor line (3.29), noise and AD quantisation, and the encoders.
 
+The physics runs on the plant's own parameters (:mod:`cdpr_sim.plant`), by default a robot that
+differs from the robot file as a real one does (geometry, cable stiffness and settlement, friction,
+drives, sensor lines); ``SimConfig(plant="nominal")`` makes the plant the robot file itself.
+
 Cable lengths: theta is the winch's unstretched cable length and the elongation is
 dq = IK{x} - theta (2.24), positive under tension (section 3.2). Encoders and commands may carry a
 calibration offset (``encoder_offset``): encoder theta = unstretched length + offset. With the
@@ -42,6 +46,7 @@ from cdpr_control.kinematics import inverse_kinematics
 
 from .cables import CableModel
 from .contacts import PlatformShape, add_obstacle, platform_collision_shape
+from .plant import KINDS, Settlement, build_plant
 from .platform import PlatformBody, kardan_angles
 from .sensors import Encoder, ForceSensor
 from .wrench import WrenchPulse
@@ -74,6 +79,9 @@ class SimConfig:
     encoder_counts: int = 2**20        # per motor revolution; 0 = ideal encoder [20 bit]
     platform_shape: PlatformShape = field(default_factory=PlatformShape)
     obstacles: tuple = ()              # contacts.Plane / contacts.Cylinder
+    plant: str = "mismatched"          # mismatched: the plant's own parameters (cdpr_sim.plant); nominal: the robot file
+    plant_seed: int = 1                # which mismatched robot (one seed, one robot)
+    plant_file: str | None = None      # bounds of the mismatch; None: cdpr_sim/plants/mismatch.yaml
 
     def __post_init__(self):
         if not (math.isfinite(self.period) and self.period > 0.0):
@@ -83,6 +91,8 @@ class SimConfig:
         if self.period / self.substeps > 1e-3 + 1e-12:
             raise ValueError(f"physics step period / substeps = {self.period / self.substeps} s "
                              "exceeds 1 ms: raise substeps")
+        if self.plant not in KINDS:
+            raise ValueError(f"plant must be one of {', '.join(KINDS)}, got {self.plant!r}")
         if not self.friction_v_eps >= 0.0:
             raise ValueError(f"friction_v_eps must be >= 0 m/s, got {self.friction_v_eps}")
 
@@ -131,8 +141,17 @@ def home_calibration_offset(robot, f) -> np.ndarray:
     return cable.elongation_from_force(robot, f, cable.total_free_length(robot, q))
 
 
+def plant_of(robot, config: "SimConfig"):
+    """The plant (cdpr_sim.plant.Plant) a simulator of the nominal ``robot`` with ``config`` runs."""
+    return build_plant(robot, config.plant, config.plant_seed, config.plant_file)
+
+
 class Simulator:
     """Cable robot simulator for robot (cdpr_control.robot.Robot) with SimConfig ``config``.
+
+    ``robot`` is the nominal robot file (the controller's model): the physics runs on the plant of
+    ``config`` (``self.plant``, :mod:`cdpr_sim.plant`); the sensor readings apply the robot file's
+    calibration. theta0 are the plant's unstretched lengths (see :func:`cdpr_sim.startup.startup_state`).
 
     Starts at rest at pose x0 (default robot.home) with unstretched cable lengths theta0 (default:
     IK{x0}, i.e. no tension) and encoder offset ``encoder_offset`` (default 0). ``output`` holds
@@ -140,6 +159,9 @@ class Simulator:
     """
 
     def __init__(self, robot, config: SimConfig = SimConfig(), x0=None, theta0=None, encoder_offset=None):
+        self.nominal = robot
+        self.plant = plant_of(robot, config)
+        robot = self.plant.robot
         self.base_robot = robot
         self.robot = robot
         self.config = config
@@ -156,6 +178,8 @@ class Simulator:
         self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance)
         self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
         self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
+        self.settlement = Settlement(self.plant.settlement_ratio, self.plant.settlement_time, robot.cable.k0,
+                                     config.period, self.m)
         self._w_cont = np.zeros(6)
         self._pulse: WrenchPulse | None = None
         self._external = False            # a held wrench or a pulse is acting
@@ -180,8 +204,12 @@ class Simulator:
         self.t = 0.0
         self.steps = 0
         self._rng = np.random.Generator(np.random.PCG64(cfg.seed if seed is None else seed))
-        self.sensor = ForceSensor(robot.sensor, self.m, self._rng, cfg.sensor_gamma_1, cfg.sensor_gamma_0,
-                                  cfg.noise_std)
+        plant = self.plant
+        self.sensor = ForceSensor(self.nominal.sensor, self.m, self._rng,
+                                  plant.gamma_1 if cfg.sensor_gamma_1 is None else cfg.sensor_gamma_1,
+                                  plant.gamma_0 if cfg.sensor_gamma_0 is None else cfg.sensor_gamma_0, cfg.noise_std)
+        self.settlement.s[:] = 0.0
+        self.settlement.f_settled = None             # settled to the forces of the first measurement
         self.friction = PulleyFriction.from_robot(robot, theta0, cfg.friction_v_eps, jit=compiled)
         self.drives.reset(theta0)
         self._body.set_state(x0, xdot0)
@@ -252,7 +280,7 @@ class Simulator:
                 F, T, r, R = self._pending
             else:
                 r, R, v, omega = body.state()
-                _, F, T, _ = cables.wrench(r, R, v, omega, drives.theta, drives.thetadot)
+                _, F, T, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
             if self._external:
                 w = self._external_wrench(t, R)
                 F, T = F + w[:3], T + w[3:]
@@ -278,12 +306,14 @@ class Simulator:
         body, cables, drives, period = self._body, self.cables, self.drives, self.config.period
         r, R, v, omega = body.state()
         theta = drives.theta
-        f, F, T, _ = cables.wrench(r, R, v, omega, theta, drives.thetadot)
+        theta_u = theta + self.settlement.s                  # unstretched length incl. settlement
+        f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         phi = kardan_angles(R)
         if cables.needs_refresh():
             cables.refresh(np.concatenate([r, phi]))
-            f, F, T, _ = cables.wrench(r, R, v, omega, theta, drives.thetadot)
+            f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         f = f.copy()
+        self.settlement.update(f, cable.total_free_length(self.robot, theta_u))   # acts from the next step
         self._pending = (F.copy(), T.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity

@@ -28,6 +28,8 @@ def add_parser(sub) -> None:
     p.add_argument("--mode", choices=("composed", "processes"), default="composed", help="how to run the graph")
     p.add_argument("--controller", choices=("force_control", "ik_only"), default="force_control",
                    help="joint_command mode: the thesis' force control or the IK-only reference")
+    p.add_argument("--plant", choices=("mismatched", "nominal"), default="mismatched",
+                   help="the simulated robot: its own parameters (default) or the robot file itself")
     p.add_argument("--output", help="bag directory (default: bags/demo_<robot>_<date-time>)")
     p.add_argument("--timeout", type=float, default=900.0, help="wall-clock limit for the program [s]")
     p.set_defaults(run=run)
@@ -55,7 +57,9 @@ def run(args) -> int:
     for spec in description.nodes:
         if spec.module.endswith("joint_command"):
             spec.parameters.append({"mode": args.controller})
-    print(f"[demo] {robot.name}: program {name!r} through the node graph ({args.mode}, {args.controller}), "
+        if spec.module.endswith("winch_platform_sim"):
+            spec.parameters.append({"plant": args.plant})
+    print(f"[demo] {robot.name} ({args.plant} plant): program {name!r} through the node graph ({args.mode}, {args.controller}), "
           f"recording to {bag}", flush=True)
     wall0 = time.perf_counter()
     with Launcher(description, mode=args.mode) as launch:

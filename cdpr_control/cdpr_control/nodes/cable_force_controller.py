@@ -20,16 +20,17 @@ from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
 
+_D = CFCParams()      # the defaults live in the dataclass (one source of truth)
 PARAMS = [
     ParamSpec("enabled", True, "cable force control on; off = IK-only reference control (2.3.2)"),
-    ParamSpec("K_p", 0.85, "proportional gain K_p,CFC [-] (3.19), table 3.1", range=(0.0, 10.0)),
-    ParamSpec("T_i", 0.1, "integrator reset time T_i,CFC [s] (3.19), table 3.1", range=(1e-3, 100.0)),
-    ParamSpec("T_filter", 0.08, "PT1 time constant of the force feedback T_1,r [s] (3.20), table 3.1", range=(0.0, 1.0)),
-    ParamSpec("F_sat_n", 200.0, "negative saturation of the PI part F_sat,n [N]", range=(0.0, 1e5)),
-    ParamSpec("F_sat_p", 200.0, "positive saturation of the PI part F_sat,p [N]", range=(0.0, 1e5)),
-    ParamSpec("widen_band", 50.0, "force distance to a limit where the saturation widens [N]", range=(1e-3, 1e5)),
-    ParamSpec("widen_factor", 3.0, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
-    ParamSpec("stiffness_model", "nonlinear", "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
+    ParamSpec("K_p", _D.K_p, "proportional gain K_p,CFC [-] (3.19), table 3.1", range=(0.0, 10.0)),
+    ParamSpec("T_i", _D.T_i, "integrator reset time T_i,CFC [s] (3.19), table 3.1", range=(1e-3, 100.0)),
+    ParamSpec("T_filter", _D.T_filter, "PT1 time constant of the force feedback T_1,r [s] (3.20), table 3.1", range=(0.0, 1.0)),
+    ParamSpec("F_sat_n", _D.F_sat_n, "negative saturation of the PI part F_sat,n [N]", range=(0.0, 1e5)),
+    ParamSpec("F_sat_p", _D.F_sat_p, "positive saturation of the PI part F_sat,p [N]", range=(0.0, 1e5)),
+    ParamSpec("widen_band", _D.widen_band, "force distance to a limit where the saturation widens [N]", range=(1e-3, 1e5)),
+    ParamSpec("widen_factor", _D.widen_factor, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
+    ParamSpec("stiffness_model", _D.stiffness_model, "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
               "nonlinear (secant of (2.16)-(2.17))", choices=("linear", "nonlinear")),
 ]
 

@@ -34,22 +34,23 @@ class ForceDistributionNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("force_distribution", **kwargs)
         c = self.robot.cable
+        d = ForceSetpointParams()       # the defaults live in the dataclass (one source of truth)
         specs = [
-            ParamSpec("method", "qp", "cable force algorithm: " + ", ".join(sorted(METHODS)), choices=tuple(sorted(METHODS))),
-            ParamSpec("backend", "daqp", "QP solver: " + ", ".join(BACKENDS), choices=tuple(BACKENDS)),
-            ParamSpec("tension_level", 0.0, "f_ref = f_min + level (f_max - f_min) (3.27) [0..1]", range=(0.0, 1.0)),
-            ParamSpec("tension_rate", 1.0, "ramp of the tension level [1/s]; 0 = step", range=(0.0, 1e3)),
+            ParamSpec("method", d.method, "cable force algorithm: " + ", ".join(sorted(METHODS)), choices=tuple(sorted(METHODS))),
+            ParamSpec("backend", d.backend, "QP solver: " + ", ".join(BACKENDS), choices=tuple(BACKENDS)),
+            ParamSpec("tension_level", d.tension_level, "f_ref = f_min + level (f_max - f_min) (3.27) [0..1]", range=(0.0, 1.0)),
+            ParamSpec("tension_rate", d.tension_rate, "ramp of the tension level [1/s]; 0 = step", range=(0.0, 1e3)),
             ParamSpec("f_min", c.f_min.tolist(), "minimum cable force per cable [N] (2.39)"),
             ParamSpec("f_max", c.f_max.tolist(), "maximum cable force per cable [N] (2.39)"),
-            ParamSpec("overload_factor", 1.0, "f_max may rise to this multiple at the workspace border (3.6.2) [-]", range=(1.0, 5.0)),
-            ParamSpec("overload_rate", 0.0, "max rate of the overload raise [1/s]; 0 = instant", range=(0.0, 1e3)),
-            ParamSpec("wrench_source", "measured", "measured: w_d = w + (I - G_w) w_dyn (3.26); model: w_d = w_dyn (3.1)",
+            ParamSpec("overload_factor", d.overload_factor, "f_max may rise to this multiple at the workspace border (3.6.2) [-]", range=(1.0, 5.0)),
+            ParamSpec("overload_rate", d.overload_rate, "max rate of the overload raise [1/s]; 0 = instant", range=(0.0, 1e3)),
+            ParamSpec("wrench_source", d.wrench_source, "measured: w_d = w + (I - G_w) w_dyn (3.26); model: w_d = w_dyn (3.1)",
                       choices=("measured", "model")),
-            ParamSpec("T_d_w", 0.01, "transfer delay T_d,w of the Smith predictor (3.25) [s]", range=(0.0, 0.5)),
-            ParamSpec("wrench_deviation_max", 3.0, "saturation of the measured disturbance wrench (3.24) relative "
+            ParamSpec("T_d_w", d.T_d_w, "transfer delay T_d,w of the Smith predictor (3.25) [s]", range=(0.0, 0.5)),
+            ParamSpec("wrench_deviation_max", d.wrench_deviation_max, "saturation of the measured disturbance wrench (3.24) relative "
                       "to the platform weight m g (torques: times the mean platform radius) [-] (section 3.6.1)",
                       range=(0.0, 100.0)),
-            ParamSpec("T_wrench_filter", 0.3, "PT1 time constant on the measured wrench [s]", range=(0.0, 1.0)),
+            ParamSpec("T_wrench_filter", d.T_wrench_filter, "PT1 time constant on the disturbance w - w_dyn(t - T_d,w) of (3.24) [s]", range=(0.0, 1.0)),
         ]
         self.stage: ForceSetpoint | None = None
         self.params = ParameterSet(self, specs, self._validate, self._apply)

@@ -10,6 +10,7 @@ computation is :class:`cdpr_control.forward_kinematics.PoseEstimator`.
 """
 from __future__ import annotations
 
+import inspect
 import time
 
 import numpy as np
@@ -33,11 +34,12 @@ TERMINATION = {
     fk.NON_FINITE: ForwardKinematicsDiagnostics.INVALID_INPUT,
 }
 
+_D = {k: v.default for k, v in inspect.signature(fk.PoseEstimator).parameters.items()}   # one source of truth
 PARAMS = [
-    ParamSpec("pulleys", "frozen", "pulley model in the iterations: frozen at x_d (section 3.2) or full",
+    ParamSpec("pulleys", _D["pulleys"], "pulley model in the iterations: frozen at x_d (section 3.2) or full",
               choices=("frozen", "full")),
-    ParamSpec("max_iterations", 30, "Levenberg-Marquardt iterations per solve [-]", range=(1, 1000)),
-    ParamSpec("xtol", 1e-9, "convergence: Gauss-Newton step below this [m, rad]", range=(1e-15, 1e-3)),
+    ParamSpec("max_iterations", _D["max_iterations"], "Levenberg-Marquardt iterations per solve [-]", range=(1, 1000)),
+    ParamSpec("xtol", _D["xtol"], "convergence: Gauss-Newton step below this [m, rad]", range=(1e-15, 1e-3)),
 ]
 
 

@@ -33,11 +33,12 @@ class FrictionCompensationNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("friction_compensation", **kwargs)
         fr = self.robot.friction
+        d = FrictionCompensationParams()   # the defaults live in the dataclass
         specs = [
-            ParamSpec("enabled", True, "compensate pulley friction; off = f = f_w (3.40)"),
+            ParamSpec("enabled", d.enabled, "compensate pulley friction; off = f = f_w (3.40)"),
             ParamSpec("velocity_source", "measured", "θ, θ̇ driving the friction model: measured (encoders) "
                       "or desired (θ_d as in section 3.7.3)", choices=("measured", "desired")),
-            ParamSpec("time_shift", 0.0, "delay of the Dahl output [s]; the thesis uses 0.05 with desired",
+            ParamSpec("time_shift", d.time_shift, "delay of the Dahl output [s]; the thesis uses 0.05 with desired",
                       range=(0.0, 1.0)),
             ParamSpec("mu", fr.mu.tolist(), "Coulomb coefficient per cable [-] (3.31)"),
             ParamSpec("sigma", fr.sigma.tolist(), "Dahl stiffness per cable [N/m] (3.43)"),

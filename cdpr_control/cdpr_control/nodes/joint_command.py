@@ -10,11 +10,12 @@ is used while younger than its deadline. For safety it also watches ``winch/stat
 ``winch/command`` (sensor_msgs/JointState, position = θ_d [m]) and ``/diagnostics``.
 
 Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets.<name>.deadline``
-[s], live; ``offset_ramp_time`` [s] ramps every switch on or off.
+[s], live; ``transfer_time`` [s] ramps every switch on or off (bumpless transfer), Δq_CFC too.
 
 ``mode`` switches between the thesis's force control and the IK-only reference control
-(section 2.3.2) at run time; the command is rate-limited to the drives' v_max, so the switch is
-smooth. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
+(section 2.3.2) at run time; the offsets and Δq_CFC are blended in and out over ``transfer_time``
+(also when a controller reports itself enabled or disabled), and the command is rate-limited to
+the drives' v_max. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
 input, and optionally force limits) hold the last safe θ_d; the command is never NaN.
 """
 from __future__ import annotations
@@ -25,6 +26,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
+from cdpr_control.bumpless import Blend
+from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.joint_command import JointCommand
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import SafetyConfig, SafetyMonitor
@@ -46,17 +49,20 @@ def offset_params(name: str) -> list[ParamSpec]:
             ParamSpec(f"offsets.{name}.deadline", DEFAULT_OFFSET.deadline,
                       f"age of an active {name} state that holds the command [s]", range=(1e-4, 10.0))]
 
+
+_S = SafetyConfig()   # the defaults live in the dataclass (one source of truth)
 PARAMS = [
     ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
               "(2.3.2), the offsets ramped out", choices=("force_control", "ik_only")),
-    ParamSpec("offset_ramp_time", 0.2, "time an offset input takes to ramp in or out when switched [s]",
-              range=(0.0, 10.0)),
     ParamSpec("v_max", 0.0, "rate limit of θ_d [m/s]; 0 = the robot's drive v_max", range=(0.0, 100.0)),
-    ParamSpec("force_tolerance", 0.0, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
-    ParamSpec("hold_on_force_limit", False, "a force-limit fault holds θ_d (else it is only reported)"),
-    ParamSpec("max_position_lag", 0.05, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
-    ParamSpec("max_orientation_lag", 0.1, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
-    ParamSpec("stale_timeout", 0.05, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("force_tolerance", _S.force_tolerance, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
+    ParamSpec("hold_on_force_limit", _S.hold_on_force_limit, "a force-limit fault holds θ_d (else it is only reported)"),
+    ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
+    ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
+    ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
+              "input are blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
+              range=(0.0, 10.0)),
 ]
 
 
@@ -65,10 +71,11 @@ class JointCommandNode(CdprNode):
         super().__init__("joint_command", **kwargs)
         self.names = [f"cable_{i + 1}" for i in range(self.robot.m)]
         self.command = JointCommand(self.robot, self.dt)
+        self.blend_cfc = Blend(0.0, self.dt)        # bumpless transfer of Δq_CFC (offsets: self.offsets)
         self.monitor = SafetyMonitor()
         self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
         names = list(self.get_parameter(OFFSET_INPUTS.name).value)
-        self.offsets = OffsetInputs(names, self.dt)
+        self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
         specs = PARAMS + [spec for name in names for spec in offset_params(name)]
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
@@ -106,8 +113,9 @@ class JointCommandNode(CdprNode):
     def _apply(self, v: dict) -> None:
         self.mode = v["mode"]
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
+        self.blend_cfc.set_transfer_time(v["transfer_time"])
         self.monitor = SafetyMonitor(self._safety(v))
-        self.offsets.configure(self._offset_configs(v), v["offset_ramp_time"])
+        self.offsets.configure(self._offset_configs(v), v["transfer_time"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         theta_msg = self.latest.get("theta")
@@ -122,8 +130,9 @@ class JointCommandNode(CdprNode):
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
         hold = any(f.holds for f in faults)
-        dq_cfc = np.asarray(msgs["cfc"].output) if force_control else None
-        theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold)
+        cfc = msgs["cfc"]
+        s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
+        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
         self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 from cdpr_msgs.msg import ControllerState, OperationalSetpoint
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+from cdpr_control.stability import check_force_control, planned_home_forces
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
@@ -18,11 +20,12 @@ from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
 
+_D = OSPCParams()     # the defaults live in the dataclass (one source of truth)
 PARAMS = [
     ParamSpec("enabled", True, "operational-space position control on; off = x_OSPC held at 0"),
-    ParamSpec("K_p", [0.07] * 6, "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
-    ParamSpec("T_i", [0.18] * 6, "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
-    ParamSpec("x_sat", [0.02, 0.02, 0.02, 0.02, 0.02, 0.02], "output saturation per DOF [m, m, m, rad, rad, rad]"),
+    ParamSpec("K_p", _D.K_p.tolist(), "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
+    ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
+    ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
 ]
 
 
@@ -31,6 +34,7 @@ class OSPCNode(CdprNode):
         super().__init__("ospc", **kwargs)
         self.controller: OperationalSpacePositionController | None = None
         self.enabled = True
+        self.precondition: str | None = None
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
         self.sync = StampSync(self, {
@@ -55,6 +59,10 @@ class OSPCNode(CdprNode):
         if v["enabled"] != self.enabled:
             self.controller.reset()
         self.enabled = v["enabled"]
+        # section 3.1.3: force control without OSPC needs a positive definite K_g; checked at home
+        # for the minimal-tension distribution of the robot file (the node cannot see the others)
+        self.precondition = None if self.enabled else check_force_control(
+            self.robot, self.robot.home, planned_home_forces(self.robot), ospc_enabled=False)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d = pose_from_msg(msgs["setpoint"].pose)
@@ -62,6 +70,8 @@ class OSPCNode(CdprNode):
         state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
                                 names=list(AXES), reference=x_d.tolist(), feedback=x.tolist(),
                                 error=(x_d - x).tolist())
+        if not self.enabled and self.precondition:
+            self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
         if self.enabled and np.all(np.isfinite(x)) and np.all(np.isfinite(x_d)):
             out = self.controller.update(x_d, x)
             state.integrator = self.controller.pi.integrator.tolist()

@@ -64,6 +64,10 @@ def _specs(robot) -> list[ParamSpec]:
     return [
         ParamSpec("substeps", 1, "physics steps per control period (period / substeps <= 1 ms)", (1, 1000), read_only=True),
         ParamSpec("seed", 0, "seed of the sensor noise", (0, 2**31 - 1), read_only=True),
+        ParamSpec("plant", SimConfig.plant, "mismatched: the robot's own parameters differ from the robot file "
+                  "(cdpr_sim/plants/mismatch.yaml); nominal: the robot file (perfect model)",
+                  choices=("mismatched", "nominal"), read_only=True),
+        ParamSpec("plant_seed", SimConfig.plant_seed, "which mismatched robot", (0, 2**31 - 1), read_only=True),
         ParamSpec("cable_damping_time", 0.002, "Kelvin-Voigt damping time constant of the cables [s]", (0.0, 0.05), read_only=True),
         ParamSpec("friction", True, "pulley friction between force sensor and platform (3.30)-(3.43)", read_only=True),
         ParamSpec("noise_scale", 1.0, "force sensor noise as a multiple of the robot file's noise_std [-]", (0.0, 100.0), read_only=True),
@@ -186,9 +190,10 @@ class WinchPlatformSimNode(CdprNode):
             period=self.dt, substeps=v["substeps"], seed=v["seed"], cable_damping_time=v["cable_damping_time"],
             ik_refresh_distance=v["ik_refresh_distance"], friction=v["friction"],
             noise_std=v["noise_scale"] * robot.sensor.noise_std, encoder_counts=v["encoder_counts"],
-            platform_shape=shape, obstacles=tuple(obstacles))
+            platform_shape=shape, obstacles=tuple(obstacles), plant=v["plant"], plant_seed=v["plant_seed"])
         x0, theta0, offset = startup_state(robot, np.asarray(v["initial_pose"], dtype=float),
-                                           v["initial_tension_level"], v["encoder_calibration"] == "home_tension")
+                                           v["initial_tension_level"], v["encoder_calibration"] == "home_tension",
+                                           config)
         return Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset)
 
     # --- inputs ----------------------------------------------------------------------------

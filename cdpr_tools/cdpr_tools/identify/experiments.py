@@ -155,23 +155,24 @@ def circle_trajectory(home, r_c: float = 0.1, frequency: float = 1.0, revolution
     return x
 
 
-def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps: int = 1):
+def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps: int = 1,
+               plant: str = "mismatched"):
     """The simulator at rest at home under the QP forces of ``level``; payload (mass, c) carried from
     the start (tensed and encoders calibrated with it on, so the run starts in equilibrium)."""
     from cdpr_sim.simulator import SimConfig, Simulator
     from cdpr_sim.startup import startup_state
 
     loaded = robot if payload is None else robot.with_payload(*payload)
-    x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True)
-    sim = Simulator(robot, SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps), x0=x0, theta0=theta0,
-                    encoder_offset=offset)
+    config = SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps, plant=plant)
+    x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True, config=config)
+    sim = Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset)
     if payload is not None:
         sim.set_payload(*payload)
     return sim
 
 
 def _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, before_step=None,
-         substeps: int = 1) -> Path:
+         substeps: int = 1, plant: str = "mismatched") -> Path:
     """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag.
 
     payload: (mass, centre of gravity) on the platform; before_step(sim, k): called before step k;
@@ -179,7 +180,7 @@ def _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, b
     """
     from cdpr_tools.bag import BagWriter
 
-    with _simulator(robot, seed, noise_std, level, payload, substeps) as sim, BagWriter(bag_path) as bag:
+    with _simulator(robot, seed, noise_std, level, payload, substeps, plant) as sim, BagWriter(bag_path) as bag:
         rec = _Recorder(bag, robot)
         rec.state(sim.output)
         for k, theta_d in enumerate(commands):
@@ -238,14 +239,18 @@ def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10
 
 
 def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.65, 0.9), hold: float = 0.4,
-                         ramp: float = 0.3, seed: int = 1, level: float = 0.5) -> Path:
+                         ramp: float = 0.3, seed: int = 1, level: float = 0.5, plant: str = "mismatched") -> Path:
     """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
-    (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16)."""
+    (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16).
+    plant: the simulator's plant (cdpr_sim.plant); on the mismatched one the geometry errors are
+    as large as the Mini's elongations and a fit of (2.16) at one pose misses k0 (docs/identify.md)."""
     from cdpr_sim.simulator import pretension_lengths
     from cdpr_sim.startup import startup_forces, startup_state
 
     robot = load_robot(robot) if isinstance(robot, str) else robot
-    offset = startup_state(robot, robot.home, level, calibrate_home=True)[2]
+    from cdpr_sim.simulator import SimConfig
+
+    offset = startup_state(robot, robot.home, level, calibrate_home=True, config=SimConfig(plant=plant))[2]
     targets = [pretension_lengths(robot, robot.home, startup_forces(robot, robot.home, lv)) + offset
                for lv in (level, *levels)]
     n_ramp, n_hold = int(round(ramp / 1e-3)), int(round(hold / 1e-3))
@@ -253,7 +258,7 @@ def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.
     for a, b in zip(targets[:-1], targets[1:]):
         s = 0.5 * (1.0 - np.cos(np.pi * np.arange(1, n_ramp + 1) / n_ramp))
         parts += [a + s[:, None] * (b - a), np.repeat(b[None], n_hold, axis=0)]
-    return _run(robot, bag_path, np.concatenate(parts), None, seed, None, level)
+    return _run(robot, bag_path, np.concatenate(parts), None, seed, None, level, plant=plant)
 
 
 def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitude: float = 5e-4,
