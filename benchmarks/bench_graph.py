@@ -42,7 +42,8 @@ from cdpr_control.robot import load_robot  # noqa: E402
 from cdpr_sim.closed_loop import hold, run  # noqa: E402
 from cdpr_tools.bag import BagReader  # noqa: E402
 from cdpr_tools.demo_cmd import GRAPH  # noqa: E402
-from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file  # noqa: E402
+from cdpr_tools.launch import Launcher, RecordSpec  # noqa: E402
+from cdpr_tools.launch_file import load_launch_file  # noqa: E402
 from cdpr_tools.ros_graph import new_context  # noqa: E402
 
 ROBOT = "ipanema3_mini"

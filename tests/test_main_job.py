@@ -17,7 +17,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from cdpr_test_nodes.graph import wait_for
 from cdpr_tools.bag import BagReader
 from cdpr_tools.demo_cmd import GRAPH
-from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
+from cdpr_tools.launch import Launcher, RecordSpec
+from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.program_client import run_program
 from cdpr_tools.run_report import run_data, summarize
 

@@ -42,7 +42,8 @@ def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
 
 
 def run(args) -> int:
-    from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
+    from cdpr_tools.launch import Launcher, RecordSpec
+    from cdpr_tools.launch_file import load_launch_file
     from cdpr_tools.program_client import run_program
     from cdpr_tools.run_report import plot_run, read_bag, summarize
 

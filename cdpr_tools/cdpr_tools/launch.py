@@ -1,4 +1,4 @@
-"""The launcher: start a node graph from a YAML description, composed or one process per node.
+"""The launcher: start a node graph from a launch description, composed or one process per node.
 
 ``launch``/``launch_ros`` are not on PyPI, so the project starts its graphs itself. A graph is a
 list of nodes (a Python module following the node convention of docs/tools.md, or a console-script
@@ -21,7 +21,6 @@ import importlib
 import importlib.metadata
 import inspect
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -46,7 +45,6 @@ STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SI
 # child process: import the node module and call its main([module, --ros-args, ...])
 _BOOTSTRAP = ("import importlib, sys; "
               "sys.exit(getattr(importlib.import_module(sys.argv[1]), sys.argv[2])([sys.argv[1]] + sys.argv[3:]))")
-_SUBSTITUTION = re.compile(r"\$\((arg|env)\s+([A-Za-z_][\w]*)(?:\s+([^)]*))?\)")
 
 
 @dataclass
@@ -97,98 +95,7 @@ class LaunchDescription:
     source: Path | None = None  # the launch file, for messages and relative paths
 
 
-# -- launch files ---------------------------------------------------------------------------------
-_TOP_KEYS = {"arguments", "mode", "parameters", "record", "nodes"}
-_NODE_KEYS = {"module", "entry_point", "name", "namespace", "parameters", "remappings", "ros_args", "required"}
-_RECORD_KEYS = {"output", "topics", "exclude", "include_hidden_topics"}
-
-
-def load_launch_file(path: str | os.PathLike, arguments: dict | None = None) -> LaunchDescription:
-    """Read a launch file (schema in docs/tools.md); ``arguments`` override its ``arguments:``."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"launch file {path} not found") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: a launch file is a mapping with a 'nodes' list")
-    _check_keys(data, _TOP_KEYS, str(path))
-    declared = {str(k): v for k, v in (data.get("arguments") or {}).items()}
-    unknown = sorted(set(arguments or {}) - set(declared))
-    if unknown:
-        raise ValueError(f"{path}: unknown argument {', '.join(unknown)}; arguments: {', '.join(declared) or '(none)'}")
-    values = {**declared, **(arguments or {})}
-    data = _substitute({k: v for k, v in data.items() if k != "arguments"}, values, path)
-    base = path.parent
-    nodes = []
-    for i, entry in enumerate(data.get("nodes") or []):
-        where = f"{path}: nodes[{i}]"
-        if not isinstance(entry, dict):
-            raise ValueError(f"{where}: a node is a mapping with module or entry_point")
-        _check_keys(entry, _NODE_KEYS, where)
-        params = entry.get("parameters") or []
-        params = [params] if isinstance(params, dict) else list(params)
-        params = [p if isinstance(p, dict) else _existing(base / str(p), where) for p in params]
-        remaps = entry.get("remappings") or {}
-        if isinstance(remaps, list):  # also accept ["from:=to", ...]
-            remaps = dict(r.split(":=", 1) for r in remaps)
-        nodes.append(NodeSpec(module=entry.get("module"), entry_point=entry.get("entry_point"),
-                              name=entry.get("name"), namespace=entry.get("namespace"), parameters=params,
-                              remappings={str(k): str(v) for k, v in remaps.items()},
-                              ros_args=[str(a) for a in entry.get("ros_args") or []],
-                              required=bool(entry.get("required", False))))
-        nodes[-1].target()  # fail now on a missing entry point or an ambiguous spec
-    if not nodes:
-        raise ValueError(f"{path}: no nodes")
-    record = data.get("record")
-    if record is True:
-        record = {}
-    if isinstance(record, dict):
-        _check_keys(record, _RECORD_KEYS, f"{path}: record")
-        record = RecordSpec(**record)
-    elif record not in (None, False):
-        raise ValueError(f"{path}: record is true, false or a mapping of {', '.join(sorted(_RECORD_KEYS))}")
-    mode = data.get("mode", "composed")
-    if mode not in MODES:
-        raise ValueError(f"{path}: mode must be one of {', '.join(MODES)}, got {mode!r}")
-    return LaunchDescription(nodes=nodes, mode=mode, parameters=dict(data.get("parameters") or {}),
-                             record=record or None, source=path)
-
-
-def _check_keys(mapping: dict, allowed: set, where: str) -> None:
-    unknown = sorted(set(mapping) - allowed)
-    if unknown:
-        raise ValueError(f"{where}: unknown key {', '.join(map(str, unknown))}; allowed: {', '.join(sorted(allowed))}")
-
-
-def _existing(path: Path, where: str) -> str:
-    if not path.is_file():
-        raise FileNotFoundError(f"{where}: parameter file {path} not found")
-    return str(path)
-
-
-def _substitute(value, arguments: dict, path: Path):
-    """Replace ``$(arg NAME)`` and ``$(env NAME [default])`` in every string (typed if alone)."""
-    if isinstance(value, dict):
-        return {k: _substitute(v, arguments, path) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_substitute(v, arguments, path) for v in value]
-    if not isinstance(value, str) or "$(" not in value:
-        return value
-
-    def replace(match: re.Match) -> str:
-        kind, name, default = match.groups()
-        if kind == "arg":
-            if name not in arguments:
-                raise ValueError(f"{path}: $(arg {name}) is not declared under arguments")
-            return str(arguments[name])
-        if name in os.environ or default is not None:
-            return os.environ.get(name, default)
-        raise ValueError(f"{path}: environment variable {name} is not set and $(env {name}) has no default")
-
-    full = _SUBSTITUTION.fullmatch(value.strip())
-    text = _SUBSTITUTION.sub(replace, value)
-    return yaml.safe_load(text) if full and text.strip() else text
+# Launch files (ROS 2 YAML launch format) are read by cdpr_tools.launch_file.load_launch_file.
 
 
 # -- the arguments every node gets ------------------------------------------------------------------

@@ -1,8 +1,9 @@
-"""``cdpr launch FILE [NAME:=VALUE ...]``: start a node graph from a YAML launch file.
+"""``cdpr launch FILE [NAME:=VALUE ...]``: start a node graph from a ROS 2 YAML launch file.
 
-The graph runs composed in one process (EventsExecutor) or as one process per node
+The graph runs composed in one process (EventsExecutor, the default) or as one process per node
 (``--mode processes``), optionally recording every topic to a bag (``--record``). Ctrl-C stops it
-cleanly. The launch file schema is in docs/tools.md.
+cleanly. The file is in ROS 2's YAML launch format (the subset cdpr launch reads is in
+docs/tools.md; anything else is an error naming the file and the entry).
 """
 from __future__ import annotations
 
@@ -12,16 +13,17 @@ from dataclasses import asdict
 
 import yaml
 
-from cdpr_tools.launch import MODES, Launcher, RecordSpec, load_launch_file
+from cdpr_tools.launch import MODES, Launcher, RecordSpec
+from cdpr_tools.launch_file import load_launch_file
 from cdpr_control.nodes.runner import stop_on_signals
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("launch", help="start a node graph from a YAML launch file",
+    p = sub.add_parser("launch", help="start a node graph from a ROS 2 YAML launch file",
                        description=__doc__.replace("``", ""), formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", help="launch file (YAML)")
+    p.add_argument("file", help="launch file (ROS 2 YAML launch format)")
     p.add_argument("arguments", nargs="*", metavar="NAME:=VALUE", help="values for the file's arguments")
-    p.add_argument("--mode", choices=MODES, help="override the file's mode")
+    p.add_argument("--mode", choices=MODES, help="composed (default): one process; processes: one per node")
     p.add_argument("--record", nargs="?", const="", metavar="BAG",
                    help="record every topic (to BAG, default bags/rosbag2_<date>-<time>)")
     p.add_argument("--show", action="store_true", help="print the resolved launch description, start nothing")
