@@ -57,7 +57,7 @@ def test_colcon_build_installs_executables_and_share_files_found_by_ament_index(
                           "--build-base", str(tmp_path / "build"), "--install-base", str(tmp_path / "install")],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    assert "Summary: 3 packages finished" in run.stdout
+    assert all(f"Finished <<< {p}" in run.stdout for p in PACKAGES)
     install = tmp_path / "install"
     for package in PACKAGES:
         lib = install / package / "lib" / package
