@@ -144,6 +144,7 @@ def test_composed_graph_runs_in_process_and_records(tmp_path, listen):
     collector = listen.add(Collector, topics={"/comp/heard": Int32})
     launcher = Launcher(load_recorded(tmp_path, "composed", "/comp"))
     with launcher:
+        assert {"/comp/chatter", "/comp/heard"} <= set(launcher.recorder.recorded_topics)  # held until recorded
         talker = next(n for n in launcher.nodes if n.get_name() == "talker_x")
         assert talker.get_fully_qualified_name() == "/comp/talker_x"
         assert talker.get_parameter("rate").value == 100.0

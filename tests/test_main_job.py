@@ -96,10 +96,8 @@ def job(tmp_path_factory):
     description.record = RecordSpec(output=str(bag))
     with Launcher(description, mode="composed") as launch:
         sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").sim
-        # The launcher starts the loop before its recorder has discovered the topics (up to ~4 s
-        # of wall time later); waiting here keeps the whole program in the bag.
-        wait_for(lambda: set(LOOP_TYPES) <= set(launch.recorder.recorded_topics), timeout=60.0,
-                 what="the recorder to subscribe to the loop topics")
+        # the launcher holds the composed graph until its recorder records every loop topic
+        assert set(LOOP_TYPES) <= set(launch.recorder.recorded_topics)
         result = run_program(PROGRAM, "short", timeout=120.0)
         t_end = sim.t
         wait_for(lambda: sim.t >= t_end + SETTLE_S, timeout=60.0, what="the loop to run on after the program")

@@ -11,5 +11,10 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     from cdpr_control.analysis.force_distribution_comparison import main
+    from cdpr_tools.progress import Progress
 
-    return main(args.options)
+    progress = Progress("analyze force-distribution")
+    try:
+        return main(args.options, progress=progress.update)
+    finally:
+        progress.done()

@@ -10,7 +10,9 @@ remappings. Every node gets the same ``--ros-args`` in both modes:
 - ``processes``: one subprocess per node, ``main([module, --ros-args ...])``; DDS connects them, so
   they may as well run on other machines.
 
-Optionally every topic is recorded to a bag meanwhile. ``stop()`` (Ctrl-C in ``cdpr launch``)
+Optionally every topic is recorded to a bag meanwhile; a composed graph is held (not spun) until
+the recorder has subscribed to every topic it publishes, so a lockstep run is recorded from its
+first period. ``stop()`` (Ctrl-C in ``cdpr launch``)
 ends everything cleanly: executors stop, nodes are destroyed, children get SIGINT (then SIGTERM,
 then SIGKILL if they hang), the bag is closed.
 """
@@ -26,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,10 +41,11 @@ from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
 from cdpr_control.nodes.runner import spin
-from cdpr_tools.ros_graph import keep_discovery_local, new_context
+from cdpr_tools.ros_graph import _hidden_topic, keep_discovery_local, new_context
 
 MODES = ("composed", "processes")
 STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SIGTERM
+RECORDER_TIMEOUT = 60.0  # s the recorder may take to discover a composed graph's topics
 # child process: import the node module and call its main([module, --ros-args, ...])
 _BOOTSTRAP = ("import importlib, sys; "
               "sys.exit(getattr(importlib.import_module(sys.argv[1]), sys.argv[2])([sys.argv[1]] + sys.argv[3:]))")
@@ -167,8 +171,12 @@ class Launcher:
                 self._start_composed()
             if self.description.record is not None:
                 self._start_recorder(self.description.record)
+                if self.mode == "composed":
+                    self._threads[-1].start()  # the recorder spins, the graph waits for it
+                    self._hold_until_recorded()
             for thread in self._threads:
-                thread.start()
+                if thread.ident is None:
+                    thread.start()
         except BaseException:
             self.stop()
             raise
@@ -222,6 +230,21 @@ class Launcher:
         executor.add_node(self.recorder)
         self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "recorder"),
                                               name="cdpr-launch-recorder", daemon=True))
+
+    def _hold_until_recorded(self, timeout: float = RECORDER_TIMEOUT) -> None:
+        """Composed graph, not yet spun: wait until the recorder records every topic it publishes.
+
+        DDS discovery takes up to seconds; a lockstep graph would meanwhile run its first periods
+        unrecorded. Nothing of the graph runs before its executor spins, so holding it costs nothing.
+        """
+        topics = {p.topic_name for node in self.nodes for p in node.publishers}
+        topics = {t for t in topics if self.recorder.wanted(t) and not _hidden_topic(t)}
+        deadline = time.monotonic() + timeout
+        while not topics <= set(self.recorder.recorded_topics):
+            if time.monotonic() > deadline:
+                missing = sorted(topics - set(self.recorder.recorded_topics))
+                raise TimeoutError(f"the recorder did not subscribe to {', '.join(missing)} within {timeout:g} s")
+            time.sleep(0.05)
 
     def _new_context(self) -> Context:
         context = new_context()
