@@ -19,7 +19,7 @@ from cdpr_control.nodes.runner import spin
 from cdpr_tools.bag.schema import message_definition
 from cdpr_tools.launch import Launcher
 from cdpr_tools.launch_file import load_launch_file
-from cdpr_tools.marker_plot import plot_marker_array
+from cdpr_tools.marker_plot import Scene, plot_markers
 from cdpr_tools.nodes.foxglove_bridge import FoxgloveBridge
 from cdpr_tools.ros_graph import new_context
 from cdpr_tools.share import package_share
@@ -107,7 +107,14 @@ def test_winch_state_and_markers_arrive_and_decode_with_the_bag_schema(live, tmp
     client.receive(lambda: sim.sim.steps > 100)  # past the start-up handshake (state of stamp 0 repeated)
     client.subscribe(1, "/winch/state")
     client.subscribe(2, "/visualization/markers")
-    client.receive(lambda: len(client.messages.get(1, [])) >= 20 and len(client.messages.get(2, [])) >= 2)
+    scene = Scene()  # the newest marker per (ns, id), as Foxglove keeps them
+
+    def markers_complete() -> bool:  # frame and anchors come once a second
+        for _, array in client.messages.pop(2, []):
+            scene.add(array)
+        return "frame" in scene.namespaces and "cables" in scene.namespaces
+
+    client.receive(lambda: len(client.messages.get(1, [])) >= 20 and markers_complete())
 
     states = [m for _, m in client.messages[1]]
     stamps = [s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states]
@@ -115,9 +122,10 @@ def test_winch_state_and_markers_arrive_and_decode_with_the_bag_schema(live, tmp
     assert all(b > a for a, b in zip(stamps, stamps[1:]))  # the 1 kHz loop, in order
     assert all(np.diff(stamps) % 1_000_000 == 0)  # whole control periods of 1 ms
 
-    markers = {m.ns: m for m in client.messages[2][-1][1].markers}
-    assert set(markers) == {"frame", "anchors", "pulleys", "cables", "platform", "setpoint", "wrench"}
-    assert all(m.header.frame_id == "base" for m in markers.values())
+    assert scene.namespaces == {"frame", "anchors", "pulleys", "cables", "platform", "setpoint", "wrench"}
+    assert sorted(i for ns, i in scene.markers if ns == "pulleys") == list(range(robot.m))  # a disc per pulley
+    assert all(m.header.frame_id == "base" for m in scene.markers.values())
+    markers = {ns: m for (ns, i), m in scene.markers.items() if i == 0}
     anchors = np.array([(p.x, p.y, p.z) for p in markers["anchors"].points])
     np.testing.assert_allclose(anchors, robot.a, atol=1e-12)
     cables = markers["cables"]
@@ -128,7 +136,7 @@ def test_winch_state_and_markers_arrive_and_decode_with_the_bag_schema(live, tmp
     # pretensioned at minimal tension: forces within their limits, so no cable is drawn magenta
     assert not any(c.r == 1.0 and c.b == 1.0 and c.g == 0.0 for c in cables.colors)
 
-    png = plot_marker_array(client.messages[2][-1][1], tmp_path / "markers.png")
+    png = plot_markers(scene, tmp_path / "markers.png")
     assert png.stat().st_size > 10_000
 
 

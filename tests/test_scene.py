@@ -28,22 +28,31 @@ def test_cables_run_from_the_pulley_leave_points_to_the_platform_points(robot):
     np.testing.assert_allclose(length, inverse_kinematics(robot, x).l_f, rtol=1e-12)  # free length (2.5)
 
 
-def test_pulley_circles_pass_through_anchor_and_leave_point(robot):
+def test_pulley_wheels_touch_the_swivel_axis_at_a_and_release_the_cable_at_c(robot):
     x = pose(robot)
     view = sc.scene(robot, x)
     if not robot.swivelling_pulleys:
-        assert view.pulley_edges.shape == (0, 2, 3)
+        assert view.pulley_centres.shape == (0, 3)
         return
-    edges = view.pulley_edges.reshape(robot.m, sc.PULLEY_SEGMENTS, 2, 3)
-    np.testing.assert_allclose(edges[:, 0, 0], robot.a, atol=1e-12)  # the swivel axis touches the circle at a_i
-    np.testing.assert_allclose(edges[:, -1, 1], robot.a, atol=1e-12)  # closed
-    c = inverse_kinematics(robot, x).c
-    for i in range(robot.m):
-        centre = edges[i, :, 0].mean(axis=0)
-        np.testing.assert_allclose(np.linalg.norm(edges[i, :, 0] - centre, axis=1), robot.r_p[i], rtol=1e-9)
-        assert abs(np.linalg.norm(c[i] - centre) - robot.r_p[i]) < 1e-9  # C_i on the circle (2.8)
-        normal = np.cross(edges[i, 1, 0] - centre, edges[i, 2, 0] - centre)
-        assert abs(np.dot(c[i] - centre, normal / np.linalg.norm(normal))) < 1e-9  # in the pulley plane
+    ik = inverse_kinematics(robot, x)
+    for centre, normal, r_p, a, c, u in zip(view.pulley_centres, view.pulley_normals, view.pulley_radii,
+                                            robot.a, ik.c, ik.u):
+        np.testing.assert_allclose(np.linalg.norm(normal), 1.0, rtol=1e-12)
+        for point in (a, c):  # on the rim: at r_p from the centre, in the wheel's plane
+            np.testing.assert_allclose(np.linalg.norm(point - centre), r_p, rtol=1e-9)
+            assert abs(np.dot(point - centre, normal)) < 1e-12
+        assert abs(np.dot(c - centre, u)) < 1e-9 * r_p  # the cable leaves tangentially (2.8)
+
+
+@pytest.mark.parametrize("n", [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0.3, -0.5, 0.8)])
+def test_quaternion_takes_the_cylinder_axis_to_the_pulley_normal(n):
+    q = sc.z_to(n)
+    np.testing.assert_allclose(np.linalg.norm(q), 1.0, rtol=1e-12)
+    x, y, z, w = q
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    np.testing.assert_allclose(R[:, 2], np.asarray(n) / np.linalg.norm(n), atol=1e-12)
 
 
 def test_frame_box_and_platform_hull(robot):

@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
     p.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="offer only these topics")
     p.add_argument("--exclude", default="", metavar="REGEX", help="do not offer topics matching REGEX")
     p.add_argument("--use-sim-time", action="store_true", help="log times from /clock (the simulation's time)")
-    p.add_argument("--snapshot", metavar="PNG", help="instead: draw the next /visualization/markers message "
+    p.add_argument("--snapshot", metavar="PNG", help="instead: draw the markers on /visualization/markers "
                    "(matplotlib 3D, what Foxglove's 3D panel shows) to PNG and exit")
     p.add_argument("--timeout", type=float, default=30.0, help="with --snapshot: wait this long for markers [s]")
     p.set_defaults(run=run)
@@ -56,14 +56,14 @@ def snapshot(path: str, timeout: float) -> int:
     from visualization_msgs.msg import MarkerArray
 
     from cdpr_control.nodes.qos import CONTROL
-    from cdpr_tools.marker_plot import plot_marker_array
+    from cdpr_tools.marker_plot import Scene, plot_markers
     from cdpr_tools.ros_graph import graph_node, spin_until
 
-    received = []
-    with graph_node("view") as node:
-        node.create_subscription(MarkerArray, "/visualization/markers", received.append, CONTROL)
-        if not spin_until(node, lambda: bool(received), timeout):
-            raise TimeoutError(f"no /visualization/markers within {timeout:g} s (is a graph with the "
-                               "visualization node running?)")
-    print(f"[view] {plot_marker_array(received[0], path)}")
+    scene = Scene()
+    with graph_node("view") as node:  # until the static markers (sent once a second) came too
+        node.create_subscription(MarkerArray, "/visualization/markers", scene.add, CONTROL)
+        if not spin_until(node, lambda: {"frame", "cables"} <= scene.namespaces, timeout):
+            raise TimeoutError(f"no complete /visualization/markers within {timeout:g} s (is a graph with "
+                               "the visualization node running?)")
+    print(f"[view] {plot_markers(scene, path)}")
     return 0

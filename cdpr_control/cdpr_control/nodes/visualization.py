@@ -10,8 +10,9 @@ remap to ``ground_truth/pose`` to see the simulator's), ``cable_forces``, ``setp
 The 1 kHz loop pays nothing for the view: the inputs are *sampled*, not subscribed with callbacks.
 Their subscriptions (keep-last 1) belong to a hidden helper node that no executor spins, and a
 timer at ``rate`` [Hz] (steady clock, so also in a lockstep simulation running slower than real
-time) takes the newest message of each and publishes one MarkerArray. The loop's publishers only
-hand each message to one more reader.
+time) takes the newest message of each and publishes one MarkerArray (frame and anchors once a
+second). The loop's publishers only hand each message to one more reader; the figure is in
+docs/visualization.md (benchmarks/bench_visualization.py).
 
 tf2_msgs is not among the ROS 2 wheels on PyPI, so there is no ``/tf``: every marker is in ``base``
 and the platform pose is drawn directly (Foxglove and RViz display ``base`` as the fixed frame).
@@ -37,7 +38,7 @@ from .qos import CONTROL
 
 FRAME = "base"
 PARAMS = [
-    ParamSpec("rate", 20.0, "markers published per second of wall time [Hz]", range=(0.1, 100.0), read_only=True),
+    ParamSpec("rate", 10.0, "markers published per second of wall time [Hz]", range=(0.1, 100.0), read_only=True),
     ParamSpec("force_scale", 0.0, "length of the force arrow per newton [m/N]; 0: a tenth of the frame "
               "diagonal for the mean f_max", range=(0.0, 10.0)),
 ]
@@ -60,8 +61,11 @@ class VisualizationNode(CdprNode):
         self._subs = {key: self._sampler.create_subscription(cls, topic, _unused, SAMPLED)
                       for key, (cls, topic) in INPUTS.items()}
         self.latest: dict = {}
-        self.create_timer(1.0 / self.get_parameter("rate").value, self.publish_markers,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        rate = self.get_parameter("rate").value
+        self.static_every = max(1, round(rate))  # frame and anchors once a second: they do not move
+        self.ticks = 0
+        self.markers = Markers()
+        self.create_timer(1.0 / rate, self.publish_markers, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _apply(self, v: dict) -> None:
         self.force_scale = float(v["force_scale"]) or None
@@ -86,7 +90,8 @@ class VisualizationNode(CdprNode):
                         w=None if wrench is None else wrench_from_msg(wrench.wrench), force_scale=self.force_scale)
         if not np.all(np.isfinite(view.cables)):
             return  # a pose outside the model (cable inside a pulley): nothing sensible to draw
-        self.marker_pub.publish(markers(view, pose.header.stamp))
+        self.marker_pub.publish(self.markers.build(view, pose.header.stamp, static=self.ticks % self.static_every == 0))
+        self.ticks += 1
 
     def destroy_node(self):
         self._sampler.destroy_node()
@@ -98,41 +103,64 @@ def _unused(msg) -> None:  # the sampler's subscriptions are read with take_mess
 
 
 def _points(array) -> list[Point]:
-    return [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in np.asarray(array).reshape(-1, 3)]
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(array, dtype=float).reshape(-1, 3).tolist()]
 
 
-def _marker(ns: str, kind: int, stamp, rgba, scale=(1.0, 1.0, 1.0), points=None, colors=None) -> Marker:
-    m = Marker(ns=ns, id=0, type=kind, action=Marker.ADD, lifetime=Duration())
-    m.header.frame_id, m.header.stamp = FRAME, stamp
-    m.pose.orientation.w = 1.0
-    m.scale = Vector3(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
-    m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
-    m.points = points or []
-    m.colors = colors or []
-    return m
+class Markers:
+    """Builds the MarkerArray of a scene. The Marker messages are made once and updated in place:
+    constructing one (with its nested defaults) costs far more than filling in its points."""
 
+    def __init__(self):
+        self._made: dict[tuple, Marker] = {}
 
-def markers(view: sc.Scene, stamp) -> MarkerArray:
-    """One marker per namespace: frame, anchors, pulleys, cables, platform, setpoint, wrench."""
-    size = float(np.linalg.norm(np.ptp(view.anchors, axis=0)))
-    line, dot = 0.002 * size, 0.01 * size
-    out = [
-        _marker("frame", Marker.LINE_LIST, stamp, (0.5, 0.5, 0.5, 1.0), (line, 0, 0), _points(view.frame_edges)),
-        _marker("anchors", Marker.SPHERE_LIST, stamp, (0.2, 0.2, 0.2, 1.0), (dot, dot, dot), _points(view.anchors)),
-        _marker("pulleys", Marker.LINE_LIST, stamp, (0.1, 0.1, 0.1, 1.0), (line / 2, 0, 0), _points(view.pulley_edges)),
-    ]
-    colours = [ColorRGBA(r=c[0], g=c[1], b=c[2], a=1.0) for c in map(sc.force_colour, view.force_level) for _ in (0, 1)]
-    out.append(_marker("cables", Marker.LINE_LIST, stamp, (1.0, 1.0, 1.0, 1.0), (1.5 * line, 0, 0),
-                       _points(view.cables), colours))
-    out.append(_marker("platform", Marker.TRIANGLE_LIST, stamp, (0.95, 0.6, 0.1, 0.8), points=_points(view.platform_triangles)))
-    if view.setpoint is not None:
-        m = _marker("setpoint", Marker.SPHERE, stamp, (0.0, 0.8, 0.2, 0.6), (dot, dot, dot))
-        m.pose.position = _points(view.setpoint)[0]
+    def _marker(self, ns: str, kind: int, stamp, rgba, scale=(1.0, 1.0, 1.0), id: int = 0) -> Marker:
+        m = self._made.get((ns, id))
+        if m is None:
+            m = self._made[ns, id] = Marker(ns=ns, id=id, type=kind, action=Marker.ADD, lifetime=Duration())
+            m.header.frame_id = FRAME
+            m.pose.orientation.w = 1.0
+            m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+        m.header.stamp = stamp
+        m.scale = Vector3(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
+        return m
+
+    def build(self, view: sc.Scene, stamp, static: bool = True) -> MarkerArray:
+        """Markers by namespace: frame and anchors (only if ``static``: they never move, and viewers
+        keep a marker until it is replaced), pulleys (one disc each, id = cable index), cables,
+        platform, setpoint, wrench."""
+        size = float(np.linalg.norm(np.ptp(view.anchors, axis=0)))
+        line, dot = 0.002 * size, 0.01 * size
+        out = []
+        if static:
+            m = self._marker("frame", Marker.LINE_LIST, stamp, (0.5, 0.5, 0.5, 1.0), (line, 0, 0))
+            m.points = _points(view.frame_edges)
+            a = self._marker("anchors", Marker.SPHERE_LIST, stamp, (0.2, 0.2, 0.2, 1.0), (dot, dot, dot))
+            a.points = _points(view.anchors)
+            out += [m, a]
+        centres, turns = _points(view.pulley_centres), sc.z_to(view.pulley_normals).tolist()  # disc axis = normal
+        for i, (centre, (qx, qy, qz, qw), r_p) in enumerate(zip(centres, turns, view.pulley_radii)):
+            m = self._marker("pulleys", Marker.CYLINDER, stamp, (0.15, 0.15, 0.15, 0.9), (2 * r_p, 2 * r_p, 0.3 * r_p), i)
+            m.pose.position = centre
+            o = m.pose.orientation
+            o.x, o.y, o.z, o.w = qx, qy, qz, qw
+            out.append(m)
+        m = self._marker("cables", Marker.LINE_LIST, stamp, (1.0, 1.0, 1.0, 1.0), (1.5 * line, 0, 0))
+        m.points = _points(view.cables)
+        m.colors = [ColorRGBA(r=c[0], g=c[1], b=c[2], a=1.0) for c in map(sc.force_colour, view.force_level)
+                    for _ in (0, 1)]
         out.append(m)
-    if view.force_arrow is not None:  # shaft diameter, head diameter, head length
-        out.append(_marker("wrench", Marker.ARROW, stamp, (0.8, 0.1, 0.8, 1.0), (line * 2, line * 4, line * 6),
-                           _points(view.force_arrow)))
-    return MarkerArray(markers=out)
+        m = self._marker("platform", Marker.TRIANGLE_LIST, stamp, (0.95, 0.6, 0.1, 0.8))
+        m.points = _points(view.platform_triangles)
+        out.append(m)
+        if view.setpoint is not None:
+            m = self._marker("setpoint", Marker.SPHERE, stamp, (0.0, 0.8, 0.2, 0.6), (dot, dot, dot))
+            m.pose.position = _points(view.setpoint)[0]
+            out.append(m)
+        if view.force_arrow is not None:  # scale: shaft diameter, head diameter, head length
+            m = self._marker("wrench", Marker.ARROW, stamp, (0.8, 0.1, 0.8, 1.0), (line * 2, line * 4, line * 6))
+            m.points = _points(view.force_arrow)
+            out.append(m)
+        return MarkerArray(markers=out)
 
 
 def main(args=None):
