@@ -116,6 +116,17 @@ launch:
     assert (package_share("cdpr_control") / "params" / "ipanema3_mini.yaml").is_file()
 
 
+def test_cdpr_launch_finds_a_file_in_a_package_share_and_shows_it():
+    run = subprocess.run([sys.executable, "-m", "cdpr_tools.cli", "launch", "cdpr_tools", "closed_loop.yaml",
+                          "robot:=ipanema3", "--show"], capture_output=True, text=True, env=subprocess_env(), timeout=60)
+    assert run.returncode == 0, run.stderr
+    shown = yaml.safe_load(run.stdout)
+    assert shown["mode"] == "composed" and shown["parameters"] == {"use_sim_time": True, "sync_mode": "exact"}
+    modules = [n["module"] for n in shown["nodes"]]
+    assert modules[0] == "cdpr_sim.nodes.winch_platform_sim" and "cdpr_control.nodes.visualization" in modules
+    assert all(n["parameters"][0].endswith("params/ipanema3.yaml") for n in shown["nodes"])
+
+
 @pytest.mark.parametrize("change, message", [
     (lambda t: t + "  - include: {file: other.launch.yaml}\n", r"launch\[5\]: 'include' is not supported by cdpr launch"),
     (lambda t: t.replace("on_exit: shutdown", "respawn: true"), r"launch\[4\] \(node\): 'respawn' is not supported"),

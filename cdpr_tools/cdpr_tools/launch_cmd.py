@@ -1,4 +1,4 @@
-"""``cdpr launch FILE [NAME:=VALUE ...]``: start a node graph from a ROS 2 YAML launch file.
+"""``cdpr launch FILE|PACKAGE FILE [NAME:=VALUE ...]``: start a node graph from a ROS 2 YAML launch file.
 
 The graph runs composed in one process (EventsExecutor, the default) or as one process per node
 (``--mode processes``), optionally recording every topic to a bag (``--record``). Ctrl-C stops it
@@ -10,18 +10,20 @@ from __future__ import annotations
 import argparse
 import threading
 from dataclasses import asdict
+from pathlib import Path
 
 import yaml
 
 from cdpr_tools.launch import MODES, Launcher, RecordSpec
-from cdpr_tools.launch_file import load_launch_file
+from cdpr_tools.launch_file import find_launch_file, load_launch_file
 from cdpr_control.nodes.runner import stop_on_signals
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("launch", help="start a node graph from a ROS 2 YAML launch file",
                        description=__doc__.replace("``", ""), formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", help="launch file (ROS 2 YAML launch format)")
+    p.add_argument("file", help="launch file (ROS 2 YAML launch format), or a package whose share holds the "
+                   "file named next (as ros2 launch PACKAGE FILE)")
     p.add_argument("arguments", nargs="*", metavar="NAME:=VALUE", help="values for the file's arguments")
     p.add_argument("--mode", choices=MODES, help="composed (default): one process; processes: one per node")
     p.add_argument("--record", nargs="?", const="", metavar="BAG",
@@ -41,6 +43,8 @@ def parse_arguments(items: list[str]) -> dict[str, str]:
 
 
 def run(args) -> int:
+    if not Path(args.file).is_file() and args.arguments and ":=" not in args.arguments[0]:
+        args.file = str(find_launch_file(args.file, args.arguments.pop(0)))
     description = load_launch_file(args.file, parse_arguments(args.arguments))
     if args.record is not None:
         record = description.record or RecordSpec()

@@ -67,6 +67,17 @@ def load_launch_file(path: str | os.PathLike, arguments: dict | None = None) -> 
     return LaunchDescription(nodes=reader.nodes, parameters=reader.common, source=path)
 
 
+def find_launch_file(package: str, name: str) -> Path:
+    """``ros2 launch PACKAGE NAME``: the file called ``name`` anywhere in the package's share."""
+    share = package_share(package)
+    found = sorted(share.rglob(name))
+    if not found:
+        raise FileNotFoundError(f"no launch file {name!r} in {share} (package {package})")
+    if len(found) > 1:
+        raise LookupError(f"several files {name!r} in {share}: {', '.join(str(p) for p in found)}")
+    return found[0]
+
+
 def resolve_executable(package: str, executable: str, where: str) -> NodeSpec:
     """The node spec (module or entry point) that runs ``ros2 run PACKAGE EXECUTABLE``."""
     try:
