@@ -12,6 +12,7 @@ from cdpr_test_nodes.graph import Collector, Spinner, subprocess_env, wait_for
 from cdpr_tools.bag import BagReader
 from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, RecordSpec, node_class, ros_arguments
 from cdpr_tools.launch_file import load_launch_file
+from cdpr_tools.share import package_share
 
 GRAPH = """
 launch:
@@ -212,3 +213,19 @@ def test_a_raising_callback_ends_a_composed_launch_with_the_error(capfd):
         assert launcher.wait(15)
     assert launcher.errors == ["graph: RuntimeError: boom"]
     assert "RuntimeError: boom" in capfd.readouterr().out  # the traceback, printed under [graph]
+
+
+@pytest.mark.parametrize("mode", ["composed", "processes"])
+def test_the_shipped_graph_runs_in_both_modes(listen, mode):
+    """closed_loop.yaml (IPAnema 3 Mini, nominal simulator plant, lockstep) loops and draws markers."""
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    collector = listen.add(Collector, topics={"/winch/state": JointState, "/visualization/markers": MarkerArray})
+    description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml")
+    with Launcher(description, mode=mode) as launcher:
+        wait_for(lambda: collector.count("/winch/state") > 200 and collector.count("/visualization/markers") > 2,
+                 timeout=120, what=f"the {mode} graph to loop and draw")
+        assert not launcher.wait(0)  # still running
+    assert not launcher.errors
+    assert all(code == 0 for code in launcher.exit_codes.values())
