@@ -50,6 +50,7 @@ OTHER_TYPES = {  # present whenever the recorder saw a publisher; the first two 
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "/rosout": "rcl_interfaces/msg/Log",
     "/parameter_events": "rcl_interfaces/msg/ParameterEvent",
+    "/visualization/markers": "visualization_msgs/msg/MarkerArray",  # 10 Hz of wall time
 }
 TYPES = {**LOOP_TYPES, **OTHER_TYPES}
 
