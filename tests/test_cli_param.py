@@ -83,6 +83,27 @@ def test_parameter_file_selection(tmp_path):
         parameters_for_node(str(path), "/nobody", use_wildcard=False)
 
 
+def test_negative_yaml_values_are_values_not_options(talker, capfd):
+    # -.inf parses as the value (argparse would take it for an option); the node refuses it by range
+    rc, _, err = cdpr(capfd, "set", NAME, "rate", "-.inf")
+    assert rc == 1 and "Setting parameter failed" in err and "out of range" in err
+    assert cdpr(capfd, "set", NAME, "gains.kp", "-1.0e-3")[0] == 0
+    assert talker.get_parameter("gains.kp").value == -1e-3
+    assert cdpr(capfd, "set", NAME, "gains.kp", "1.5")[0] == 0
+
+
+def test_integer_beyond_int64_is_refused_with_the_reason(talker, capfd):
+    rc, _, err = cdpr(capfd, "set", NAME, "gains.axes", "[1, 99999999999999999999]")
+    assert rc == 1 and "beyond the 64-bit integers" in err and "1e+20" in err
+    assert list(talker.get_parameter("gains.axes").value) == [1, 2, 3]
+
+
+def test_undeclared_parameter_is_named_by_get_and_describe(talker, capfd):
+    for verb in ("get", "describe"):
+        rc, out, err = cdpr(capfd, verb, NAME, "no_such_param")
+        assert rc == 1 and f"node /{NAME} has no parameter no_such_param" in err and "cdpr param list" in err
+
+
 def test_unknown_node_names_the_running_ones(talker, capfd):
     rc = cli.main(["param", "get", "/no_such_node", "rate", "--timeout", "4"])
     err = capfd.readouterr().err

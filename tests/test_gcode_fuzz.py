@@ -1,5 +1,6 @@
-"""Property-based tests: the parser returns a Program or a GCodeError with line:col on any input,
-and whatever parses interpolates within the limits to the programmed end point."""
+"""Property-based tests: on any input the parser and planner return a planned Program or a
+GCodeError with line:col, and whatever parses interpolates within the limits to its end point."""
+import os
 import re
 
 import numpy as np
@@ -9,10 +10,12 @@ from hypothesis import strategies as st
 from cdpr_control import programs
 from cdpr_control.gcode import parse_gcode
 from cdpr_control.gcode_program import GCodeError, Program
-from cdpr_control.interpolation import AxisLimits, Limits, sample_program
+from cdpr_control.interpolation import AxisLimits, Interpolator, Limits, sample_program
 
 # 3200 parser examples in all, in well under 30 s.
 FAST = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None)
+# CDPR_FUZZ_SCALE=31 runs about 100,000 programs (a nightly run); 1 (make test) about 3,300
+SCALE = max(1, int(os.environ.get("CDPR_FUZZ_SCALE", "1")))
 GCODE_ALPHABET = "GMXYZABCUVWIJKRFNPgx0123456789.-+ \t()#;<>=\"%\n\r_/" + "Qe\u00e9\x00\u2028"
 CORPUS = [programs.read(name) for name in programs.names()] + [
     "G21 G90 G1 X10 Y5 F3000\nG2 X20 Y5 R5\nG3 X10 Y5 I-5 J0\nG4 P0.1\nM100 P80\n#<a.b> = 1\nM2",
@@ -20,10 +23,13 @@ CORPUS = [programs.read(name) for name in programs.names()] + [
 ]
 
 
-def check_parse(text):
-    """The contract of parse_gcode: Program, or GCodeError whose diagnostics point into the text."""
+def check_parse(text, plan=True):
+    """The contract of parse_gcode and of planning: a Program with a planned time law, or
+    GCodeError whose diagnostics point into the text; no other exception."""
     try:
         program = parse_gcode(text)
+        if plan:
+            Interpolator(program, FAST_LIMITS)
     except GCodeError as err:
         assert err.diagnostics
         lines = text.split("\n")
@@ -38,13 +44,13 @@ def check_parse(text):
     return program
 
 
-@settings(FAST, max_examples=1500)
+@settings(FAST, max_examples=1500 * SCALE)
 @given(st.text(alphabet=GCODE_ALPHABET, max_size=120))
 def test_random_text(text):
     check_parse(text)
 
 
-@settings(FAST, max_examples=200)
+@settings(FAST, max_examples=200 * SCALE)
 @given(st.text(max_size=60))
 def test_arbitrary_unicode(text):
     check_parse(text)
@@ -75,7 +81,7 @@ def mutated(draw):
     return text
 
 
-@settings(FAST, max_examples=1500)
+@settings(FAST, max_examples=1500 * SCALE)
 @given(mutated())
 def test_mutated_programs(text):
     check_parse(text)
@@ -125,7 +131,7 @@ def structured_program(draw):
 FAST_LIMITS = Limits(AxisLimits(2.0, 20.0, 400.0), AxisLimits(10.0, 100.0, 2000.0), AxisLimits(1e3, 1e4, 1e6))
 
 
-@settings(FAST, max_examples=60)
+@settings(FAST, max_examples=60 * SCALE)
 @given(structured_program())
 def test_structured_programs_parse_and_interpolate_within_limits(text):
     program = check_parse(text)

@@ -111,6 +111,20 @@ def test_a_program_with_errors_is_refused_with_line_and_column(graph):
     assert r.message.startswith("2:4: ") and "3:1: " in r.message
 
 
+def test_a_program_leaving_the_workspace_is_refused_before_it_moves(graph):
+    node = graph[0]
+    before = node.q.copy()
+    # the Mini's wrench-feasible workspace ends near x = 0.42 m: line 2 crosses it, line 3 comes back
+    r = result_of(graph, send(graph, "G90 G1 X0 F6000\nG1 X600\nG1 X0", "outside")).result
+    assert not r.success and r.error_line == 2 and "wrench-feasible workspace" in r.message
+    np.testing.assert_array_equal(node.q, before)
+
+
+def test_a_move_too_long_to_plan_is_refused_with_its_line(graph):
+    r = result_of(graph, send(graph, "G91\nG1 X300 F1", "slow")).result
+    assert not r.success and r.error_line == 2 and "raise F or split the move" in r.message
+
+
 def test_dry_run_plans_without_moving(graph):
     node = graph[0]
     before = node.q.copy()

@@ -261,3 +261,17 @@ def test_cancel_while_paused_waiting_or_dwelling_is_immediate():
     interp.step()
     assert interp.cancel() and interp.state is ProgramState.CANCELLED
     assert not interp.cancel()
+
+
+def test_a_move_longer_than_the_planner_handles_is_a_gcode_error_with_its_line():
+    from cdpr_control.gcode_program import GCodeError
+    from cdpr_control.interpolation import MAX_MOVE_DURATION
+
+    # 300 mm at 1 mm/min: 18,000 s (ruckig's time law ends near 7,600 s, code -101 unknown to its bindings)
+    with pytest.raises(GCodeError, match="^2:1: this move takes 18000 s") as err:
+        Interpolator(parse_gcode("G90 G1 X0 F600\nG1 X300 F1"))
+    assert err.value.diagnostics[0].line == 2
+    # just below the refusal the move is planned, and lasts what its feed says
+    feed = 300 / (0.99 * MAX_MOVE_DURATION) * 60                # mm/min
+    interp = Interpolator(parse_gcode(f"G90 G1 X300 F{feed:.6f}"))
+    assert interp.duration == pytest.approx(0.99 * MAX_MOVE_DURATION, rel=1e-3)

@@ -1,5 +1,5 @@
-"""CFC, OSPC and joint-command nodes on typed topics: one lockstep period end to end, live
-parameter changes, and rejected parameters leaving the node running with its old value."""
+"""CFC, OSPC and joint-command nodes on typed topics: one lockstep period end to end with two offset
+inputs, live parameter changes, and rejected parameters leaving the node running with its old value."""
 import time
 
 import numpy as np
@@ -29,7 +29,11 @@ def graph():
     overrides = [Parameter("robot", value="ipanema3_mini")]
     cfc_linear = overrides + [Parameter("stiffness_model", value="linear")]     # the thesis' K_l (2.15)
     nodes = [CableForceControllerNode(parameter_overrides=cfc_linear), OSPCNode(parameter_overrides=overrides),
-             JointCommandNode(parameter_overrides=overrides + [Parameter("v_max", value=100.0)])]
+             # a second offset input beside OSPC, published by the probe; no ramp, so that one period
+             # already shows the full sum of (5.10) (the ramp is tested in test_offset_inputs.py)
+             JointCommandNode(parameter_overrides=overrides + [
+                 Parameter("v_max", value=100.0), Parameter("offset_ramp_time", value=0.0),
+                 Parameter("offset_inputs", value=["ospc", "probe_offset"])])]
     probe = rclpy.create_node("probe")
     executor = SingleThreadedExecutor()
     for n in nodes + [probe]:
@@ -54,7 +58,7 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
     pubs = {name: probe.create_publisher(t, topic, CONTROL) for name, t, topic in (
         ("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
         ("fd", ForceDistribution, "force_distribution"), ("sp", OperationalSetpoint, "setpoint"),
-        ("pose", PoseStamped, "platform/pose"))}
+        ("pose", PoseStamped, "platform/pose"), ("offset", ControllerState, "probe_offset/state"))}
     commands, cfc_states = [], []
     probe.create_subscription(JointState, "winch/command", commands.append, CONTROL)
     probe.create_subscription(ControllerState, "cable_force_controller/state", cfc_states.append, CONTROL)
@@ -65,6 +69,7 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
     q = inverse_kinematics(robot, x_d).q
     f = np.full(m, 10.0)
     f_d = np.full(m, 12.0)
+    x_probe = np.array([0.0, 0.001, 0.0, 0.002, 0.0, 0.0])
     for k in range(1, 4):
         header = CdprNode.header(k * 1_000_000)
         pubs["theta"].publish(JointState(header=header, position=q.tolist(), velocity=[0.0] * m, effort=f.tolist()))
@@ -72,15 +77,17 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
         pubs["fd"].publish(ForceDistribution(header=header, f_d=f_d.tolist(), f_min=robot.cable.f_min.tolist(), f_max=robot.cable.f_max.tolist()))
         pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(x_d)))
         pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
+        pubs["offset"].publish(ControllerState(header=header, controller="probe_offset", enabled=True,
+                                               output=x_probe.tolist()))
         assert _spin_until(executor, lambda: len(commands) >= k), f"no command for period {k}"
     last = commands[-1]
     assert last.header.stamp.nanosec == 3_000_000
     theta_d = np.asarray(last.position)
     assert np.all(np.isfinite(theta_d))
-    # the command is IK of the OSPC-corrected set-point minus the CFC elongation (5.10)
+    # the command is IK of the set-point plus both offsets minus the CFC elongation (5.10)
     ospc = nodes[1].controller.pi.output
     dq = np.asarray(cfc_states[-1].output)
-    np.testing.assert_allclose(theta_d, inverse_kinematics(robot, x_d + ospc).q - dq, atol=1e-12)
+    np.testing.assert_allclose(theta_d, inverse_kinematics(robot, x_d + ospc + x_probe).q - dq, atol=1e-12)
     assert ospc[2] > 0.0                                        # pushes up against the sag
     # Δq_CFC (3.23) with Δq_0 = f_0 / K_l from the first measured force; after three periods of a
     # constant error e = f_d - f: f_c,out = f_d + K_p e + 3 K_p dt / T_i e  (3.19), (3.22)
@@ -104,6 +111,9 @@ def test_rejected_parameter_keeps_old_value_and_says_why(graph):
     result = jc.set_parameters([Parameter("mode", value="torque")])[0]
     assert not result.successful and "force_control" in result.reason
     assert jc.mode == "force_control"
+    result = jc.set_parameters([Parameter("offsets.probe_offset.deadline", value=-1.0)])[0]
+    assert not result.successful and result.reason
+    assert jc.offsets.configs["probe_offset"].deadline == 0.005
 
 
 def test_parameters_apply_live(graph):
@@ -113,5 +123,7 @@ def test_parameters_apply_live(graph):
     assert cfc.stage.params.K_p == 0.5 and cfc.stage.controller.pi.K_p[0] == 0.5
     assert jc.set_parameters([Parameter("mode", value="ik_only")])[0].successful and jc.mode == "ik_only"
     assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
+    assert jc.set_parameters([Parameter("offsets.probe_offset.enabled", value=False)])[0].successful
+    assert not jc.offsets.configs["probe_offset"].enabled and jc.offsets.configs["ospc"].enabled
     assert ospc.set_parameters([Parameter("x_sat", value=[0.01] * 6)])[0].successful
     np.testing.assert_allclose(ospc.controller.pi.u_pos, 0.01)

@@ -65,6 +65,13 @@ def _broken(tmp_path, edit):
         (lambda d: d["platform"].__setitem__("inertia", [[1, 0, 0], [0, -1, 0], [0, 0, 1]]), "platform.inertia", "positive definite"),
         (lambda d: d.pop("cable"), "cable.", "missing key"),
         (lambda d: d["friction"].__setitem__("sigma", float("nan")), "friction.sigma", "finite"),
+        # accepted before: a typo, a boolean taken for 1.0 m, a doubled anchor, a degenerate platform
+        (lambda d: d["cable"].__setitem__("f_mx", 40.0), "cable.f_mx", "unknown key; known here: diameter, f_max"),
+        (lambda d: d.__setitem__("gravty", [0, 0, -9.81]), "gravty", "unknown key"),
+        (lambda d: d["geometry"].__setitem__("r_p", True), "geometry.r_p", "expected numbers"),
+        (lambda d: d["geometry"]["a"].__setitem__(5, list(d["geometry"]["a"][2])), "geometry.a[5]",
+         "same anchor point as geometry.a[2]"),
+        (lambda d: d["geometry"].__setitem__("b", [[0.0, 0.0, 0.0]] * 8), "geometry.b", "rank 3 < 6"),
     ],
 )
 def test_broken_file_names_file_and_key(tmp_path, edit, key, reason):
@@ -73,6 +80,24 @@ def test_broken_file_names_file_and_key(tmp_path, edit, key, reason):
         load_robot(path)
     message = str(err.value)
     assert str(path) in message and key in message and reason in message
+
+
+def test_yaml_alias_bomb_is_refused_with_a_short_message(tmp_path):
+    lines = ["a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]" for i in range(1, 9)]
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text(robot_path("ipanema3_mini").read_text() + "\n".join(lines) + "\n")
+    assert bomb.stat().st_size < 20_000
+    with pytest.raises(RobotFileError) as err:
+        load_robot(bomb)
+    assert "more than 100000 values" in str(err.value) and len(str(err.value)) < 300
+
+
+def test_long_bad_value_is_cut_in_the_message(tmp_path):
+    path = _broken(tmp_path, lambda d: d["platform"].__setitem__("mass", ["x"] * 10_000))
+    with pytest.raises(RobotFileError, match="characters") as err:
+        load_robot(path)
+    assert len(str(err.value)) < 300
 
 
 def test_unknown_robot_lists_shipped_ones():

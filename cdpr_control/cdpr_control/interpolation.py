@@ -23,7 +23,7 @@ import numpy as np
 from ruckig import ControlInterface, DurationDiscretization, InputParameter, Result, Ruckig, Trajectory
 
 from cdpr_control.gcode_path import Chain, joins_smoothly
-from cdpr_control.gcode_program import Dwell, Motion, ParameterCommand, Program, ProgramStop
+from cdpr_control.gcode_program import Diagnostic, Dwell, GCodeError, Motion, ParameterCommand, Program, ProgramStop
 
 #: Share of a_max that the centripetal acceleration on arcs may take; the rest drives s_ddot.
 CENTRIPETAL_SHARE = 0.5
@@ -115,6 +115,15 @@ def path_limits(chain: Chain, limits: Limits, feed: float | None) -> tuple[float
     return speed, accel, jerk
 
 
+# ruckig plans profiles of at most about 7,600 s (its result -101 beyond, measured); a move that
+# long is a typo in F more often than a wish, so it is refused with its line, not split.
+MAX_MOVE_DURATION = 7000.0  # s
+
+
+class PlanningError(ValueError):
+    """A motion that the time law cannot be planned for."""
+
+
 class _Planner:
     """1-DoF ruckig on the normalised path parameter u = s/L in [0, 1], durations on the dt grid."""
 
@@ -131,9 +140,12 @@ class _Planner:
 
     def _calculate(self, inp) -> Trajectory:
         trajectory = Trajectory(1)
-        result = self.otg.calculate(inp, trajectory)
+        try:
+            result = self.otg.calculate(inp, trajectory)
+        except (ValueError, RuntimeError) as exc:     # codes the bindings lack, e.g. -101 (duration)
+            raise PlanningError(f"the time law cannot be planned ({exc})") from None
         if result not in (Result.Working, Result.Finished):
-            raise RuntimeError(f"ruckig failed to plan the path parameter: {result}")
+            raise PlanningError(f"the time law cannot be planned (ruckig: {result})")
         return trajectory
 
     def to_end(self, state, limits_u) -> Trajectory:
@@ -166,11 +178,19 @@ class _ChainPlan:
                 and joins_smoothly(last.segment, motion.segment))
 
     def finish(self, limits: Limits, planner: _Planner) -> None:
+        """Plan the chain's time law; GCodeError naming the first block of a chain that cannot be."""
         self.chain = Chain([m.segment for m in self.motions])
         v, a, j = path_limits(self.chain, limits, self.motions[0].feed)
         length = self.chain.length
         self.limits_u = (v / length, a / length, j / length)
-        self.trajectory = planner.to_end((0.0, 0.0, 0.0), self.limits_u)
+        first = self.motions[0].line
+        if length / v > MAX_MOVE_DURATION:
+            raise GCodeError([Diagnostic(first, 1, "motion", f"this move takes {length / v:.0f} s at its feed, more than the "
+                                         f"{MAX_MOVE_DURATION:.0f} s the interpolator plans: raise F or split the move")])
+        try:
+            self.trajectory = planner.to_end((0.0, 0.0, 0.0), self.limits_u)
+        except PlanningError as exc:
+            raise GCodeError([Diagnostic(first, 1, "motion", str(exc))]) from None
         self.duration = self.trajectory.duration
 
     def line_at(self, u: float) -> int:

@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .kinematics import inverse_kinematics
+
 ROBOTS_DIR = Path(__file__).parent / "robots"
+MAX_VALUES = 100_000      # scalars a robot file may expand to (a YAML alias bomb is refused early)
 
 
 class RobotFileError(ValueError):
@@ -85,6 +88,28 @@ class FrictionParams:
 
 
 @dataclass(frozen=True)
+class EnergyParams:
+    """Energy consumption model of the actuator units, thesis (4.9)-(4.14), table 4.6."""
+
+    pulley_mu: np.ndarray    # (m,) -, Coulomb coefficient of the pulleys (4.9)
+    pulley_F_pv: np.ndarray  # (m,) N s/m, viscous pulley friction (4.9)
+    r_w: float               # m, drum radius over gear ratio (4.10)
+    J_w: float               # kg m^2, winch, gear box and rotor inertia at the motor (4.11)
+    mu_w: float              # -, Coulomb friction coefficient of the winch (4.11)
+    F_wv: float              # N m s, viscous friction (4.11)
+    F_s: float               # N m, static friction (4.11)
+    alphadot_s: float        # rad/s, Stribeck velocity (4.11)
+    c_m: float               # -, efficiency of the servo amplifier (4.12)
+    R: float                 # Ohm, winding resistance (4.12)
+    Psi_m: float             # N m/A, torque constant (4.12)
+    c_n1: float              # W s, re-magnetisation losses (4.12)
+    c_n2: float              # W s^2, eddy current losses (4.12)
+    P_0: float               # W, idle power of the control cabinet (4.14)
+    c_pm: float              # -, supply efficiency in motor operation (4.14)
+    c_pg: float              # -, supply efficiency in generator operation, 0 = brake resistor (4.14)
+
+
+@dataclass(frozen=True)
 class Robot:
     """A cable robot with m cables and n DOF; arrays are read-only, units SI."""
 
@@ -108,6 +133,7 @@ class Robot:
     platform: PlatformParams
     sensor: SensorParams
     friction: FrictionParams
+    energy: EnergyParams | None = None   # optional section ``energy`` of the robot file
 
     def with_payload(self, mass: float, center_of_gravity=(0.0, 0.0, 0.0), inertia=None) -> "Robot":
         """The same robot carrying a point-like (or given-inertia) payload rigidly on the platform.
@@ -155,6 +181,7 @@ class _Reader:
     def __init__(self, data: dict, file: Path):
         self.data = data
         self.file = file
+        self.used: set[str] = set()          # dotted keys read, to find unknown ones
 
     def error(self, key: str, message: str) -> RobotFileError:
         return RobotFileError(f"{self.file}: {key}: {message}")
@@ -167,15 +194,40 @@ class _Reader:
             if part not in node:
                 raise self.error(key, "missing key")
             node = node[part]
+        self.used.add(key)
         return node
+
+    def optional(self, key: str) -> bool:
+        """Whether an optional key is present (mark it read with the typed accessors)."""
+        try:
+            self.raw(key)
+        except RobotFileError:
+            return False
+        return True
+
+    def check_unknown(self) -> None:
+        """Every key of the file must have been read: a typo (``f_mx``) is an error, not a default."""
+        def walk(node, prefix):
+            for k, v in node.items():
+                key = f"{prefix}{k}"
+                if key in self.used:
+                    continue
+                if isinstance(v, dict) and any(u.startswith(key + ".") for u in self.used):
+                    walk(v, key + ".")
+                else:
+                    known = sorted({u.split(".")[prefix.count(".")] for u in self.used if u.startswith(prefix)})
+                    raise self.error(key, f"unknown key; known here: {', '.join(known)}")
+        walk(self.data, "")
 
     def array(self, key: str, shape: tuple, sign: str | None = None, deg: bool = False) -> np.ndarray:
         """A float array of the given shape; a scalar broadcasts to a (m,) shape."""
         value = self.raw(key)
+        if _has_bool(value):                      # YAML's true is not 1.0 m
+            raise self.error(key, f"expected numbers of shape {shape}, got {_short(value)}")
         try:
             x = np.array(value, dtype=float)
         except (TypeError, ValueError):
-            raise self.error(key, f"expected numbers of shape {shape}, got {value!r}") from None
+            raise self.error(key, f"expected numbers of shape {shape}, got {_short(value)}") from None
         if x.ndim == 0 and len(shape) == 1:
             x = np.full(shape, float(x))
         if x.shape != shape:
@@ -186,7 +238,7 @@ class _Reader:
     def scalar(self, key: str, sign: str | None = None) -> float:
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, f"expected a number, got {value!r}")
+            raise self.error(key, f"expected a number, got {_short(value)}")
         x = np.array([float(value)])
         self._check_sign(key, x, sign)
         return float(x[0])
@@ -194,19 +246,19 @@ class _Reader:
     def integer(self, key: str, minimum: int) -> int:
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise self.error(key, f"expected an integer >= {minimum}, got {value!r}")
+            raise self.error(key, f"expected an integer >= {minimum}, got {_short(value)}")
         return value
 
     def choice(self, key: str, options: tuple) -> str:
         value = self.raw(key)
         if value not in options:
-            raise self.error(key, f"expected one of {', '.join(options)}, got {value!r}")
+            raise self.error(key, f"expected one of {', '.join(options)}, got {_short(value)}")
         return value
 
     def boolean(self, key: str) -> bool:
         value = self.raw(key)
         if not isinstance(value, bool):
-            raise self.error(key, f"expected true or false, got {value!r}")
+            raise self.error(key, f"expected true or false, got {_short(value)}")
         return value
 
     def _check_sign(self, key: str, x: np.ndarray, sign: str | None) -> None:
@@ -221,10 +273,51 @@ class _Reader:
                 raise self.error(where, f"must be >= 0, got {v}")
 
 
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _has_bool(value) -> bool:
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, list) and any(_has_bool(v) for v in value)
+
+
+def _count_values(node, limit: int) -> int:
+    """Scalars in a parsed YAML tree, counting shared (aliased) parts each time; stops past ``limit``."""
+    count, stack = 0, [node]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        else:
+            count += 1
+        if count + len(stack) > limit:
+            return limit + 1
+    return count
+
+
+def _check_geometry(r: _Reader, robot: Robot) -> None:
+    """Anchors distinct, and the structure matrix (2.10) of full rank n at home: else no wrench
+    (2.39) can be balanced in every direction (e.g. every b_i = 0 leaves rank 3)."""
+    for i in range(robot.m):
+        for j in range(i):
+            if np.allclose(robot.a[i], robot.a[j], atol=1e-9):
+                raise r.error(f"geometry.a[{i}]", f"same anchor point as geometry.a[{j}]: {robot.a[i].tolist()}")
+    AT = inverse_kinematics(robot, robot.home).AT
+    rank = np.linalg.matrix_rank(AT, tol=1e-9 * np.abs(AT).max())
+    if rank < robot.n:
+        raise r.error("geometry.b", f"the structure matrix A^T (2.10) at home has rank {rank} < {robot.n}: "
+                      "the cables cannot balance every wrench (are the platform points b_i all alike?)")
+
+
 def _read_robot(r: _Reader) -> Robot:
     name = r.raw("name")
     if not isinstance(name, str) or not name:
-        raise r.error("name", f"expected a non-empty string, got {name!r}")
+        raise r.error("name", f"expected a non-empty string, got {_short(name)}")
     m = r.integer("m", minimum=1)
     n = r.integer("n", minimum=1)
     if n != 6:
@@ -267,7 +360,10 @@ def _read_robot(r: _Reader) -> Robot:
             beta_1=float(np.deg2rad(r.scalar("sensor.beta_1_deg", "nonnegative"))),
         ),
         friction=_read_friction(r, m),
+        energy=_read_energy(r, m) if "energy" in r.data else None,
     )
+    _check_geometry(r, robot)
+    r.check_unknown()
     return robot
 
 
@@ -326,6 +422,19 @@ def _read_friction(r: _Reader, m: int) -> FrictionParams:
     )
 
 
+def _read_energy(r: _Reader, m: int) -> EnergyParams:
+    efficiencies = ("c_m", "c_pm", "c_pg")
+    values = {key: r.scalar(f"energy.{key}", "positive") for key in
+              ("r_w", "J_w", "alphadot_s", "c_m", "R", "Psi_m", "c_pm")}
+    values.update({key: r.scalar(f"energy.{key}", "nonnegative") for key in
+                   ("mu_w", "F_wv", "F_s", "c_n1", "c_n2", "P_0", "c_pg")})
+    for key in efficiencies:
+        if values[key] > 1.0:
+            raise r.error(f"energy.{key}", f"an efficiency must be <= 1, got {values[key]}")
+    return EnergyParams(pulley_mu=r.array("energy.pulley_mu", (m,), "nonnegative"),
+                        pulley_F_pv=r.array("energy.pulley_F_pv", (m,), "nonnegative"), **values)
+
+
 # --- public API ------------------------------------------------------------------------------
 
 
@@ -360,4 +469,6 @@ def load_robot(name_or_path: str | Path) -> Robot:
         raise RobotFileError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):
         raise RobotFileError(f"{path}: expected a mapping at the top level")
+    if _count_values(data, MAX_VALUES) > MAX_VALUES:
+        raise RobotFileError(f"{path}: expands to more than {MAX_VALUES} values (YAML aliases nested too deep?)")
     return _read_robot(_Reader(data, path))

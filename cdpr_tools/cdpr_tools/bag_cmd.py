@@ -7,6 +7,7 @@ these commands read bags from ``ros2 bag`` in turn.
 from __future__ import annotations
 
 import argparse
+import sys
 import threading
 from datetime import datetime, timezone
 
@@ -15,7 +16,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
-from cdpr_tools.bag.reader import BagReader
+from cdpr_tools.bag.reader import BagReader, CorruptBagError
+from cdpr_tools.bag.recovery import reindex
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
 from cdpr_control.nodes.runner import spin, stop_on_signals
 from cdpr_tools.ros_graph import new_context
@@ -37,6 +39,8 @@ def add_parser(sub) -> None:
     r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
     r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
     r.add_argument("--stop-after", type=float, metavar="SEC", help="stop recording after SEC seconds")
+    r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
+                   help="compress each MCAP chunk (default none); every reader of MCAP decompresses it")
     r.set_defaults(run=run_record)
 
     i = verbs.add_parser("info", help="print a bag's duration, topics, types and counts",
@@ -59,6 +63,14 @@ def add_parser(sub) -> None:
                    help="wait up to SEC seconds until every topic has a subscriber")
     y.set_defaults(run=run_play)
 
+    x = verbs.add_parser("reindex", help="rebuild the index and metadata.yaml of a bag cut off by a crash",
+                         description="Make a bag whose recording was killed whole again, as `ros2 bag "
+                                     "reindex` does: every complete chunk is kept, the file gets its summary "
+                                     "and index back (the original stays beside it as <file>.orig) and the "
+                                     "bag directory a new metadata.yaml.")
+    x.add_argument("bag", help="bag directory or .mcap file")
+    x.set_defaults(run=run_reindex)
+
 
 def run_record(args) -> int:
     if args.all and args.topics:
@@ -66,7 +78,8 @@ def run_record(args) -> int:
     overrides = [Parameter("output", value=args.output or default_bag_name()),
                  Parameter("exclude", value=args.exclude),
                  Parameter("include_hidden_topics", value=args.include_hidden_topics),
-                 Parameter("use_sim_time", value=args.use_sim_time)]
+                 Parameter("use_sim_time", value=args.use_sim_time),
+                 Parameter("compression", value=args.compression)]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
     context = new_context()
@@ -96,7 +109,19 @@ def run_record(args) -> int:
 def run_info(args) -> int:
     bag = BagReader(args.bag)
     print(format_info(bag))
+    _warn(bag)
     return 0
+
+
+def run_reindex(args) -> int:
+    for line in reindex(args.bag):
+        print(line)
+    return 0
+
+
+def _warn(bag: BagReader) -> None:
+    for problem in bag.problems:
+        print(f"warning: {problem}", file=sys.stderr)
 
 
 def format_info(bag: BagReader) -> str:
@@ -148,8 +173,16 @@ def run_play(args) -> int:
                 stop.wait(args.delay)
             print(f"playing {bag.path}: {len(player.publishers)} topics, {bag.duration_ns / 1e9:.3f} s "
                   f"at rate {args.rate:g}" + (f", /clock at {args.clock:g} Hz" if args.clock else ""), flush=True)
-            count = player.play(stop)
+            _warn(bag)
+            try:
+                count = player.play(stop)
+            except CorruptBagError as exc:
+                print(f"published {player.published} of {bag.message_count} messages, then: {exc}", file=sys.stderr)
+                return 1
         print(f"published {count} messages" + (" (stopped)" if stop.is_set() else ""))
+        if bag.corrupt_chunks:
+            print(f"error: {bag.corrupt_chunks} corrupt chunk(s) of {bag.path} were not played", file=sys.stderr)
+            return 1
     finally:
         context.try_shutdown()
     return 0

@@ -8,6 +8,7 @@ layout ``/node: {ros__parameters: {...}}``.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -44,6 +45,10 @@ _GET_LABELS = {
 }
 
 
+_NEGATIVE_VALUE = re.compile(r"^-(\d+|\d*\.\d*([eE][-+]?\d+)?|\d+[eE][-+]?\d+|\.?(inf|Inf|INF)|\.?(nan|NaN|NAN))$")
+_INT64 = (-(1 << 63), (1 << 63) - 1)
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("param", help="list, get, set, describe, dump and load node parameters",
                        description=__doc__.replace("``", ""), formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -68,7 +73,9 @@ def add_parser(sub) -> None:
                                        "5.0 a double, [1.0, 2.0] a double array, anything else a string).")
     put.add_argument("node")
     put.add_argument("name")
-    put.add_argument("value")
+    put.add_argument("value", help="the value, read as YAML (-.inf, -1e-3 and -5 are values, not options)")
+    # argparse takes only plain negative numbers for values; YAML's -.inf, -1e3 are values here too
+    put._negative_number_matcher = _NEGATIVE_VALUE
     _common(put)
     put.set_defaults(run=run_set)
 
@@ -142,7 +149,8 @@ def run_list(args) -> int:
 
 def run_get(args) -> int:
     with graph_node("param") as node:
-        value = _Remote(node, args.node, args.timeout).get([args.name])[0]
+        remote = _Remote(node, args.node, args.timeout)
+        value = _declared(remote, [args.name], remote.get([args.name]))[0]
         if value.type == ParameterType.PARAMETER_NOT_SET:
             print("Parameter not set.")
             return 1
@@ -154,9 +162,10 @@ def run_get(args) -> int:
 
 
 def run_set(args) -> int:
+    value = parameter_value(args.value)
     with graph_node("param") as node:
         remote = _Remote(node, args.node, args.timeout)
-        result = remote.set([ParameterMsg(name=args.name, value=get_parameter_value(args.value))])[0]
+        result = remote.set([ParameterMsg(name=args.name, value=value)])[0]
     if result.successful:
         print("Set parameter successful" + (f": {result.reason}" if result.reason else ""))
         return 0
@@ -164,9 +173,34 @@ def run_set(args) -> int:
     return 1
 
 
+def parameter_value(text: str) -> ParameterValue:
+    """A command-line value read as YAML, as ``ros2 param set`` does; ValueError saying why not."""
+    try:
+        python = yaml.safe_load(text)
+    except yaml.YAMLError:
+        python = text
+    ints = python if isinstance(python, list) else [python]
+    for v in ints:
+        if isinstance(v, int) and not isinstance(v, bool) and not _INT64[0] <= v <= _INT64[1]:
+            raise ValueError(f"{v} is beyond the 64-bit integers ROS 2 parameters hold; write it as {float(v):g} "
+                             "for a double")
+    return get_parameter_value(text)
+
+
+def _declared(remote: _Remote, names: list[str], answers: list) -> list:
+    """The answers for ``names``, or a ValueError naming the parameters the node does not have."""
+    if len(answers) == len(names):
+        return answers
+    known = set(remote.list())
+    missing = [n for n in names if n not in known]
+    raise ValueError(f"node {remote.name} has no parameter {', '.join(missing) or ', '.join(names)}; "
+                     f"`cdpr param list {remote.name}` shows its {len(known)} parameters")
+
+
 def run_describe(args) -> int:
     with graph_node("param") as node:
-        for d in _Remote(node, args.node, args.timeout).describe(args.names):
+        remote = _Remote(node, args.node, args.timeout)
+        for d in _declared(remote, args.names, remote.describe(args.names)):
             print(format_descriptor(d))
     return 0
 

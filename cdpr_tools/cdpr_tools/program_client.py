@@ -26,7 +26,8 @@ def run_program(text: str, name: str, action: str = "/run_program", timeout: flo
         deadline = time.monotonic() + server_timeout
         while not client.server_is_ready():
             if time.monotonic() > deadline:
-                raise TimeoutError(f"no RunProgram action server at {action} after {server_timeout:.0f} s")
+                raise TimeoutError(f"no RunProgram action server at {action} after {server_timeout:g} s: is a graph "
+                                   "running? (`cdpr launch closed_loop.yaml` starts one; `cdpr demo` runs the main job)")
             executor.spin_once(timeout_sec=0.1)
         on_feedback = None if feedback is None else (lambda m: feedback(m.feedback.line, m.feedback.progress))
         sent = client.send_goal_async(RunProgram.Goal(program=text, name=name), feedback_callback=on_feedback)

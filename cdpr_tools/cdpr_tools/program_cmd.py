@@ -6,26 +6,37 @@ from pathlib import Path
 from cdpr_control import programs
 from cdpr_control.gcode import parse_gcode
 from cdpr_control.gcode_program import GCodeError
+from cdpr_control.program_check import check_program
+from cdpr_control.robot import load_robot
+from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("program", help="list, check or run G-code programs (dialect: docs/gcode.md)")
     verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     verbs.add_parser("list", help="shipped programs").set_defaults(run=_list)
-    check = verbs.add_parser("check", help="parse a program and report every error with line:col")
+    check = verbs.add_parser("check", help="parse and plan a program for a robot; every error with line:col",
+                             description="Parse the program, plan its time law and check that its path "
+                                         "stays in the robot's wrench-feasible workspace (with the payload); "
+                                         "errors name line:col. The interpreter runs the same check before "
+                                         "it starts a program.")
     check.add_argument("program", help="G-code file or shipped program name")
+    check.add_argument("--robot", default="ipanema3_mini", help="robot name or file (default ipanema3_mini)")
+    check.add_argument("--payload", type=float, default=0.0, help="payload carried [kg] (default 0)")
     check.set_defaults(run=_check)
     run = verbs.add_parser("run", help="run a program through the RunProgram action of a running graph")
     run.add_argument("program", help="G-code file or shipped program name")
     run.add_argument("--action", default="/run_program", help="action name (default /run_program)")
     run.add_argument("--timeout", type=float, default=3600.0, help="wall-clock limit [s]")
+    run.add_argument("--server-timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
+                     help=f"wait up to SEC seconds for the graph's action server (default {DISCOVERY_TIMEOUT:g})")
     run.set_defaults(run=_run)
 
 
 def _text(program: str) -> tuple[str, str]:
     path = Path(program)
     if path.exists():
-        return path.stem, path.read_text()
+        return path.stem, path.read_bytes()         # the parser names line:col of non-UTF-8 bytes
     if program in programs.names() or f"{program}.gcode" in programs.names():
         return program.removesuffix(".gcode"), programs.read(program)
     raise FileNotFoundError(f"no file {program!r} and no shipped program of that name; shipped: {', '.join(programs.names())}")
@@ -39,13 +50,16 @@ def _list(args) -> int:
 
 def _check(args) -> int:
     name, text = _text(args.program)
+    robot = load_robot(args.robot)
     try:
-        program = parse_gcode(text)
+        program = parse_gcode(text, start_pose=robot.home)
+        duration = check_program(program, robot, payload=args.payload)
     except GCodeError as exc:
         for d in exc.diagnostics:
             print(f"{args.program}:{d}")
         return 1
-    print(f"{name}: ok, {len(program.blocks)} blocks")
+    print(f"{name}: ok for {robot.name}, {len(program.blocks)} blocks, {duration:.2f} s "
+          "(at the interpreter's default limits)")
     return 0
 
 
@@ -53,7 +67,7 @@ def _run(args) -> int:
     from cdpr_tools.program_client import run_program
 
     name, text = _text(args.program)
-    result = run_program(text, name, action=args.action, timeout=args.timeout,
+    result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
                          feedback=lambda line, progress: print(f"\r line {line:5d}  {100 * progress:5.1f} %", end="", flush=True))
     print()
     print(f"{name}: {'done' if result.success else 'failed'} after {result.duration:.2f} s {result.message}")

@@ -37,6 +37,7 @@ from cdpr_control.gcode import parse_gcode
 from cdpr_control.gcode_program import GCodeError, ParameterCommand
 from cdpr_control.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
 from cdpr_control.kinematics import twist_from_pose_rates
+from cdpr_control.program_check import check_program
 
 from .base import CdprNode, spin_node
 from .conversions import accel_to_msg, pose_to_msg, twist_to_msg, vector3
@@ -60,6 +61,7 @@ PARAMS = [
     ParamSpec("status_period", 0.1, "period of program_status and action feedback while running [s]",
               range=(1e-3, 10.0)),
     ParamSpec("frame_id", "base", "frame_id of the set-points", read_only=True),
+    ParamSpec("payload", 0.0, "payload the workspace check of a program assumes [kg]", range=(0.0, 1e5)),
 ]
 
 _STATUS = {
@@ -211,6 +213,7 @@ class GCodeInterpreterNode(CdprNode):
 
     def _plan(self, goal) -> Interpolator:
         program = parse_gcode(goal.program, start_pose=self.q[:6], start_force=self.q[6:])
+        check_program(program, self.robot, self.limits, self.values["payload"])   # plannable, in the WFW
         return Interpolator(program, self.limits, self.dt, wait_for_commands=True,
                             optional_stop=self.values["optional_stop"])
 

@@ -1,8 +1,16 @@
-"""Node ``joint_command``: θ_d = IK{x_d + x_OSPC} - Δq_CFC (Fig. 3.4, (5.10)) to the drives.
+"""Node ``joint_command``: θ_d = IK{x_d + Σ offsets} - Δq_CFC (Fig. 3.4, (5.1), (5.10)) to the drives.
 
-Subscribes ``setpoint``, ``ospc/state``, ``cable_force_controller/state`` (synchronised per
-period), and for safety ``winch/state``, ``cable_forces`` and ``forward_kinematics/diagnostics``;
-publishes ``winch/command`` (sensor_msgs/JointState, position = θ_d [m]) and ``/diagnostics``.
+Subscribes ``setpoint``, ``cable_force_controller/state`` and one ``<name>/state``
+(cdpr_msgs/ControllerState, ``output`` = the 6-vector offset) per entry of ``offset_inputs``
+(``ospc`` by default; hybrid force control, load compensation and admittance control join the
+same way, see :mod:`cdpr_control.offset_inputs`), synchronised per period in lockstep (every
+declared input is awaited, so every declared offset node must run); free-running, an offset input
+is used while younger than its deadline. For safety it also watches ``winch/state``,
+``cable_forces``, ``platform/pose`` and ``forward_kinematics/diagnostics``. Publishes
+``winch/command`` (sensor_msgs/JointState, position = θ_d [m]) and ``/diagnostics``.
+
+Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets.<name>.deadline``
+[s], live; ``offset_ramp_time`` [s] ramps every switch on or off.
 
 ``mode`` switches between the thesis's force control and the IK-only reference control
 (section 2.3.2) at run time; the command is rate-limited to the drives' v_max, so the switch is
@@ -14,9 +22,11 @@ from __future__ import annotations
 import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, ForwardKinematicsDiagnostics, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
 from cdpr_control.joint_command import JointCommand
+from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import SafetyConfig, SafetyMonitor
 
 from .base import CdprNode, spin_node
@@ -25,9 +35,22 @@ from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync, stamp_ns
 
+OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/state output (6 values) is added "
+                          "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
+DEFAULT_OFFSET = OffsetConfig()
+
+
+def offset_params(name: str) -> list[ParamSpec]:
+    """The live parameters of one offset input."""
+    return [ParamSpec(f"offsets.{name}.enabled", DEFAULT_OFFSET.enabled, f"add the output of {name} to x_d"),
+            ParamSpec(f"offsets.{name}.deadline", DEFAULT_OFFSET.deadline,
+                      f"age of an active {name} state that holds the command [s]", range=(1e-4, 10.0))]
+
 PARAMS = [
-    ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + x_OSPC) - Δq_CFC; ik_only: θ_d = IK(x_d) (2.3.2)",
-              choices=("force_control", "ik_only")),
+    ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
+              "(2.3.2), the offsets ramped out", choices=("force_control", "ik_only")),
+    ParamSpec("offset_ramp_time", 0.2, "time an offset input takes to ramp in or out when switched [s]",
+              range=(0.0, 10.0)),
     ParamSpec("v_max", 0.0, "rate limit of θ_d [m/s]; 0 = the robot's drive v_max", range=(0.0, 100.0)),
     ParamSpec("force_tolerance", 0.0, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
     ParamSpec("hold_on_force_limit", False, "a force-limit fault holds θ_d (else it is only reported)"),
@@ -43,17 +66,22 @@ class JointCommandNode(CdprNode):
         self.names = [f"cable_{i + 1}" for i in range(self.robot.m)]
         self.command = JointCommand(self.robot, self.dt)
         self.monitor = SafetyMonitor()
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
+        names = list(self.get_parameter(OFFSET_INPUTS.name).value)
+        self.offsets = OffsetInputs(names, self.dt)
+        specs = PARAMS + [spec for name in names for spec in offset_params(name)]
+        self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
+                                      ("x", PoseStamped, "platform/pose"),
                                       ("fk", ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics")):
             self.create_subscription(msg_type, topic, self._keep(name), CONTROL)
         self.publisher = self.create_publisher(JointState, "winch/command", CONTROL)
-        self.sync = StampSync(self, {
-            "setpoint": (OperationalSetpoint, "setpoint"),
-            "ospc": (ControllerState, "ospc/state"),
-            "cfc": (ControllerState, "cable_force_controller/state"),
-        }, primary="cfc", callback=self._cycle, mode=self.sync_mode)
+        inputs = {"setpoint": (OperationalSetpoint, "setpoint"),
+                  "cfc": (ControllerState, "cable_force_controller/state")}
+        inputs.update({f"offset:{name}": (ControllerState, f"{name}/state") for name in names})
+        self.sync = StampSync(self, inputs, primary="cfc", callback=self._cycle, mode=self.sync_mode,
+                              optional=tuple(f"offset:{name}" for name in names))
 
     def _keep(self, name):
         def keep(msg):
@@ -66,13 +94,20 @@ class JointCommandNode(CdprNode):
                             max_orientation_lag=v["max_orientation_lag"], stale_timeout=v["stale_timeout"],
                             hold_on_force_limit=v["hold_on_force_limit"])
 
+    def _offset_configs(self, v: dict) -> dict[str, OffsetConfig]:
+        return {n: OffsetConfig(enabled=v[f"offsets.{n}.enabled"], deadline=v[f"offsets.{n}.deadline"])
+                for n in self.offsets.names}
+
     def _validate(self, v: dict) -> None:
         self._safety(v).validate()
+        for name, config in self._offset_configs(v).items():
+            config.validate(name)
 
     def _apply(self, v: dict) -> None:
         self.mode = v["mode"]
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
         self.monitor = SafetyMonitor(self._safety(v))
+        self.offsets.configure(self._offset_configs(v), v["offset_ramp_time"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         theta_msg = self.latest.get("theta")
@@ -81,13 +116,14 @@ class JointCommandNode(CdprNode):
         if self.command.theta_d is None:
             self.command.reset(np.asarray(theta_msg.position))
         x_d = pose_from_msg(msgs["setpoint"].pose)
-        ospc, cfc = msgs["ospc"], msgs["cfc"]
-        faults = self._faults(t_ns, ospc)
+        force_control = self.mode == "force_control"
+        samples = {name: self._offset_sample(msgs.get(f"offset:{name}")) for name in self.offsets.names} \
+            if force_control else {}
+        offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
+        faults = self._faults(t_ns, x_d) + offset_faults
         hold = any(f.holds for f in faults)
-        if self.mode == "force_control":
-            theta_d = self.command.update(x_d, [np.asarray(ospc.output)], np.asarray(cfc.output), hold=hold)
-        else:
-            theta_d = self.command.update(x_d, hold=hold)
+        dq_cfc = np.asarray(msgs["cfc"].output) if force_control else None
+        theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold)
         self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN
@@ -98,12 +134,15 @@ class JointCommandNode(CdprNode):
         else:
             self.report(DiagnosticStatus.OK, f"ok ({self.mode})", stamp_ns=t_ns)
 
-    def _faults(self, t_ns: int, ospc):
-        f_msg, fk = self.latest.get("f"), self.latest.get("fk")
+    @staticmethod
+    def _offset_sample(msg) -> OffsetSample | None:
+        return None if msg is None else OffsetSample(stamp_ns(msg) * 1e-9, msg.enabled, np.asarray(msg.output))
+
+    def _faults(self, t_ns: int, x_d):
+        f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
         now = t_ns * 1e-9
         times = {name: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
-        x_d = np.asarray(ospc.reference) if len(ospc.reference) == 6 else None
-        x = np.asarray(ospc.feedback) if len(ospc.feedback) == 6 else None
+        x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         return self.monitor.check(
             now, f=None if f_msg is None else np.asarray(f_msg.f), f_min=c.f_min, f_max=c.f_max,

@@ -3,7 +3,8 @@
 In lockstep simulation every message of period k carries the stamp t_k (each node copies the
 stamp of its inputs), so a node computes period k exactly once, when all its inputs for t_k are
 there: the graph is a deterministic data flow. With ``mode="latest"`` (free-running, hardware) the
-cycle runs on every message of the primary input with the newest of the others.
+cycle runs on every message of the primary input with the newest of the others; ``optional``
+inputs need not have arrived there (their entry is then missing), in lockstep every input is awaited.
 """
 from __future__ import annotations
 
@@ -19,9 +20,12 @@ def stamp_ns(msg) -> int:
 
 class StampSync:
     def __init__(self, node, inputs: dict[str, tuple[type, str]], primary: str,
-                 callback: Callable[[dict, int], None], mode: str = "exact", qos=CONTROL):
+                 callback: Callable[[dict, int], None], mode: str = "exact", qos=CONTROL,
+                 optional: tuple[str, ...] = ()):
         if primary not in inputs:
             raise ValueError(f"primary input {primary!r} not among {list(inputs)}")
+        if primary in optional or not set(optional) <= set(inputs):
+            raise ValueError(f"optional inputs {optional} must be non-primary inputs among {list(inputs)}")
         self.mode = mode
         self.primary = primary
         self.callback = callback
@@ -32,12 +36,13 @@ class StampSync:
             for name, (msg_type, topic) in inputs.items()
         ]
         self.names = tuple(inputs)
+        self.required = tuple(n for n in inputs if n not in optional)
 
     def _receiver(self, name: str):
         def receive(msg):
             self.latest[name] = msg
             if self.mode == "latest":
-                if name == self.primary and len(self.latest) == len(self.names):
+                if name == self.primary and all(n in self.latest for n in self.required):
                     self.callback(dict(self.latest), stamp_ns(msg))
                 return
             t = stamp_ns(msg)

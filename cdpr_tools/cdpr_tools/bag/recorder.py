@@ -31,7 +31,7 @@ def default_bag_name() -> str:
 
 class BagRecorder(Node):
     """Parameters: ``output`` (bag path), ``topics`` (empty: all), ``exclude`` (regex),
-    ``include_hidden_topics``, ``discovery_period`` [s], ``queue_depth``."""
+    ``include_hidden_topics``, ``discovery_period`` [s], ``queue_depth``, ``compression``."""
 
     def __init__(self, **kwargs):
         super().__init__("bag_recorder", **kwargs)
@@ -45,6 +45,9 @@ class BagRecorder(Node):
         self.declare_parameter("discovery_period", 0.1, ParameterDescriptor(
             description="how often to look for new topics [s]", read_only=True))
         self.declare_parameter("queue_depth", DEFAULT_QUEUE_DEPTH, ParameterDescriptor(read_only=True))
+        self.declare_parameter("compression", "none", ParameterDescriptor(
+            description="chunk compression of the MCAP file: none, zstd or lz4 (as rosbag2's mcap storage)",
+            read_only=True))
         output = self.get_parameter("output").value or default_bag_name()
         try:
             topics = self.get_parameter("topics").value or []
@@ -55,7 +58,7 @@ class BagRecorder(Node):
         self.exclude = re.compile(exclude) if exclude else None
         self.include_hidden = self.get_parameter("include_hidden_topics").value
         self.depth = self.get_parameter("queue_depth").value
-        self.writer = BagWriter(output)
+        self.writer = BagWriter(output, compression=self.get_parameter("compression").value)
         self._recording: dict[str, object] = {}  # topic -> subscription
         self._skipped: set[str] = set()
         # graph polling on the steady clock: with use_sim_time the node's clock waits for /clock

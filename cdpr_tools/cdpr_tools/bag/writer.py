@@ -6,11 +6,18 @@ appended, see :mod:`.schema`); one channel per topic (encoding ``cdr``, metadata
 ``offered_qos_profiles`` and ``topic_type_hash``); CDR payloads cut to their encoding
 (:mod:`.cdr`); chunks with message indexes, statistics and summary; and a ``rosbag2`` metadata
 record holding the bag metadata (version 9). A bag directory also gets rosbag2's metadata.yaml.
+
+A recording cut off by a crash or SIGKILL stays readable up to its last complete chunk, as rosbag2
+promises: chunks are bounded in size (``chunk_size``) and in time (``flush_interval``), each one
+goes to the operating system as soon as it is complete, and metadata.yaml is written when the bag
+opens and updated after every chunk. Such a file lacks its summary section; :class:`BagReader`
+then scans it linearly and ``cdpr bag reindex`` rebuilds summary and metadata.
 """
 from __future__ import annotations
 
 import os
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable
@@ -61,7 +68,8 @@ class BagWriter:
     ...     bag.write("/chatter", "std_msgs/msg/String", String(data="hi"), log_time_ns=t)
     """
 
-    def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20):
+    def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20,
+                 flush_interval: float = 1.0):
         path = Path(path)
         if path.suffix == ".mcap":
             self.directory, self.mcap_path = None, path
@@ -73,9 +81,14 @@ class BagWriter:
         if compression not in _COMPRESSION:
             raise ValueError(f"compression must be one of {', '.join(_COMPRESSION)}, got {compression!r}")
         self.mcap_path.parent.mkdir(parents=True, exist_ok=True)
+        if chunk_size <= 0 or flush_interval <= 0:
+            raise ValueError(f"chunk_size and flush_interval must be > 0, got {chunk_size}, {flush_interval}")
         self.compression = compression
+        self.chunk_size = chunk_size
+        self.flush_interval = flush_interval
         self._stream = open(self.mcap_path, "wb")
-        self._mcap = Writer(self._stream, chunk_size=chunk_size, compression=_COMPRESSION[compression],
+        # the chunks are cut here (_maybe_flush), by size and by age, not by the mcap writer
+        self._mcap = Writer(self._stream, chunk_size=1 << 62, compression=_COMPRESSION[compression],
                             index_types=IndexType.ALL, use_chunking=True, use_statistics=True,
                             use_summary_offsets=True)
         self._mcap.start(profile="ros2", library="cdpr_tools bag writer (rosbag2 layout)")
@@ -84,6 +97,10 @@ class BagWriter:
         self._times = _Times()
         self._lock = threading.Lock()
         self._closed = False
+        self._pending_bytes = 0
+        self._last_flush = time.monotonic()
+        self._flushed = {"count": 0, "times": _Times(), "counts": {}}   # what is on disk
+        self._write_metadata_file()
 
     # -- topics ------------------------------------------------------------------------------
     def add_topic(self, topic: str, type_name: str, qos: Any = None, type_description_hash: str | None = None) -> None:
@@ -143,6 +160,26 @@ class BagWriter:
             self._times.add(log_time_ns)
             self._mcap.add_message(channel.id, log_time_ns, bytes(data),
                                    log_time_ns if publish_time_ns is None else publish_time_ns, channel.count)
+            self._pending_bytes += len(data)
+            self._maybe_flush()
+
+    def flush(self) -> None:
+        """End the chunk in progress and put it on disk with an updated metadata.yaml."""
+        with self._lock:
+            if not self._closed:
+                self._flush()
+
+    def _maybe_flush(self) -> None:
+        if self._pending_bytes >= self.chunk_size or time.monotonic() - self._last_flush >= self.flush_interval:
+            self._flush()
+
+    def _flush(self) -> None:
+        self._mcap.flush()              # ends the chunk and flushes the stream: on disk despite SIGKILL
+        self._pending_bytes = 0
+        self._last_flush = time.monotonic()
+        self._flushed = {"count": self.message_count, "times": _Times(self._times.start, self._times.end),
+                         "counts": {t: c.count for t, c in self._channels.items()}}
+        self._write_metadata_file()
 
     @property
     def message_count(self) -> int:
@@ -154,30 +191,14 @@ class BagWriter:
         return self.directory or self.mcap_path
 
     # -- closing -----------------------------------------------------------------------------
-    def metadata(self) -> dict:
-        """rosbag2's bag metadata (the mapping under ``rosbag2_bagfile_information``)."""
-        start = self._times.start or 0
-        duration = (self._times.end - start) if self._times.end is not None else 0
-        name = self.mcap_path.name
-        return {
-            "version": METADATA_VERSION,
-            "storage_identifier": "mcap",
-            "duration": {"nanoseconds": duration},
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": self.message_count,
-            "topics_with_message_count": [
-                {"topic_metadata": {"name": c.topic, "type": c.type, "serialization_format": SERIALIZATION_FORMAT,
-                                    "offered_qos_profiles": c.qos_profiles, "type_description_hash": c.type_hash},
-                 "message_count": c.count}
-                for c in self._channels.values()],
-            "compression_format": "",
-            "compression_mode": "",
-            "relative_file_paths": [name],
-            "files": [{"path": name, "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": self.message_count}],
-            "custom_data": None,
-            "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
-        }
+    def metadata(self, on_disk: bool = False) -> dict:
+        """rosbag2's bag metadata (the mapping under ``rosbag2_bagfile_information``); ``on_disk``:
+        of what the finished chunks hold (while recording), else of everything written."""
+        times = self._flushed["times"] if on_disk else self._times
+        counts = self._flushed["counts"] if on_disk else {t: c.count for t, c in self._channels.items()}
+        topics = [TopicRecord(c.topic, c.type, c.qos_profiles, c.type_hash, counts.get(c.topic, 0))
+                  for c in self._channels.values()]
+        return bag_metadata(self.mcap_path.name, topics, times.start, times.end)
 
     def close(self) -> None:
         """Finish the MCAP file (summary, indexes) and write metadata.yaml; safe to call twice."""
@@ -190,8 +211,13 @@ class BagWriter:
                                                 "ROS_DISTRO": metadata["ros_distro"]})
             self._mcap.finish()
             self._stream.close()
-            if self.directory is not None:
-                (self.directory / "metadata.yaml").write_text(_yaml({"rosbag2_bagfile_information": metadata}))
+            self._write_metadata_file(metadata)
+
+    def _write_metadata_file(self, metadata: dict | None = None) -> None:
+        """metadata.yaml of a bag directory, replaced atomically (a crash leaves the old or the new)."""
+        if self.directory is None:
+            return
+        write_metadata_yaml(self.directory, self.metadata(on_disk=True) if metadata is None else metadata)
 
     def __enter__(self) -> "BagWriter":
         return self
@@ -200,11 +226,54 @@ class BagWriter:
         self.close()
 
 
+@dataclass(frozen=True)
+class TopicRecord:
+    """One topic of a bag as rosbag2's metadata lists it."""
+    name: str
+    type: str
+    qos_profiles: list[dict]
+    type_hash: str
+    count: int
+
+
+def bag_metadata(file_name: str, topics: list[TopicRecord], start_ns: int | None, end_ns: int | None) -> dict:
+    """rosbag2's bag metadata (version 9) of a one-file MCAP bag."""
+    start = start_ns or 0
+    duration = (end_ns - start) if end_ns is not None else 0
+    total = sum(t.count for t in topics)
+    return {
+        "version": METADATA_VERSION,
+        "storage_identifier": "mcap",
+        "duration": {"nanoseconds": duration},
+        "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": total,
+        "topics_with_message_count": [
+            {"topic_metadata": {"name": t.name, "type": t.type, "serialization_format": SERIALIZATION_FORMAT,
+                                "offered_qos_profiles": t.qos_profiles, "type_description_hash": t.type_hash},
+             "message_count": t.count}
+            for t in topics],
+        "compression_format": "",
+        "compression_mode": "",
+        "relative_file_paths": [file_name],
+        "files": [{"path": file_name, "starting_time": {"nanoseconds_since_epoch": start},
+                   "duration": {"nanoseconds": duration}, "message_count": total}],
+        "custom_data": None,
+        "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
+    }
+
+
 def _profiles(qos: Any) -> list[dict]:
     if qos is None:
         return []
     items: Iterable = qos if isinstance(qos, (list, tuple)) else [qos]
     return [qos_to_dict(q) if isinstance(q, QoSProfile) else dict(q) for q in items]
+
+
+def write_metadata_yaml(directory: Path, metadata: dict) -> None:
+    """Write ``directory/metadata.yaml`` (rosbag2's bag metadata) atomically."""
+    tmp = directory / ".metadata.yaml.tmp"
+    tmp.write_text(_yaml({"rosbag2_bagfile_information": metadata}))
+    os.replace(tmp, directory / "metadata.yaml")
 
 
 def _yaml(data: dict) -> str:

@@ -1,0 +1,100 @@
+"""Offset inputs of the joint command: the x_* terms of (5.1)/(5.10) summed in the IK argument.
+
+    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC + x_Adm} - Δq_CFC
+
+Each controller that corrects the set-point in operational space (OSPC (3.16), load compensation
+(4.6), hybrid position/force control (5.1), admittance control (5.10)) is one *offset input*: a
+6-vector [m, m, m, rad, rad, rad] in the base frame, published every control period with a flag
+saying whether it is active. The joint command treats them all alike:
+
+- an input counts only while it is enabled here and active at its source, and its value is finite;
+- a switch on or off is ramped: the contribution is α·x with α slewing between 0 and 1 in
+  ``ramp_time`` (switching off ramps the last active value out), so a controller switched live
+  never steps the command (bumpless transfer);
+- an active input older than its ``deadline`` is a fault that holds the command: its producer
+  stopped, and adding an old correction to a moving set-point would be wrong. An inactive input
+  may go silent (it contributes nothing).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .safety import NON_FINITE, STALE_INPUT, Fault
+
+
+@dataclass
+class OffsetSample:
+    """What the producer of one offset input said for a period."""
+    t: float                     # stamp [s]
+    active: bool                 # the producer's own enable (e.g. ControllerState.enabled)
+    x: np.ndarray                # offset [m, m, m, rad, rad, rad]
+
+
+@dataclass
+class OffsetConfig:
+    enabled: bool = True         # taken into the sum (the joint command's switch for this input)
+    deadline: float = 0.005      # age of an active sample that is a fault [s]
+
+    def validate(self, name: str) -> None:
+        if not self.deadline > 0.0:
+            raise ValueError(f"offset input {name}: deadline must be > 0 s, got {self.deadline}")
+
+
+class OffsetInputs:
+    """The sum of the offset inputs with per-input enable, deadline and ramped switching."""
+
+    def __init__(self, names, dt: float, ramp_time: float = 0.2, configs: dict | None = None):
+        names = list(names)
+        if len(set(names)) != len(names):
+            raise ValueError(f"offset inputs must be unique, got {names}")
+        self.names = names
+        self.dt = dt
+        self.ramp_time = ramp_time
+        self.configs = {n: OffsetConfig() for n in names}
+        self.configure(configs or {}, ramp_time)
+        self.alpha = dict.fromkeys(names, 0.0)
+        self.last = {n: np.zeros(6) for n in names}
+
+    def configure(self, configs: dict, ramp_time: float) -> None:
+        """Apply per-input configs (``{name: OffsetConfig}``) and the ramp time, validated first."""
+        unknown = set(configs) - set(self.names)
+        if unknown:
+            raise ValueError(f"unknown offset inputs {sorted(unknown)}; declared: {self.names}")
+        if ramp_time < 0.0:
+            raise ValueError(f"offset ramp time must be >= 0 s, got {ramp_time}")
+        for name, config in configs.items():
+            config.validate(name)
+        self.configs.update(configs)
+        self.ramp_time = ramp_time
+
+    def reset(self) -> None:
+        """Forget every contribution (e.g. when the joint command leaves force control)."""
+        for name in self.names:
+            self.alpha[name] = 0.0
+            self.last[name] = np.zeros(6)
+
+    def update(self, now: float, samples: dict[str, OffsetSample | None]) -> tuple[np.ndarray, list[Fault]]:
+        """One period: the summed offset and the faults (stale or non-finite active inputs)."""
+        total = np.zeros(6)
+        faults: list[Fault] = []
+        step = 1.0 if self.ramp_time == 0.0 else self.dt / self.ramp_time
+        for name in self.names:
+            sample = samples.get(name)
+            active = self.configs[name].enabled and sample is not None and sample.active
+            if active:
+                age = now - sample.t
+                x = np.asarray(sample.x, dtype=float)
+                if age > self.configs[name].deadline:
+                    faults.append(Fault(STALE_INPUT, f"offset {name} is {1e3 * age:.0f} ms old "
+                                        f"(deadline {1e3 * self.configs[name].deadline:.0f} ms)", True))
+                    active = False
+                elif x.shape != (6,) or not np.all(np.isfinite(x)):
+                    faults.append(Fault(NON_FINITE, f"offset {name} is not 6 finite values: {x}", True))
+                    active = False
+                else:
+                    self.last[name] = x
+            self.alpha[name] = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
+            total += self.alpha[name] * self.last[name]
+        return total, faults
