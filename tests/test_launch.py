@@ -117,6 +117,25 @@ launch:
     assert (package_share("cdpr_control") / "params" / "ipanema3_mini.yaml").is_file()
 
 
+@pytest.mark.parametrize("given, expected", [({}, ["talker"]), ({"listen": "true"}, ["talker", "listener"]),
+                                             ({"listen": "1", "quiet": "True"}, ["listener"])])
+def test_if_and_unless_switch_actions(tmp_path, given, expected):
+    path = tmp_path / "optional.yaml"
+    path.write_text("""
+launch:
+  - arg: {name: listen, default: "false"}
+  - arg: {name: quiet, default: "false"}
+  - set_parameter: {name: use_sim_time, value: true, if: $(var quiet)}
+  - node: {pkg: cdpr_test_nodes, exec: talker, unless: $(var quiet)}
+  - node: {pkg: cdpr_test_nodes, exec: listener, if: $(var listen)}
+""")
+    description = load_launch_file(path, given)
+    assert [n.module.rpartition(".")[2] for n in description.nodes] == expected
+    assert description.parameters == ({"use_sim_time": True} if given.get("quiet") else {})
+    with pytest.raises(ValueError, match=r"launch\[4\] \(node\): if: 'maybe' is not true, false, 1 or 0"):
+        load_launch_file(path, {"listen": "maybe"})
+
+
 def test_cdpr_launch_finds_a_file_in_a_package_share_and_shows_it():
     run = subprocess.run([sys.executable, "-m", "cdpr_tools.cli", "launch", "cdpr_tools", "closed_loop.yaml",
                           "robot:=ipanema3", "--show"], capture_output=True, text=True, env=subprocess_env(), timeout=60)

@@ -12,6 +12,8 @@ graph needs and names the file and the entry of anything else, rather than ignor
   ``name``/``value``, or ``name`` with a nested ``param`` list), ``remap`` (``from``/``to``),
   ``ros_args`` (a string), ``on_exit: shutdown`` (its end ends the launch), ``output`` (accepted;
   cdpr launch prints every node's output, prefixed with its name);
+- ``if``/``unless`` on ``let``, ``set_parameter`` and ``node`` (true, false, 1 or 0 after
+  substitution), so optional stages can be switched by an argument;
 - substitutions in any string: ``$(var NAME)``, ``$(find-pkg-share PKG)``, ``$(env NAME [DEFAULT])``.
   A parameter value that is a substitution is typed as YAML, as ``launch_ros`` does
   (``value: $(var seed)`` with seed 0 is the integer 0).
@@ -37,7 +39,9 @@ from cdpr_tools.launch import LaunchDescription, NodeSpec
 from cdpr_tools.share import package_share
 
 ACTIONS = ("arg", "let", "set_parameter", "node")
-NODE_KEYS = ("pkg", "exec", "name", "namespace", "param", "remap", "ros_args", "on_exit", "output")
+NODE_KEYS = ("pkg", "exec", "name", "namespace", "param", "remap", "ros_args", "on_exit", "output", "if", "unless")
+CONDITION_KEYS = ("if", "unless")
+_TRUE, _FALSE = ("true", "1"), ("false", "0")  # what launch's IfCondition accepts, case-insensitive
 _SUBSTITUTION = re.compile(r"\$\(([a-z][\w-]*)((?:\s+[^\s)]+)*)\s*\)")
 
 
@@ -119,7 +123,21 @@ class _Reader:
                                   f"(supported actions: {', '.join(ACTIONS)})")
         if not isinstance(body, dict):
             raise LaunchFileError(f"{where}: {kind} takes a mapping of attributes")
-        getattr(self, f"_{kind}")(body, f"{where} ({kind})")
+        where = f"{where} ({kind})"
+        if kind != "arg" and not self._condition(body, where):
+            return
+        getattr(self, f"_{kind}")({k: v for k, v in body.items() if k not in CONDITION_KEYS}, where)
+
+    def _condition(self, body: dict, where: str) -> bool:
+        """``if:``/``unless:`` of an action, as launch's IfCondition/UnlessCondition read them."""
+        result = True
+        for key in CONDITION_KEYS:
+            if key in body:
+                text = self.text(body[key], where).strip().lower()
+                if text not in _TRUE + _FALSE:
+                    raise LaunchFileError(f"{where}: {key}: {text!r} is not true, false, 1 or 0")
+                result = result and ((text in _TRUE) == (key == "if"))
+        return result
 
     def _arg(self, body: dict, where: str) -> None:
         self._keys(body, ("name", "default", "description"), where)
