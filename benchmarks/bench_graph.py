@@ -60,7 +60,8 @@ from cdpr_control.robot import load_robot  # noqa: E402
 from cdpr_sim.closed_loop import hold, run  # noqa: E402
 from cdpr_tools.bag import BagReader  # noqa: E402
 from cdpr_tools.demo_cmd import GRAPH  # noqa: E402
-from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file, select_nodes  # noqa: E402
+from cdpr_tools.launch import Launcher, RecordSpec, select_nodes  # noqa: E402
+from cdpr_tools.launch_file import load_launch_file  # noqa: E402
 from cdpr_tools.program_client import run_program  # noqa: E402
 from cdpr_tools.ros_graph import new_context  # noqa: E402
 

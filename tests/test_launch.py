@@ -10,25 +10,29 @@ from std_msgs.msg import Int32
 
 from cdpr_test_nodes.graph import Collector, Spinner, subprocess_env, wait_for
 from cdpr_tools.bag import BagReader
-from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, load_launch_file, node_class, ros_arguments
+from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, RecordSpec, node_class, ros_arguments
+from cdpr_tools.launch_file import load_launch_file
+from cdpr_tools.share import package_share
 
 GRAPH = """
-arguments:
-  rate: 100.0
-  ns: {ns}
-mode: {mode}
-parameters: {{use_sim_time: false}}
-record: {{output: {bag}}}
-nodes:
-  - module: cdpr_test_nodes.talker
-    name: talker_x
-    namespace: $(arg ns)
-    parameters:
-      - {{rate: $(arg rate), greeting: launched}}
-      - talker_params.yaml
-  - module: cdpr_test_nodes.listener
-    namespace: $(arg ns)
-    required: true
+launch:
+  - arg: {{name: rate, default: "100.0"}}
+  - arg: {{name: ns, default: {ns}}}
+  - set_parameter: {{name: use_sim_time, value: false}}
+  - node:
+      pkg: cdpr_test_nodes
+      exec: talker
+      name: talker_x
+      namespace: $(var ns)
+      param:
+        - {{name: rate, value: $(var rate)}}
+        - {{name: greeting, value: launched}}
+        - from: talker_params.yaml
+  - node:
+      pkg: cdpr_test_nodes
+      exec: listener
+      namespace: $(var ns)
+      on_exit: shutdown
 """
 
 
@@ -36,8 +40,14 @@ def write_graph(tmp_path, mode: str, ns: str):
     (tmp_path / "talker_params.yaml").write_text(yaml.safe_dump(
         {"/**": {"ros__parameters": {"gains": {"kp": 2.5}}}}))
     path = tmp_path / f"{mode}.yaml"
-    path.write_text(GRAPH.format(mode=mode, ns=ns, bag=tmp_path / f"{mode}_bag"))
+    path.write_text(GRAPH.format(ns=ns))
     return path
+
+
+def load_recorded(tmp_path, mode: str, ns: str):
+    description = load_launch_file(write_graph(tmp_path, mode, ns))
+    description.record = RecordSpec(output=str(tmp_path / f"{mode}_bag"))
+    return description
 
 
 @pytest.fixture
@@ -65,13 +75,18 @@ def wait_for_graph_and_recorder(launcher, collector, ns: str) -> None:
 def test_launch_file_arguments_parameters_and_ros_args(tmp_path, monkeypatch):
     monkeypatch.setenv("CDPR_TEST_FRAME", "tool")
     path = write_graph(tmp_path, "composed", "/a")
-    text = path.read_text().replace("greeting: launched", "greeting: launched, frame: $(env CDPR_TEST_FRAME)")
-    path.write_text(text.replace("    required: true", "    remappings: [heard:=/elsewhere]"))
+    text = path.read_text().replace("{name: greeting, value: launched}",
+                                    "{name: greeting, value: launched}\n        - {name: frame, value: $(env CDPR_TEST_FRAME)}")
+    text = text.replace("      on_exit: shutdown", "      remap: [{from: heard, to: /elsewhere}]\n      ros_args: --log-level warn")
+    path.write_text(text)
     description = load_launch_file(path, {"rate": "42.0"})
     talker, listener = description.nodes
+    assert talker.module == "cdpr_test_nodes.talker" and listener.module == "cdpr_test_nodes.listener"
     assert talker.parameters[0] == {"rate": 42.0, "greeting": "launched", "frame": "tool"}  # typed, substituted
     assert talker.parameters[1] == str(tmp_path / "talker_params.yaml")  # relative to the launch file
     assert listener.remappings == {"heard": "/elsewhere"} and listener.namespace == "/a"
+    assert listener.ros_args == ["--log-level", "warn"] and not listener.required and not talker.required
+    assert description.parameters == {"use_sim_time": False}  # set_parameter: every node
     args = ros_arguments(talker, description.parameters, tmp_path)
     assert args[:5] == ["--ros-args", "-r", "__node:=talker_x", "-r", "__ns:=/a"]
     files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
@@ -79,30 +94,88 @@ def test_launch_file_arguments_parameters_and_ros_args(tmp_path, monkeypatch):
     assert yaml.safe_load(open(files[0])) == {"/**": {"ros__parameters": {"use_sim_time": False}}}
     assert yaml.safe_load(open(files[1]))["/**"]["ros__parameters"]["rate"] == 42.0
     assert node_class("cdpr_test_nodes.talker").__name__ == "Talker"
+    assert load_launch_file(write_graph(tmp_path, "composed", "/a")).nodes[1].required  # on_exit: shutdown
+
+
+def test_launch_file_nested_parameters_let_and_find_pkg_share(tmp_path):
+    from cdpr_tools.share import package_share
+
+    path = tmp_path / "nested.yaml"
+    path.write_text("""
+launch:
+  - let: {name: robot, value: ipanema3_mini}
+  - node:
+      pkg: cdpr_test_nodes
+      exec: talker
+      param:
+        - {name: gains, param: [{name: kp, value: 2.5}, {name: ki, value: $(var robot)}]}
+        - from: $(find-pkg-share cdpr_control)/params/$(var robot).yaml
+""")
+    (talker,) = load_launch_file(path).nodes
+    assert talker.parameters[0] == {"gains": {"kp": 2.5, "ki": "ipanema3_mini"}}
+    assert talker.parameters[1] == str(package_share("cdpr_control") / "params" / "ipanema3_mini.yaml")
+    assert (package_share("cdpr_control") / "params" / "ipanema3_mini.yaml").is_file()
+
+
+@pytest.mark.parametrize("given, expected", [({}, ["talker"]), ({"listen": "true"}, ["talker", "listener"]),
+                                             ({"listen": "1", "quiet": "True"}, ["listener"])])
+def test_if_and_unless_switch_actions(tmp_path, given, expected):
+    path = tmp_path / "optional.yaml"
+    path.write_text("""
+launch:
+  - arg: {name: listen, default: "false"}
+  - arg: {name: quiet, default: "false"}
+  - set_parameter: {name: use_sim_time, value: true, if: $(var quiet)}
+  - node: {pkg: cdpr_test_nodes, exec: talker, unless: $(var quiet)}
+  - node: {pkg: cdpr_test_nodes, exec: listener, if: $(var listen)}
+""")
+    description = load_launch_file(path, given)
+    assert [n.module.rpartition(".")[2] for n in description.nodes] == expected
+    assert description.parameters == ({"use_sim_time": True} if given.get("quiet") else {})
+    with pytest.raises(ValueError, match=r"launch\[4\] \(node\): if: 'maybe' is not true, false, 1 or 0"):
+        load_launch_file(path, {"listen": "maybe"})
+
+
+def test_cdpr_launch_finds_a_file_in_a_package_share_and_shows_it():
+    run = subprocess.run([sys.executable, "-m", "cdpr_tools.cli", "launch", "cdpr_tools", "closed_loop.yaml",
+                          "robot:=ipanema3", "--show"], capture_output=True, text=True, env=subprocess_env(), timeout=60)
+    assert run.returncode == 0, run.stderr
+    shown = yaml.safe_load(run.stdout)
+    assert shown["mode"] == "composed" and shown["parameters"] == {"use_sim_time": True, "sync_mode": "exact"}
+    modules = [n["module"] for n in shown["nodes"]]
+    assert modules[0] == "cdpr_sim.nodes.winch_platform_sim" and "cdpr_control.nodes.visualization" in modules
+    assert all(n["parameters"][0].endswith("params/ipanema3.yaml") for n in shown["nodes"])
 
 
 @pytest.mark.parametrize("change, message", [
-    (lambda t: t + "surprise: 1\n", "unknown key surprise"),
+    (lambda t: t + "  - include: {file: other.launch.yaml}\n", r"launch\[5\]: 'include' is not supported by cdpr launch"),
+    (lambda t: t.replace("on_exit: shutdown", "respawn: true"), r"launch\[4\] \(node\): 'respawn' is not supported"),
+    (lambda t: t.replace("on_exit: shutdown", "on_exit: restart"), "on_exit: restart is not supported"),
     (lambda t: t.replace("talker_params.yaml", "missing.yaml"), "parameter file .*missing.yaml not found"),
-    (lambda t: t.replace("cdpr_test_nodes.listener", "cdpr_tools.message_convert"), "exactly one node class"),
-    (lambda t: t.replace("    name: talker_x", "    entry_point: cdpr\n    name: talker_x"), "exactly one of module"),
-    (lambda t: t.replace("$(arg rate)", "$(arg speed)"), r"\$\(arg speed\) is not declared"),
+    (lambda t: t.replace("exec: listener", "exec: nowhere"), "has no executable 'nowhere'"),
+    (lambda t: t.replace("cdpr_test_nodes\n      exec: listener", "cdpr_tools\n      exec: message_convert"),
+     "exactly one node class"),
+    (lambda t: t.replace("$(var rate)", "$(var speed)"), r"\$\(var speed\) is not declared"),
+    (lambda t: t.replace("$(var rate)", "$(eval 2*50)"), r"substitution \$\(eval 2\*50\) is not supported"),
+    (lambda t: t.replace("launch:", "nodes:"), "a mapping with one key, 'launch:'"),
 ])
 def test_launch_file_errors_name_the_problem(tmp_path, change, message):
     path = write_graph(tmp_path, "composed", "/a")
     path.write_text(change(path.read_text()))
-    with pytest.raises((ValueError, LookupError, FileNotFoundError), match=message):
+    with pytest.raises((ValueError, LookupError, FileNotFoundError), match=message) as error:
         description = load_launch_file(path)
         for spec in description.nodes:
             node_class(spec.target()[0])
+    assert str(path) in str(error.value) or "exactly one node class" in message
     with pytest.raises(ValueError, match="unknown argument speed; arguments: rate, ns"):
         load_launch_file(write_graph(tmp_path, "composed", "/a"), {"speed": "1"})
 
 
 def test_composed_graph_runs_in_process_and_records(tmp_path, listen):
     collector = listen.add(Collector, topics={"/comp/heard": Int32})
-    launcher = Launcher(load_launch_file(write_graph(tmp_path, "composed", "/comp")))
+    launcher = Launcher(load_recorded(tmp_path, "composed", "/comp"))
     with launcher:
+        assert {"/comp/chatter", "/comp/heard"} <= set(launcher.recorder.recorded_topics)  # held until recorded
         talker = next(n for n in launcher.nodes if n.get_name() == "talker_x")
         assert talker.get_fully_qualified_name() == "/comp/talker_x"
         assert talker.get_parameter("rate").value == 100.0
@@ -116,7 +189,7 @@ def test_composed_graph_runs_in_process_and_records(tmp_path, listen):
 
 def test_processes_graph_runs_and_stops_cleanly(tmp_path, listen, capfd):
     collector = listen.add(Collector, topics={"/proc/heard": Int32})
-    launcher = Launcher(load_launch_file(write_graph(tmp_path, "processes", "/proc")))
+    launcher = Launcher(load_recorded(tmp_path, "processes", "/proc"), mode="processes")
     with launcher:
         assert set(launcher.processes) == {"proc/talker_x", "proc/listener"}
         wait_for_graph_and_recorder(launcher, collector, "/proc")
@@ -129,7 +202,8 @@ def test_processes_graph_runs_and_stops_cleanly(tmp_path, listen, capfd):
 def test_cdpr_launch_stops_cleanly_on_sigint(tmp_path, listen, mode):
     ns = f"/sig_{mode}"
     collector = listen.add(Collector, topics={f"{ns}/heard": Int32})
-    launch = subprocess.Popen([sys.executable, "-m", "cdpr_tools.cli", "launch", str(write_graph(tmp_path, mode, ns))],
+    launch = subprocess.Popen([sys.executable, "-m", "cdpr_tools.cli", "launch", str(write_graph(tmp_path, mode, ns)),
+                               "--mode", mode, "--record", str(tmp_path / f"{mode}_bag")],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=subprocess_env())
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(launch.stdout), daemon=True)
@@ -158,3 +232,23 @@ def test_a_raising_callback_ends_a_composed_launch_with_the_error(capfd):
         assert launcher.wait(15)
     assert launcher.errors == ["graph: RuntimeError: boom"]
     assert "RuntimeError: boom" in capfd.readouterr().out  # the traceback, printed under [graph]
+
+
+@pytest.mark.parametrize("mode", ["composed", "processes"])
+def test_the_shipped_graph_runs_in_both_modes(listen, mode):
+    """closed_loop.yaml (IPAnema 3 Mini, nominal simulator plant) loops and draws markers: composed in
+    lockstep; one process per node free-running (sync_mode latest). In lockstep, a process graph can
+    stall at start-up: the interpreter sends the set-point of t = 0 once, and a node that subscribes
+    to /setpoint after that waits for it forever while the simulator repeats only its state."""
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    collector = listen.add(Collector, topics={"/winch/state": JointState, "/visualization/markers": MarkerArray})
+    description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml",
+                                   {"sync_mode": "exact" if mode == "composed" else "latest"})
+    with Launcher(description, mode=mode) as launcher:
+        wait_for(lambda: collector.count("/winch/state") > 200 and collector.count("/visualization/markers") > 2,
+                 timeout=120, what=f"the {mode} graph to loop and draw")
+        assert not launcher.wait(0)  # still running
+    assert not launcher.errors
+    assert all(code == 0 for code in launcher.exit_codes.values())

@@ -17,7 +17,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from cdpr_test_nodes.graph import wait_for
 from cdpr_tools.bag import BagReader
 from cdpr_tools.demo_cmd import GRAPH
-from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
+from cdpr_tools.launch import Launcher, RecordSpec
+from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.program_client import run_program
 from cdpr_tools.run_report import run_data, summarize
 
@@ -49,6 +50,7 @@ OTHER_TYPES = {  # present whenever the recorder saw a publisher; the first two 
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "/rosout": "rcl_interfaces/msg/Log",
     "/parameter_events": "rcl_interfaces/msg/ParameterEvent",
+    "/visualization/markers": "visualization_msgs/msg/MarkerArray",  # 10 Hz of wall time
 }
 TYPES = {**LOOP_TYPES, **OTHER_TYPES}
 
@@ -95,10 +97,8 @@ def job(tmp_path_factory):
     description.record = RecordSpec(output=str(bag))
     with Launcher(description, mode="composed") as launch:
         sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").sim
-        # The launcher starts the loop before its recorder has discovered the topics (up to ~4 s
-        # of wall time later); waiting here keeps the whole program in the bag.
-        wait_for(lambda: set(LOOP_TYPES) <= set(launch.recorder.recorded_topics), timeout=60.0,
-                 what="the recorder to subscribe to the loop topics")
+        # the launcher holds the composed graph until its recorder records every loop topic
+        assert set(LOOP_TYPES) <= set(launch.recorder.recorded_topics)
         result = run_program(PROGRAM, "short", timeout=120.0)
         t_end = sim.t
         wait_for(lambda: sim.t >= t_end + SETTLE_S, timeout=60.0, what="the loop to run on after the program")

@@ -16,6 +16,7 @@ ANALYSES = {
     "eigenfrequencies": "cdpr_control.analysis.eigenfrequencies",
     "stability": "cdpr_control.analysis.stability",
 }
+WITH_PROGRESS = {"force-distribution"}  # main(argv, progress=...): tells how far the work is
 
 
 def add_parser(sub) -> None:
@@ -26,4 +27,13 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    return importlib.import_module(ANALYSES[args.analysis]).main(args.options)
+    main = importlib.import_module(ANALYSES[args.analysis]).main
+    if args.analysis not in WITH_PROGRESS:
+        return main(args.options)
+    from cdpr_tools.progress import Progress
+
+    progress = Progress(f"analyze {args.analysis}")
+    try:
+        return main(args.options, progress=progress.update)
+    finally:
+        progress.done()

@@ -10,8 +10,10 @@ import importlib
 import os
 import sys
 
+from cdpr_tools import progress
+
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
-COMMANDS = ("demo", "robot", "program", "topic", "param", "bag", "launch", "plot", "identify", "analyze", "bench")
+COMMANDS = ("demo", "robot", "program", "topic", "param", "bag", "launch", "view", "plot", "identify", "analyze", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,6 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     # ROS 2 discovery stays on this machine unless the user says otherwise
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     args = build_parser().parse_args(argv)
+    progress.enable()  # long commands show how far they are (stderr)
     try:
         return int(args.run(args) or 0)
     except KeyboardInterrupt:

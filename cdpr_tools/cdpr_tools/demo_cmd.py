@@ -44,7 +44,11 @@ def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
 
 
 def run(args) -> int:
-    from cdpr_tools.launch import Launcher, RecordSpec, load_launch_file
+    import rclpy.logging
+
+    from cdpr_tools.launch import Launcher, RecordSpec
+    from cdpr_tools.progress import Progress
+    from cdpr_tools.launch_file import load_launch_file
     from cdpr_tools.program_client import run_program
     from cdpr_tools.run_report import plot_run, read_bag, summarize
 
@@ -62,9 +66,14 @@ def run(args) -> int:
     print(f"[demo] {robot.name} ({args.plant} plant): program {name!r} through the node graph ({args.mode}, {args.controller}), "
           f"recording to {bag}", flush=True)
     wall0 = time.perf_counter()
-    with Launcher(description, mode=args.mode) as launch:
-        _wait_for_recorder(launch)           # the recorder discovers the topics only after a while
-        result = run_program(text, name, timeout=args.timeout, feedback=_progress)
+    # the console shows the program's progress: the recorder's line per subscribed topic is left out
+    rclpy.logging.set_logger_level("bag_recorder", rclpy.logging.LoggingSeverity.WARN)
+    with Launcher(description, mode=args.mode) as launch:   # composed: held until the recorder records
+        if args.mode == "processes":
+            _wait_for_recorder(launch)  # the children run at once; the recorder discovers them meanwhile
+        progress = Progress(f"[demo] program {name!r}")
+        result = run_program(text, name, timeout=args.timeout, feedback=lambda line, p: progress.update(p, f"line {line}"))
+        progress.done()
         wall = time.perf_counter() - wall0
         errors = list(launch.errors)
     if errors:
@@ -102,14 +111,3 @@ def _wait_for_recorder(launch, timeout: float = 60.0) -> None:
             missing = sorted(RECORDED - set(launch.recorder.recorded_topics))
             raise TimeoutError(f"the recorder did not find {', '.join(missing)} within {timeout:.0f} s")
         time.sleep(0.1)
-
-
-_reported = [-1]
-
-
-def _progress(line: int, progress: float) -> None:
-    """One line per 10 % of the program (feedback comes every few periods)."""
-    decile = int(10 * progress)
-    if decile > _reported[0]:
-        _reported[0] = decile
-        print(f"[demo] {100 * progress:5.1f} %  (line {line})", flush=True)

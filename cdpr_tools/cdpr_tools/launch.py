@@ -1,4 +1,4 @@
-"""The launcher: start a node graph from a YAML description, composed or one process per node.
+"""The launcher: start a node graph from a launch description, composed or one process per node.
 
 ``launch``/``launch_ros`` are not on PyPI, so the project starts its graphs itself. A graph is a
 list of nodes (a Python module following the node convention of docs/tools.md, or a console-script
@@ -13,7 +13,9 @@ remappings. Every node gets the same ``--ros-args`` in both modes:
   they may as well run on other machines.
 
 Optionally every topic is recorded to a bag meanwhile; composed, the recorder is one more node of
-the graph and takes the in-process messages, serialized once each. ``stop()`` (Ctrl-C in ``cdpr launch``)
+the graph and takes the in-process messages, serialized once each, and the graph is held (not spun)
+until the recorder has subscribed to every topic it publishes, so a lockstep run is recorded from its
+first period. ``stop()`` (Ctrl-C in ``cdpr launch``)
 ends everything cleanly: executors stop, nodes are destroyed, children get SIGINT (then SIGTERM,
 then SIGKILL if they hang), the bag is closed.
 """
@@ -24,12 +26,12 @@ import importlib
 import importlib.metadata
 import inspect
 import os
-import re
 import signal
 import subprocess
 import sys
 import tempfile
 import threading
+import time
 import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -43,14 +45,14 @@ from rclpy.parameter import Parameter
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
 from cdpr_control.nodes.intraprocess import IntraProcess
 from cdpr_control.nodes.runner import spin
-from cdpr_tools.ros_graph import keep_discovery_local, new_context
+from cdpr_tools.ros_graph import _hidden_topic, keep_discovery_local, new_context
 
 MODES = ("composed", "processes")
 STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SIGTERM
+RECORDER_TIMEOUT = 60.0  # s the recorder may take to discover a composed graph's topics
 # child process: import the node module and call its main([module, --ros-args, ...])
 _BOOTSTRAP = ("import importlib, sys; "
               "sys.exit(getattr(importlib.import_module(sys.argv[1]), sys.argv[2])([sys.argv[1]] + sys.argv[3:]))")
-_SUBSTITUTION = re.compile(r"\$\((arg|env)\s+([A-Za-z_][\w]*)(?:\s+([^)]*))?\)")
 
 
 @dataclass
@@ -101,98 +103,7 @@ class LaunchDescription:
     source: Path | None = None  # the launch file, for messages and relative paths
 
 
-# -- launch files ---------------------------------------------------------------------------------
-_TOP_KEYS = {"arguments", "mode", "parameters", "record", "nodes"}
-_NODE_KEYS = {"module", "entry_point", "name", "namespace", "parameters", "remappings", "ros_args", "required"}
-_RECORD_KEYS = {"output", "topics", "exclude", "include_hidden_topics"}
-
-
-def load_launch_file(path: str | os.PathLike, arguments: dict | None = None) -> LaunchDescription:
-    """Read a launch file (schema in docs/tools.md); ``arguments`` override its ``arguments:``."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"launch file {path} not found") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: a launch file is a mapping with a 'nodes' list")
-    _check_keys(data, _TOP_KEYS, str(path))
-    declared = {str(k): v for k, v in (data.get("arguments") or {}).items()}
-    unknown = sorted(set(arguments or {}) - set(declared))
-    if unknown:
-        raise ValueError(f"{path}: unknown argument {', '.join(unknown)}; arguments: {', '.join(declared) or '(none)'}")
-    values = {**declared, **(arguments or {})}
-    data = _substitute({k: v for k, v in data.items() if k != "arguments"}, values, path)
-    base = path.parent
-    nodes = []
-    for i, entry in enumerate(data.get("nodes") or []):
-        where = f"{path}: nodes[{i}]"
-        if not isinstance(entry, dict):
-            raise ValueError(f"{where}: a node is a mapping with module or entry_point")
-        _check_keys(entry, _NODE_KEYS, where)
-        params = entry.get("parameters") or []
-        params = [params] if isinstance(params, dict) else list(params)
-        params = [p if isinstance(p, dict) else _existing(base / str(p), where) for p in params]
-        remaps = entry.get("remappings") or {}
-        if isinstance(remaps, list):  # also accept ["from:=to", ...]
-            remaps = dict(r.split(":=", 1) for r in remaps)
-        nodes.append(NodeSpec(module=entry.get("module"), entry_point=entry.get("entry_point"),
-                              name=entry.get("name"), namespace=entry.get("namespace"), parameters=params,
-                              remappings={str(k): str(v) for k, v in remaps.items()},
-                              ros_args=[str(a) for a in entry.get("ros_args") or []],
-                              required=bool(entry.get("required", False))))
-        nodes[-1].target()  # fail now on a missing entry point or an ambiguous spec
-    if not nodes:
-        raise ValueError(f"{path}: no nodes")
-    record = data.get("record")
-    if record is True:
-        record = {}
-    if isinstance(record, dict):
-        _check_keys(record, _RECORD_KEYS, f"{path}: record")
-        record = RecordSpec(**record)
-    elif record not in (None, False):
-        raise ValueError(f"{path}: record is true, false or a mapping of {', '.join(sorted(_RECORD_KEYS))}")
-    mode = data.get("mode", "composed")
-    if mode not in MODES:
-        raise ValueError(f"{path}: mode must be one of {', '.join(MODES)}, got {mode!r}")
-    return LaunchDescription(nodes=nodes, mode=mode, parameters=dict(data.get("parameters") or {}),
-                             record=record or None, source=path)
-
-
-def _check_keys(mapping: dict, allowed: set, where: str) -> None:
-    unknown = sorted(set(mapping) - allowed)
-    if unknown:
-        raise ValueError(f"{where}: unknown key {', '.join(map(str, unknown))}; allowed: {', '.join(sorted(allowed))}")
-
-
-def _existing(path: Path, where: str) -> str:
-    if not path.is_file():
-        raise FileNotFoundError(f"{where}: parameter file {path} not found")
-    return str(path)
-
-
-def _substitute(value, arguments: dict, path: Path):
-    """Replace ``$(arg NAME)`` and ``$(env NAME [default])`` in every string (typed if alone)."""
-    if isinstance(value, dict):
-        return {k: _substitute(v, arguments, path) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_substitute(v, arguments, path) for v in value]
-    if not isinstance(value, str) or "$(" not in value:
-        return value
-
-    def replace(match: re.Match) -> str:
-        kind, name, default = match.groups()
-        if kind == "arg":
-            if name not in arguments:
-                raise ValueError(f"{path}: $(arg {name}) is not declared under arguments")
-            return str(arguments[name])
-        if name in os.environ or default is not None:
-            return os.environ.get(name, default)
-        raise ValueError(f"{path}: environment variable {name} is not set and $(env {name}) has no default")
-
-    full = _SUBSTITUTION.fullmatch(value.strip())
-    text = _SUBSTITUTION.sub(replace, value)
-    return yaml.safe_load(text) if full and text.strip() else text
+# Launch files (ROS 2 YAML launch format) are read by cdpr_tools.launch_file.load_launch_file.
 
 
 def select_nodes(description: LaunchDescription, only: list[str] | None = None,
@@ -286,8 +197,12 @@ class Launcher:
                 self._start_composed()
             if self.description.record is not None:
                 self._start_recorder(self.description.record)
+                if self.mode == "composed":
+                    self._threads[-1].start()  # the recorder spins, the graph waits for it
+                    self._hold_until_recorded()
             for thread in self._threads:
-                thread.start()
+                if thread.ident is None:
+                    thread.start()
         except BaseException:
             self.stop()
             raise
@@ -347,6 +262,21 @@ class Launcher:
         executor.add_node(self.recorder)
         self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "recorder"),
                                               name="cdpr-launch-recorder", daemon=True))
+
+    def _hold_until_recorded(self, timeout: float = RECORDER_TIMEOUT) -> None:
+        """Composed graph, not yet spun: wait until the recorder records every topic it publishes.
+
+        DDS discovery takes up to seconds; a lockstep graph would meanwhile run its first periods
+        unrecorded. Nothing of the graph runs before its executor spins, so holding it costs nothing.
+        """
+        topics = {p.topic_name for node in self.nodes for p in node.publishers}
+        topics = {t for t in topics if self.recorder.wanted(t) and not _hidden_topic(t)}
+        deadline = time.monotonic() + timeout
+        while not topics <= set(self.recorder.recorded_topics):
+            if time.monotonic() > deadline:
+                missing = sorted(topics - set(self.recorder.recorded_topics))
+                raise TimeoutError(f"the recorder did not subscribe to {', '.join(missing)} within {timeout:g} s")
+            time.sleep(0.05)
 
     def _new_context(self) -> Context:
         context = new_context()

@@ -1,28 +1,32 @@
-"""``cdpr launch FILE [NAME:=VALUE ...]``: start a node graph from a YAML launch file.
+"""``cdpr launch FILE|PACKAGE FILE [NAME:=VALUE ...]``: start a node graph from a ROS 2 YAML launch file.
 
-The graph runs composed in one process (EventsExecutor; messages between its nodes are passed
-in-process and go over DDS only to subscribers outside it, ``--no-intra-process``: DDS for all) or
-as one process per node (``--mode processes``), optionally recording every topic to a bag (``--record``). Ctrl-C stops it
-cleanly. The launch file schema is in docs/tools.md.
+The graph runs composed in one process (EventsExecutor, the default; messages between its nodes are
+passed in-process and go over DDS only to subscribers outside it, ``--no-intra-process``: DDS for
+all) or as one process per node (``--mode processes``), optionally recording every topic to a bag
+(``--record``). Ctrl-C stops it cleanly. The file is in ROS 2's YAML launch format (the subset cdpr
+launch reads is in docs/tools.md; anything else is an error naming the file and the entry).
 """
 from __future__ import annotations
 
 import argparse
 import threading
 from dataclasses import asdict
+from pathlib import Path
 
 import yaml
 
-from cdpr_tools.launch import MODES, Launcher, RecordSpec, load_launch_file, select_nodes
+from cdpr_tools.launch import MODES, Launcher, RecordSpec, select_nodes
+from cdpr_tools.launch_file import find_launch_file, load_launch_file
 from cdpr_control.nodes.runner import stop_on_signals
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("launch", help="start a node graph from a YAML launch file",
+    p = sub.add_parser("launch", help="start a node graph from a ROS 2 YAML launch file",
                        description=__doc__.replace("``", ""), formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", help="launch file (YAML)")
+    p.add_argument("file", help="launch file (ROS 2 YAML launch format), or a package whose share holds the "
+                   "file named next (as ros2 launch PACKAGE FILE)")
     p.add_argument("arguments", nargs="*", metavar="NAME:=VALUE", help="values for the file's arguments")
-    p.add_argument("--mode", choices=MODES, help="override the file's mode")
+    p.add_argument("--mode", choices=MODES, help="composed (default): one process; processes: one per node")
     p.add_argument("--record", nargs="?", const="", metavar="BAG",
                    help="record every topic (to BAG, default bags/rosbag2_<date>-<time>)")
     p.add_argument("--only", nargs="+", metavar="NODE", help="start only these nodes (name or module, regex); "
@@ -45,6 +49,8 @@ def parse_arguments(items: list[str]) -> dict[str, str]:
 
 
 def run(args) -> int:
+    if not Path(args.file).is_file() and args.arguments and ":=" not in args.arguments[0]:
+        args.file = str(find_launch_file(args.file, args.arguments.pop(0)))
     description = load_launch_file(args.file, parse_arguments(args.arguments))
     if args.only or args.exclude:
         description = select_nodes(description, args.only, args.exclude)

@@ -160,10 +160,10 @@ def table_3_2(results: dict, dt: float) -> list[Row32]:
     return rows
 
 
-def table_3_3(robot, masses, step: float, pulleys=None) -> list[Row33]:
-    """Rows of Table 3.3: mean forces over W_ACF per total platform mass m_p [kg]."""
+def table_3_3(robot, masses, step: float, pulleys=None, done=lambda k: None) -> list[Row33]:
+    """Rows of Table 3.3: mean forces over W_ACF per total platform mass m_p [kg]; ``done(k)`` after row k."""
     rows = []
-    for mass in masses:
+    for k, mass in enumerate(masses):
         r = with_platform_mass(robot, mass)
         grid = workspace_grid(r, step)
         AT, w = grid_problem(r, grid, pulleys)
@@ -174,24 +174,31 @@ def table_3_3(robot, masses, step: float, pulleys=None) -> list[Row33]:
         qp_max = distribute(AT[W], w[W], f_min, f_max, f_max, "qp")
         rows.append(Row33(float(mass), int(W.sum()), float(qp_min.f.mean()), float(acf.f[W].mean()),
                           float(qp_max.f.mean())))
+        done(k)
     return rows
 
 
 def compare_force_distributions(robot: str = "ipanema3", mass: float = 30.0, step: float = 0.25,
                                 speed: float = 1.0, masses=(30.0, 50.0, 100.0, 150.0),
-                                pulleys: bool | None = None) -> Comparison:
+                                pulleys: bool | None = None, progress=None) -> Comparison:
     """Tables 3.2 (at platform mass m_p = mass [kg]) and 3.3 (for each of masses) on a grid with
-    spacing step [m] over the robot's frame, trajectory speed [m/s]; see the module docstring."""
+    spacing step [m] over the robot's frame, trajectory speed [m/s]; see the module docstring.
+    ``progress(fraction, what)``, if given, is told how far the work is (Table 3.2 is half of it)."""
+    progress = progress or (lambda fraction, what: None)
     t0 = time.perf_counter()
     base = load_robot(robot)
     r = with_platform_mass(base, mass)
     grid = workspace_grid(r, step)
     AT, w = grid_problem(r, grid, pulleys)
+    progress(0.1, "Table 3.2: grid")
     results = run_methods(AT, w, r.cable.f_min, r.cable.f_max)
     rows = table_3_2(results, step / speed)
+    progress(0.5, "Table 3.3")
+    table_33 = table_3_3(base, masses, step, pulleys,
+                         lambda k: progress(0.5 + 0.5 * (k + 1) / len(masses), f"Table 3.3: m_p = {masses[k]:g} kg"))
     return Comparison(robot, float(mass), float(step), float(speed), len(AT),
                       int(results["QP_med"].feasible.sum()), int(results["acf"].feasible.sum()),
-                      int(results["cf"].feasible.sum()), rows, table_3_3(base, masses, step, pulleys),
+                      int(results["cf"].feasible.sum()), rows, table_33,
                       time.perf_counter() - t0)
 
 
@@ -224,7 +231,7 @@ def format_report(c: Comparison) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
+def main(argv=None, progress=None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m cdpr_control.analysis.force_distribution_comparison",
         description="Tables 3.2 and 3.3 of the thesis: cable force algorithms over the workspace grid.")
@@ -239,7 +246,7 @@ def main(argv=None) -> int:
     parser.add_argument("--plot", help="also write a PNG of the workspace sets and hull (m_p = --mass)")
     args = parser.parse_args(argv)
     pulleys = False if args.no_pulleys else None
-    c = compare_force_distributions(args.robot, args.mass, args.step, args.speed, args.masses, pulleys)
+    c = compare_force_distributions(args.robot, args.mass, args.step, args.speed, args.masses, pulleys, progress)
     print(format_report(c))
     if args.json:
         data = asdict(c)

@@ -26,6 +26,7 @@ from rclpy.serialization import deserialize_message
 from cdpr_tools.bag.qos import parse_profiles
 from cdpr_tools.bag.recovery import ScanResult, scan
 from cdpr_tools.message_convert import field_value, message_class
+from cdpr_tools.progress import track
 
 
 class CorruptBagError(ValueError):
@@ -151,7 +152,12 @@ class BagReader:
                 raise ValueError(f"bag {self.path} has no topic {', '.join(sorted(unknown))}; "
                                  f"topics: {', '.join(self.topics) or '(none)'}")
         streams = [self._file_messages(i, wanted, start_ns, end_ns) for i in range(len(self.files))]
-        yield from heapq.merge(*streams, key=lambda m: m.log_time_ns) if len(streams) > 1 else streams[0]
+        merged = heapq.merge(*streams, key=lambda m: m.log_time_ns) if len(streams) > 1 else streams[0]
+        if start_ns is not None or end_ns is not None:  # the count of a time range is not in the summary
+            yield from merged
+            return
+        total = sum(info.message_count for name, info in self.topics.items() if wanted is None or name in wanted)
+        yield from track(merged, total, f"reading {self.path.name}")
 
     def _file_messages(self, index: int, wanted, start_ns, end_ns) -> Iterator[BagMessage]:
         channels = self._channels[index]

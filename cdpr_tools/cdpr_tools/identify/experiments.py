@@ -179,11 +179,12 @@ def _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, b
     substeps: physics steps per 1 ms period.
     """
     from cdpr_tools.bag import BagWriter
+    from cdpr_tools.progress import track
 
     with _simulator(robot, seed, noise_std, level, payload, substeps, plant) as sim, BagWriter(bag_path) as bag:
         rec = _Recorder(bag, robot)
         rec.state(sim.output)
-        for k, theta_d in enumerate(commands):
+        for k, theta_d in track(enumerate(commands), len(commands), f"simulating {Path(bag.path).name}"):
             if before_step is not None:
                 before_step(sim, k)
             rec.command(sim.t, theta_d, None if x_d is None else x_d[k])

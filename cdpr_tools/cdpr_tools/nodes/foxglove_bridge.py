@@ -1,0 +1,220 @@
+"""Node ``foxglove_bridge``: every ROS topic of the graph, live, over the Foxglove WebSocket protocol.
+
+Built on the Foxglove SDK (``foxglove-sdk``). Like the bag recorder, it subscribes to topics as
+they appear (serialized, QoS adapted to the publishers' offers) and offers each as a channel with
+the schema the bag writer stores (encoding ``ros2msg``, :func:`cdpr_tools.bag.schema.message_definition`)
+and the CDR payload as the middleware delivered it (padding cut, :func:`cdpr_tools.bag.cdr.trimmed`),
+so Foxglove decodes live data exactly as it decodes our bags. A message is forwarded only while a
+client is subscribed to its channel. Log times are the node's clock (sim time with ``use_sim_time``).
+
+Parameters of the other nodes are offered too (Foxglove's Parameters panel): ``/node.name``, read
+and set through the standard parameter services (rcl_interfaces), so a rejected value keeps the
+node's old one, as with ``cdpr param set``.
+
+Parameters: ``host``, ``port`` (0: any free port; the bound one is in :attr:`FoxgloveBridge.port`),
+``topics`` (empty: all), ``exclude`` (regex), ``include_hidden_topics``, ``discovery_period`` [s].
+"""
+from __future__ import annotations
+
+import re
+import threading
+
+import foxglove
+from foxglove.websocket import Capability, ServerListener
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.node import Node
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+
+from cdpr_control.nodes.runner import run_node
+from cdpr_tools.bag.cdr import trimmed
+from cdpr_tools.bag.schema import ENCODING, message_definition
+from cdpr_tools.message_convert import message_class
+from cdpr_tools.ros_graph import adapted_qos, fully_qualified, topic_types
+
+DEFAULT_PORT = 8765  # Foxglove's default for a live connection
+SERVICE_TIMEOUT = 2.0  # s a node may take to answer a parameter request
+
+
+class FoxgloveBridge(Node):
+    def __init__(self, **kwargs):
+        super().__init__("foxglove_bridge", **kwargs)
+        self.declare_parameter("host", "127.0.0.1", ParameterDescriptor(
+            description="address to listen on (0.0.0.0: every interface)", read_only=True))
+        self.declare_parameter("port", DEFAULT_PORT, ParameterDescriptor(
+            description="WebSocket port; 0: any free port", read_only=True))
+        self.declare_parameter("topics", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description="topics to offer; empty or unset: every topic", read_only=True))
+        self.declare_parameter("exclude", "", ParameterDescriptor(
+            description="regular expression of topics not to offer", read_only=True))
+        self.declare_parameter("include_hidden_topics", False, ParameterDescriptor(read_only=True))
+        self.declare_parameter("discovery_period", 0.5, ParameterDescriptor(
+            description="how often to look for new topics [s]", read_only=True))
+        try:
+            topics = self.get_parameter("topics").value or []
+        except ParameterUninitializedException:
+            topics = []
+        self.selected = {fully_qualified(t) for t in topics if t}
+        exclude = self.get_parameter("exclude").value
+        self.exclude = re.compile(exclude) if exclude else None
+        self.include_hidden = self.get_parameter("include_hidden_topics").value
+        self.channels: dict[str, foxglove.Channel] = {}
+        self._raw_subscriptions: dict[str, object] = {}
+        self._skipped: set[str] = set()
+        self._lock = threading.Lock()  # parameter requests come on the server's threads
+        self._param_clients: dict[str, AsyncParameterClient] = {}
+        self.fox = foxglove.Context()  # channels of this bridge only (several bridges in one process)
+        self.server = foxglove.start_server(
+            name=f"cdpr {self.get_fully_qualified_name()}", host=self.get_parameter("host").value,
+            port=self.get_parameter("port").value, capabilities=[Capability.Parameters],
+            server_listener=_Listener(self), context=self.fox)
+        self.port = self.server.port
+        self.create_timer(self.get_parameter("discovery_period").value, self.discover,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{self.get_parameter('host').value}:{self.port}")
+
+    def wanted(self, topic: str) -> bool:
+        if self.selected and topic not in self.selected:
+            return False
+        return not (self.exclude and self.exclude.fullmatch(topic))
+
+    def discover(self) -> None:
+        """Offer wanted topics that have publishers and no channel yet."""
+        for topic, types in topic_types(self, self.include_hidden).items():
+            if topic in self.channels or topic in self._skipped or not self.wanted(topic):
+                continue
+            if self.count_publishers(topic) == 0:
+                continue  # the offered QoS decides how to subscribe: wait for a publisher
+            self._offer(topic, types[0])
+
+    def _offer(self, topic: str, type_name: str) -> None:
+        try:
+            msg_class = message_class(type_name)
+            schema = foxglove.Schema(name=type_name, encoding=ENCODING, data=message_definition(type_name).encode())
+        except (LookupError, ValueError) as exc:
+            self._skipped.add(topic)
+            self.get_logger().warning(f"not offering {topic}: {exc}")
+            return
+        channel = foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=self.fox)
+        clock = self.get_clock()
+
+        def forward(data: bytes) -> None:
+            if channel.has_sinks():
+                channel.log(trimmed(type_name, data), log_time=clock.now().nanoseconds)
+
+        self.channels[topic] = channel
+        self._raw_subscriptions[topic] = self.create_subscription(msg_class, topic, forward,
+                                                              adapted_qos(self, topic), raw=True)
+        self.get_logger().debug(f"offering {topic} [{type_name}]")
+
+    # -- parameters of the graph's nodes ------------------------------------------------------------
+    def _client(self, node: str) -> AsyncParameterClient:
+        if node not in self._param_clients:
+            self._param_clients[node] = AsyncParameterClient(self, node)
+        return self._param_clients[node]
+
+    def _call(self, future):
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(SERVICE_TIMEOUT):
+            future.cancel()
+            return None
+        return future.result()
+
+    def remote_nodes(self) -> list[str]:
+        own = self.get_fully_qualified_name()
+        names = [f"{ns.rstrip('/')}/{name}" for name, ns in self.get_node_names_and_namespaces()]
+        return sorted(n for n in names if n != own and not any(p.startswith("_") for p in n.split("/")))
+
+    def get_parameters(self, names: list[str]) -> list[foxglove.Parameter]:
+        """``/node.param`` values; all parameters of every node when ``names`` is empty."""
+        wanted: dict[str, list[str]] = {}
+        for full in names:
+            node, _, param = full.partition(".")
+            wanted.setdefault(node, []).append(param)
+        out = []
+        with self._lock:
+            for node in (list(wanted) if names else self.remote_nodes()):
+                client = self._client(node)
+                params = wanted.get(node)
+                if params is None:
+                    listed = self._call(client.list_parameters())
+                    params = sorted(listed.result.names) if listed is not None else []
+                values = self._call(client.get_parameters(params)) if params else None
+                for param, value in zip(params, values.values if values is not None else []):
+                    native = _native(value)
+                    if native is not None:
+                        out.append(foxglove.Parameter(f"{node}.{param}", value=native))
+        return out
+
+    def set_parameters(self, parameters: list[foxglove.Parameter]) -> list[foxglove.Parameter]:
+        """Set ``/node.param`` through the node's set_parameters service; return the values now in force."""
+        by_node: dict[str, list[ParameterMsg]] = {}
+        for p in parameters:
+            node, _, param = p.name.partition(".")
+            value = p.get_value()
+            if isinstance(value, bytes):  # byte arrays are not offered, so none come back
+                continue
+            by_node.setdefault(node, []).append(ParameterMsg(name=param, value=_ros_value(value)))
+        with self._lock:
+            for node, msgs in by_node.items():
+                current = self._call(self._client(node).get_parameters([m.name for m in msgs]))
+                if current is not None:  # keep the declared type: 1 for a double parameter is 1.0
+                    for msg, old in zip(msgs, current.values):
+                        _coerce(msg, old.type)
+                results = self._call(self._client(node).set_parameters(msgs))
+                for msg, result in zip(msgs, results.results if results is not None else []):
+                    if not result.successful:
+                        self.get_logger().warning(f"{node}: {msg.name} not set: {result.reason}")
+        return self.get_parameters([p.name for p in parameters])
+
+    def destroy_node(self) -> None:
+        self.server.stop()
+        for channel in self.channels.values():
+            channel.close()
+        super().destroy_node()
+
+
+class _Listener(ServerListener):
+    """The server's callbacks (foxglove.websocket.ServerListener protocol) for parameters."""
+
+    def __init__(self, bridge: FoxgloveBridge):
+        self.bridge = bridge
+
+    def on_get_parameters(self, client, param_names, request_id=None):
+        return self.bridge.get_parameters(list(param_names))
+
+    def on_set_parameters(self, client, parameters, request_id=None):
+        return self.bridge.set_parameters(list(parameters))
+
+
+def _native(value):
+    """A ROS parameter value as a Python value Foxglove takes (None for unset and byte arrays)."""
+    if value.type in (ParameterType.PARAMETER_NOT_SET, ParameterType.PARAMETER_BYTE_ARRAY):
+        return None
+    native = parameter_value_to_python(value)
+    return list(native) if isinstance(native, (tuple, list)) or hasattr(native, "tolist") else native
+
+
+def _ros_value(value):
+    return Parameter("_", value=value).to_parameter_msg().value
+
+
+def _coerce(msg: ParameterMsg, declared: int) -> None:
+    """An integer sent for a double parameter (JSON has one number type) becomes a double."""
+    v = msg.value
+    if declared == ParameterType.PARAMETER_DOUBLE and v.type == ParameterType.PARAMETER_INTEGER:
+        msg.value = _ros_value(float(v.integer_value))
+    elif declared == ParameterType.PARAMETER_DOUBLE_ARRAY and v.type == ParameterType.PARAMETER_INTEGER_ARRAY:
+        msg.value = _ros_value([float(x) for x in v.integer_array_value])
+
+
+def main(args=None) -> None:
+    run_node(FoxgloveBridge, args)
+
+
+if __name__ == "__main__":
+    main()
