@@ -6,9 +6,9 @@ entry point) with name, namespace, parameters (inline or standard parameter file
 remappings. Every node gets the same ``--ros-args`` in both modes:
 
 - ``composed``: one process, every node built with ``cli_args=<its ros args>`` in one context and
-  spun by one ``EventsExecutor``; messages between the nodes are delivered in-process as Python
-  objects (cdpr_control.nodes.intraprocess) and over DDS only to subscribers outside the process
-  (``intra_process=False``: DDS for everything, about 24 us a hop);
+  spun by one executor; messages between the nodes are delivered in-process as Python objects
+  (cdpr_control.nodes.intraprocess) and over DDS only to subscribers outside the process
+  (``intra_process=False``: DDS for everything on an ``EventsExecutor``, about 24 us a hop);
 - ``processes``: one subprocess per node, ``main([module, --ros-args ...])``; DDS connects them, so
   they may as well run on other machines.
 
@@ -39,6 +39,7 @@ from pathlib import Path
 import yaml
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -211,7 +212,10 @@ class Launcher:
     def _start_composed(self) -> None:
         context = self._new_context()
         IntraProcess.set_enabled(context, self.intra_process)
-        executor = EventsExecutor(context=context)
+        # in-process, the loop's messages never reach the executor, which only runs timers, services
+        # and DDS input: the SingleThreadedExecutor runs timers on time between in-process chains,
+        # where the EventsExecutor of these wheels delays them more and more (10 Hz became 0.3 Hz)
+        executor = (SingleThreadedExecutor if self.intra_process else EventsExecutor)(context=context)
         self._graph = context, executor
         for spec in self.description.nodes:
             module, _ = spec.target()

@@ -131,6 +131,7 @@ class IntraProcess:
         self.lock = threading.Lock()
         self.busy = False
         self.owner: int | None = None       # thread ident of the executor spinning these nodes
+        self.pumped = False                 # runner.spin drains the queue between executor events
         self.wake_timer = None
         self.wake_node: Node | None = None
         self.nodes: list[Node] = []
@@ -185,12 +186,20 @@ class IntraProcess:
                 if queue and time.perf_counter() > deadline:
                     with self.lock:
                         self.busy = False
-                        self.wake()
+                        if not self.pumped:
+                            self.wake()
                     return
         except BaseException:
             with self.lock:
                 self.busy = False
             raise
+
+    def pump(self) -> None:
+        """Deliver what is queued (at most one budget's worth): called by runner.spin between
+        executor events, so timers and services get their turn while a lockstep ring runs.
+        (Handing over through a one-shot timer instead delays the EventsExecutor's other timers
+        more and more: measured 0.16, 0.4, 0.7, 1.5, 3 s between ticks of a 10 Hz timer.)"""
+        self._on_wake()
 
     def wake(self) -> None:
         """Have the executor drain the queue soon (a one-shot timer: no guard conditions here)."""
@@ -198,7 +207,8 @@ class IntraProcess:
             self.wake_timer.reset()
 
     def _on_wake(self) -> None:
-        self.wake_timer.cancel()
+        if self.wake_timer is not None:
+            self.wake_timer.cancel()
         with self.lock:
             if self.busy or not self.queue:
                 return

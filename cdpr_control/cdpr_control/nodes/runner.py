@@ -25,18 +25,23 @@ SPIN_PERIOD = 0.1  # s: longest time between checks of the stop flag
 
 
 def spin(executor, stop: threading.Event | None = None) -> None:
-    """Run callbacks until ``stop`` is set or the executor's context shuts down."""
+    """Run callbacks until ``stop`` is set or the executor's context shuts down; in-process
+    deliveries left over by a chain that ran out of its time budget continue between events."""
     context = executor.context
     registry = IntraProcess.of(context)
     registry.owner = threading.get_ident()  # in-process deliveries from other threads wake this one
+    registry.pumped = True                  # a long in-process chain continues between events here
     try:
         while context.ok() and not (stop is not None and stop.is_set()):
             try:
-                executor.spin_once(timeout_sec=SPIN_PERIOD)
+                executor.spin_once(timeout_sec=1e-4 if registry.queue else SPIN_PERIOD)
             except ExternalShutdownException:
                 return
+            if registry.queue:
+                registry.pump()
     finally:
         registry.owner = None
+        registry.pumped = False
 
 
 @contextlib.contextmanager
