@@ -61,6 +61,7 @@ class ControlLoop:
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.command = JointCommand(robot, dt)
+        self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
 
     def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
         """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
@@ -80,5 +81,6 @@ class ControlLoop:
             theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)
         else:
             theta_d = self.command.update(x_d, hold=hold)
-        return LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
-                         self.estimator.result.converged)
+        self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
+                               self.estimator.result.converged)
+        return self.state

@@ -55,10 +55,13 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     """Simulate ``duration`` seconds: the platform starts at rest at x0 (default home) under the QP
     forces of ``tension_level`` with the encoders calibrated at home (section 2.3.2); a payload is
     attached at t = 0 (the controller does not know it). ``before_step(k, loop, sim)`` may change
-    parameters during the run."""
+    parameters during the run. A set-point source with a ``bind(loop)`` method (one that closes
+    the loop through a measurement, e.g. :class:`cdpr_sim.hand.HandGuiding`) gets the loop first."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True)
     loop = ControlLoop(robot, config.period, params)
+    if hasattr(setpoints, "bind"):
+        setpoints.bind(loop)
     n = int(round(duration / config.period))
     rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status")}
     faults = []
@@ -77,3 +80,32 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
                 rows[key].append(value)
             faults.append(state.faults)
     return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults)
+
+
+class HandGuiding:
+    """A set-point source for hand guiding (section 5.2): the admittance controller's x_d,Adm.
+
+    As in the node graph, the wrench measured in period k acts on the set-point of period k + 1.
+    Starts holding ``x_hold`` (default the robot's home) with the controller enabled or not as it
+    is; ``outputs`` records every period's :class:`cdpr_control.admittance.AdmittanceOutput`.
+    """
+
+    def __init__(self, controller, x_hold=None):
+        self.controller = controller
+        self.x = np.array(controller.robot.home if x_hold is None else x_hold, dtype=float)
+        self.xd = np.zeros(6)
+        self.xdd = np.zeros(6)
+        self.loop: ControlLoop | None = None
+        self.outputs: list = []
+
+    def bind(self, loop: ControlLoop) -> None:
+        self.loop = loop
+
+    def __call__(self, t):
+        state = None if self.loop is None else self.loop.state
+        if state is not None:
+            out = self.controller.step(state.w, self.x, self.xd, self.xdd)
+            self.x, self.xd, self.xdd = out.x, out.xd, out.xdd
+            self.outputs.append(out)
+        xdot, xddot = twist_from_pose_rates(self.x, self.xd, self.xdd)
+        return self.x.copy(), xdot, xddot
