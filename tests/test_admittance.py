@@ -126,9 +126,9 @@ def test_user_wrench_removes_weight_payload_and_inertia():
     twist, accel = twist_from_pose_rates(x, xd, xdd)
     user = np.array([3.0, -1.0, 2.0, 0.1, 0.0, -0.2])
     w = gravity_wrench(robot, x) + user - dynamic_wrench(robot, x, twist, accel)   # (2.10), (2.33)
-    np.testing.assert_allclose(uw.raw(w, x, xd, xdd), user, atol=1e-12)
+    np.testing.assert_allclose(uw.raw(w, x, twist, accel), user, atol=1e-12)
     uw.reset(np.zeros(6))
-    np.testing.assert_allclose(uw.update(uw.raw(w, x, xd, xdd)), user, atol=1e-12)
+    np.testing.assert_allclose(uw.update(uw.raw(w, x, twist, accel)), user, atol=1e-12)
 
 
 def test_user_wrench_tare_dead_band_and_saturation():
@@ -157,10 +157,10 @@ def test_switch_on_and_off_without_a_jump():
     ctl.enable()
     out = ctl.step(w_static, x_hold)
     np.testing.assert_allclose(out.x, x_hold, atol=1e-15)
-    x, xd, xdd = out.x, out.xd, out.xdd
+    x, (xd, xdd) = out.x, out.twist()
     for _ in range(150):                                   # a push of 10 N in zone 2
         out = ctl.step(w_static + np.r_[10.0, 0, 0, 0, 0, 0], x, xd, xdd)
-        x, xd, xdd = out.x, out.xd, out.xdd
+        x, (xd, xdd) = out.x, out.twist()
     assert out.zone == 1 and xd[0] > 0.05
     ctl.disable()
     v = [xd[0]]
@@ -168,7 +168,7 @@ def test_switch_on_and_off_without_a_jump():
         out = ctl.step(w_static + np.r_[10.0, 0, 0, 0, 0, 0], x, xd, xdd)   # the user is ignored
         if not out.active:
             break
-        x, xd, xdd = out.x, out.xd, out.xdd
+        x, (xd, xdd) = out.x, out.twist()
         v.append(xd[0])
     assert np.all(np.abs(np.diff(v)) <= ctl.system.a_max[0] * DT + 1e-12) and v[-1] == 0.0
     np.testing.assert_allclose(out.x, x)                   # inactive: follows the held set-point

@@ -96,11 +96,11 @@ class UserWrench:
     def raw(self, w, x_d, xdot_d=None, xddot_d=None) -> np.ndarray:
         """w - w_g + w_dyn: what is left of the measured wrench for the user (before the tare).
 
-        xdot_d, xddot_d are Kardan rates of x_d (the virtual system's coordinates)."""
+        xdot_d, xddot_d: twist and its derivative of the set-point (base frame, as in the loop)."""
         r = np.asarray(w, dtype=float) - gravity_wrench(self.robot, x_d)
         if self.params.inertia_compensation and xdot_d is not None:
-            twist, accel = twist_from_pose_rates(x_d, xdot_d, xddot_d)
-            r = r + dynamic_wrench(self.robot, x_d, twist, accel)
+            xddot_d = np.zeros(6) if xddot_d is None else xddot_d
+            r = r + dynamic_wrench(self.robot, x_d, xdot_d, xddot_d)
         return r
 
     def reset(self, raw) -> None:
@@ -206,6 +206,11 @@ class AdmittanceOutput:
     x: np.ndarray            # x_d,Adm [m, rad]
     xd: np.ndarray           # Kardan rates [m/s, rad/s]
     xdd: np.ndarray          # [m/s^2, rad/s^2]
+
+    def twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """(xdot, xddot): the rates as twist and its derivative (base frame), as the loop takes them."""
+        return twist_from_pose_rates(self.x, self.xd, self.xdd)
+
     zone: int                # index of the zone (0 = first); -1 while inactive
     w_user: np.ndarray       # w_Adm of (5.9) as used [N, N m]
     w_raw: np.ndarray        # w - w_g + w_dyn before tare, filter and dead band
@@ -215,8 +220,8 @@ class AdmittanceOutput:
 class AdmittanceController:
     """Hand guiding: enable at the current set-point, step once per period, disable by braking.
 
-    ``step(w, x_d, xd_d, xdd_d)`` takes the measured wrench of period k and the set-point in
-    force at period k and returns the set-point for period k + 1 (the wrench of a period can only
+    ``step(w, x_d, xdot_d, xddot_d)`` takes the measured wrench of period k and the set-point in
+    force at period k (pose, twist and its derivative) and returns the set-point for period k + 1 (the wrench of a period can only
     act on the next one). Inactive, it follows the given set-point. ``disable()`` ignores the user
     from then on and brakes the virtual velocity at a_max; the output stays active until it is at
     rest, so handing the set-point back is without a jump in pose or velocity.
@@ -261,9 +266,9 @@ class AdmittanceController:
             self.enabled, self.braking = False, not self._reset_pending
         self._reset_pending = False
 
-    def step(self, w, x_d, xd_d=None, xdd_d=None) -> AdmittanceOutput:
+    def step(self, w, x_d, xdot_d=None, xddot_d=None) -> AdmittanceOutput:
         x_d = np.asarray(x_d, dtype=float)
-        raw = self.user.raw(w, x_d, xd_d, xdd_d)
+        raw = self.user.raw(w, x_d, xdot_d, xddot_d)
         if not self.active:
             self.system.reset(x_d)
             return AdmittanceOutput(False, x_d.copy(), np.zeros(6), np.zeros(6), -1, np.zeros(6), raw,
@@ -327,7 +332,10 @@ def settings_from(values: dict, robot) -> tuple[AdmittanceParams, ZoneSet, objec
     params.validate()
     if not v["payload_mass"] >= 0.0:
         raise ValueError(f"payload_mass must be >= 0 kg, got {v['payload_mass']}")
-    loaded = robot.with_payload(v["payload_mass"], v["payload_center_of_gravity"]) if v["payload_mass"] else robot
+    cog = np.asarray(v["payload_center_of_gravity"], dtype=float)
+    if cog.shape != (3,) or not np.all(np.isfinite(cog)):
+        raise ValueError(f"payload_center_of_gravity needs 3 finite values, got {v['payload_center_of_gravity']!r}")
+    loaded = robot.with_payload(v["payload_mass"], cog) if v["payload_mass"] else robot
     x_0 = np.asarray(robot.home, dtype=float) + np.asarray(v["zones.origin"], dtype=float)
     zones = ZoneSet((
         Zone("rest", "sphere", v["zones.rest.radius"], v["zones.rest.c"], v["zones.rest.d"], v["zones.rest.m"]),

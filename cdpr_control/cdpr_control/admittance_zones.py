@@ -143,15 +143,17 @@ def _finite6(value, name: str) -> np.ndarray:
 
 
 def thesis_zones(x_0=np.zeros(6), rest_radius: float = 0.01, c_rest=(1000.0, 20.0), box=(0.03, 0.05),
-                 c_wall=(1000.0, 50.0), d_rest=(40.0, 0.5), d=(150.0, 0.5), m=(2.0, 0.01)) -> ZoneSet:
+                 c_free=(0.0, 20.0), c_wall=(1000.0, 50.0), d_rest=(40.0, 0.5), d=(150.0, 0.5),
+                 m=(2.0, 0.01)) -> ZoneSet:
     """The three zones of section 5.2.1 (Fig. 5.12): rest sphere R_1 = 0.01 m with c = 1000 N/m
     (2.6 N hold it at 2.6 mm, 10.2 N for 0.27 s leave it), free box to the border at 0.03 m, wall
     beyond. The thesis gives no d and m: the rest zone is lightly damped so a pulse can leave it,
     the free and wall zones are damped more so the platform stops soon after a push (ASSUMPTION).
-    The rotational axes have the same zones on the Kardan angles with a 0.05 rad box: the IPAnema 3
-    Mini's wrench-feasible orientations are small (ASSUMPTION: rotational c, d, m)."""
+    The rotational axes keep a soft spring to the rest orientation in zones 1 and 2 (the thesis
+    guides positions) and have a wall at 0.05 rad: the IPAnema 3 Mini's wrench-feasible
+    orientations are small (ASSUMPTION: rotational c, d, m)."""
     return ZoneSet((Zone("rest", "sphere", rest_radius, c=c_rest, d=d_rest, m=m),
-                    Zone("free", "box", box, c=0.0, d=d, m=m),
+                    Zone("free", "box", box, c=c_free, d=d, m=m),
                     Zone("wall", "outside", None, c=c_wall, d=d, m=m, spring="border")), x_0)
 
 

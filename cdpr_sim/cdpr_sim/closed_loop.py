@@ -92,9 +92,8 @@ class HandGuiding:
 
     def __init__(self, controller, x_hold=None):
         self.controller = controller
-        self.x = np.array(controller.robot.home if x_hold is None else x_hold, dtype=float)
-        self.xd = np.zeros(6)
-        self.xdd = np.zeros(6)
+        x = np.array(controller.robot.home if x_hold is None else x_hold, dtype=float)
+        self.setpoint = (x, np.zeros(6), np.zeros(6))
         self.loop: ControlLoop | None = None
         self.outputs: list = []
 
@@ -104,8 +103,7 @@ class HandGuiding:
     def __call__(self, t):
         state = None if self.loop is None else self.loop.state
         if state is not None:
-            out = self.controller.step(state.w, self.x, self.xd, self.xdd)
-            self.x, self.xd, self.xdd = out.x, out.xd, out.xdd
+            out = self.controller.step(state.w, *self.setpoint)
+            self.setpoint = (out.x, *out.twist())
             self.outputs.append(out)
-        xdot, xddot = twist_from_pose_rates(self.x, self.xd, self.xdd)
-        return self.x.copy(), xdot, xddot
+        return tuple(v.copy() for v in self.setpoint)

@@ -11,7 +11,7 @@ import os
 import sys
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
-COMMANDS = ("demo", "robot", "program", "topic", "param", "bag", "launch", "plot", "identify", "analyze", "bench")
+COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "bag", "launch", "plot", "identify", "analyze", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,111 @@
+"""Hand guiding through the shipped node graph (graphs/closed_loop.yaml, IPAnema 3 Mini, composed,
+lockstep): switched on by the service, pushed by the simulated hand through /sim/apply_wrench, a
+program refused meanwhile, switched off; one set-point per period and no jump at either switch;
+a program afterwards starts where the hand left the platform. One launch serves the module."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from cdpr_msgs.msg import ControllerState, OperationalSetpoint
+from std_srvs.srv import SetBool
+
+from cdpr_control.nodes.conversions import pose_from_msg
+from cdpr_sim.hand import Hand
+from cdpr_test_nodes.graph import Collector, Spinner, wait_for
+from cdpr_tools.demo_cmd import GRAPH
+from cdpr_tools.hand_cmd import apply_profile
+from cdpr_tools.launch import Launcher, load_launch_file
+from cdpr_tools.program_client import run_program
+from cdpr_tools.ros_graph import graph_node, spin_future, spin_until
+
+PERIOD_NS = 1_000_000
+
+
+def _switch(on: bool):
+    with graph_node("switch") as node:
+        client = node.create_client(SetBool, "/admittance_controller/hand_guiding")
+        assert spin_until(node, client.service_is_ready, 30.0)
+        return spin_future(node, client.call_async(SetBool.Request(data=on)), 30.0, "hand_guiding")
+
+
+@pytest.fixture(scope="module")
+def guided():
+    spinner = Spinner()
+    collector = spinner.add(Collector, topics={"/setpoint": OperationalSetpoint,
+                                               "/admittance_controller/state": ControllerState})
+    try:
+        with Launcher(load_launch_file(GRAPH, {"robot": "ipanema3_mini"}), mode="composed") as launch:
+            sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").sim
+            wait_for(lambda: collector.count("/setpoint") > 50, timeout=60.0, what="the loop to run")
+            on = _switch(True)
+            t_on = sim.t
+            apply_profile(Hand.parse("0.05 rectangle 0.25 14 0 0"), log=lambda _: None)
+            wait_for(lambda: sim.t >= t_on + 0.6, timeout=120.0, what="the push")
+            with pytest.raises(RuntimeError, match="rejected"):
+                run_program("G21 G90\nG1 X0 F600\nM30", "while guided", timeout=60.0)
+            x_guided = sim.output.x.copy()
+            off = _switch(False)
+            t_off = sim.t
+            wait_for(lambda: sim.t >= t_off + 0.3, timeout=120.0, what="the hand-over")
+            x_held = pose_from_msg(collector.messages("/setpoint")[-1].pose)
+            result = run_program("G21 G91\nG1 X-5 F1200\nM30", "after guiding", timeout=120.0)
+            t_end = sim.t
+            wait_for(lambda: sim.t >= t_end + 0.05, timeout=30.0, what="the end of the program")
+            errors = list(launch.errors)
+        yield SimpleNamespace(on=on, off=off, x_guided=x_guided, x_held=x_held, result=result, errors=errors,
+                              setpoints=collector.messages("/setpoint"),
+                              states=collector.messages("/admittance_controller/state"))
+    finally:
+        spinner.close()
+
+
+def test_switch_service_and_push_move_the_set_point(guided):
+    assert guided.on.success and guided.off.success and not guided.errors
+    assert any(s.enabled for s in guided.states)
+    assert guided.x_guided[0] > 0.01                 # the push left zone 1 (R_1 = 0.01 m)
+    assert guided.x_held[0] == pytest.approx(guided.x_guided[0], abs=2e-3)
+
+
+def test_one_set_point_per_period_and_no_jump(guided):
+    stamps = np.array([s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in guided.setpoints])
+    assert np.all(np.diff(stamps) == PERIOD_NS)
+    x = np.array([pose_from_msg(s.pose) for s in guided.setpoints])
+    v_max = 0.25                                      # the admittance's default, below the program's 0.5 m/s
+    assert np.abs(np.diff(x[:, 0])).max() <= 0.5 * 1e-3 + 1e-9
+    # the state of t_k says whether the set-point of t_k+1 came from the admittance controller
+    enabled_at = {s.header.stamp.sec * 10**9 + s.header.stamp.nanosec: s.enabled for s in guided.states}
+    guided_steps = np.array([enabled_at.get(t, False) for t in stamps[:-1]])
+    assert guided_steps.sum() > 500 and not guided.states[-1].enabled
+    assert np.abs(np.diff(x[:, 0]))[guided_steps].max() <= v_max * 1e-3 + 1e-9
+
+
+def test_program_after_guiding_starts_where_the_hand_left(guided):
+    assert guided.result.success, guided.result.message
+    x_end = pose_from_msg(guided.setpoints[-1].pose)
+    assert x_end[0] == pytest.approx(guided.x_held[0] - 0.005, abs=1e-6)
+
+
+def test_parameters_are_validated_live_and_a_refusal_keeps_the_old_value():
+    from rclpy.parameter import Parameter
+
+    from cdpr_control.nodes.admittance_controller import AdmittanceControllerNode
+    from cdpr_control.nodes.qos import STATUS
+    from cdpr_msgs.msg import ProgramStatus
+
+    spinner = Spinner()
+    try:
+        node = spinner.add(AdmittanceControllerNode)
+        box = node.get_parameter("zones.free.box").value
+        result = node.set_parameters([Parameter("zones.free.box", value=[0.3, 0.3, 0.3, 0.05, 0.05, 0.05])])[0]
+        assert not result.successful and "wrench-feasible" in result.reason
+        assert list(node.get_parameter("zones.free.box").value) == list(box)
+        assert node.set_parameters([Parameter("zones.free.d", value=[100.0] * 6)])[0].successful
+        assert node.controller.zones.zones[1].d[0] == 100.0                 # applied without a restart
+        status = node.create_publisher(ProgramStatus, "program_status", STATUS)
+        status.publish(ProgramStatus(state=ProgramStatus.RUNNING))
+        wait_for(lambda: node.program_state == ProgramStatus.RUNNING, what="the program status")
+        result = node.set_parameters([Parameter("hand_guiding", value=True)])[0]
+        assert not result.successful and "program is running" in result.reason
+        assert not node.controller.enabled
+    finally:
+        spinner.close()
