@@ -1,45 +1,26 @@
 """Hand guiding in the closed loop (thesis 5.2.3), IPAnema 3 Mini in simulation with its shipped
 parameter file: eigenfrequency of table 5.3 from the ground truth, the push sequence of Fig. 5.15,
 cable limits, a wrench spike."""
-from importlib import resources
+import dataclasses
 
 import numpy as np
 import pytest
-import yaml
 from scipy.optimize import curve_fit
 
-from cdpr_control.admittance import AdmittanceController, damped_eigenfrequency, settings_from
-from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.force_setpoint import ForceSetpointParams
+from cdpr_control.admittance import damped_eigenfrequency
+from cdpr_control.friction_compensation import FrictionCompensationParams
 from cdpr_control.robot import load_robot
-from cdpr_sim.closed_loop import HandGuiding, run
-from cdpr_sim.hand import Hand, Segment
+from cdpr_sim.hand import Segment
+from cdpr_tools.admittance_figure import PUSHES, file_loop_params, guiding_run
 
 DT = 1e-3
 MINI = load_robot("ipanema3_mini")
-FILE = yaml.safe_load(resources.files("cdpr_control").joinpath("params", "ipanema3_mini.yaml").read_text())
 
 
-def _loop_params() -> ControlLoopParams:
-    fd = FILE["force_distribution"]["ros__parameters"]
-    return ControlLoopParams(force=ForceSetpointParams(f_min=np.asarray(fd["f_min"]), tension_level=fd["tension_level"]))
-
-
-def _guide(overrides: dict, segments, duration: float, before_step=None):
+def _guide(overrides: dict, segments, duration: float, before_step=None, loop_params=None):
     """Hand guiding from home, enabled at t = 0, the hand's segments applied to the simulator."""
-    values = {**FILE["admittance_controller"]["ros__parameters"], **overrides}
-    params, zones, robot = settings_from(values, MINI)
-    controller = AdmittanceController(robot, DT, params, zones)
-    controller.enable()
-    source = HandGuiding(controller)
-    hand = Hand(segments)
-
-    def step(k, loop, sim):
-        hand.apply(sim)
-        if before_step is not None:
-            before_step(k, loop, sim)
-
-    return run(MINI, source, duration, _loop_params(), before_step=step), source
+    g = guiding_run(segments, duration, overrides, loop_params=loop_params, before_step=before_step)
+    return g.run, g.source
 
 
 def _assert_cables_within_limits(r):
@@ -79,14 +60,9 @@ def test_released_platform_oscillates_at_the_eigenfrequency_of_5_12(c, d, m, pus
     _assert_cables_within_limits(r)
 
 
-# Fig. 5.15 by numbers: light pulses in zone 1, a push into zone 2, a push into the wall, back
-PUSHES = [Segment(0.2, (2.6, 0, 0, 0, 0, 0), "rectangle", 0.5), Segment(1.2, (-2.0, 0, 0, 0, 0, 0), "rectangle", 0.3),
-          Segment(2.0, (13.0, 0, 0, 0, 0, 0), "half_sine", 0.5), Segment(3.0, (4.0, 0, 0, 0, 0, 0), "step"),
-          Segment(5.0, release=True), Segment(6.0, (-4.5, 0, 0, 0, 0, 0), "rectangle", 1.0)]
-
-
 @pytest.fixture(scope="module")
 def push_run():
+    """Fig. 5.15 by numbers: light pulses in zone 1, a push into zone 2, into the wall, back."""
     return _guide({}, PUSHES, 8.5)
 
 
@@ -132,3 +108,19 @@ def test_a_measured_wrench_spike_saturates_safely():
     assert np.all(r.x_d >= lo - 1e-12) and np.all(r.x_d <= hi + 1e-12)
     assert not any(r.faults)
     _assert_cables_within_limits(r)
+
+
+def test_pulley_friction_compensation_keeps_the_guided_platform_still():
+    """Section 5.2.4 as far as the simulator shows it (dead band off, so nothing hides it): after a
+    3 N push the uncompensated pulley friction (Dahl hysteresis) reads as a user force and moves the
+    released platform on; with the friction compensation of 3.7 it stays within noise."""
+    def ptp_after_push(compensated: bool) -> float:
+        lp = dataclasses.replace(file_loop_params(),
+                                 friction=FrictionCompensationParams(enabled=compensated))
+        r, _ = _guide({"dead_band": [0.0] * 6}, [Segment(0.1, (3.0, 0, 0, 0, 0, 0), "rectangle", 0.2)], 2.0,
+                      loop_params=lp)
+        return float(np.ptp(r.x[r.t > 1.0, 0]))
+
+    with_fc, without = ptp_after_push(True), ptp_after_push(False)
+    assert with_fc < 0.05e-3                            # m: sensor noise level
+    assert without > 3.0 * with_fc
