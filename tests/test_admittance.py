@@ -214,3 +214,15 @@ def test_default_parameters_round_trip():
 def test_invalid_parameters_are_refused_with_a_reason(bad):
     with pytest.raises(ValueError):
         settings_from(bad, MINI)
+
+
+@pytest.mark.parametrize("name", ["ipanema3_mini", "ipanema3"])
+def test_shipped_parameter_files_are_valid_for_their_robot(name):
+    import yaml
+    from importlib import resources
+
+    file = yaml.safe_load(resources.files("cdpr_control").joinpath("params", f"{name}.yaml").read_text())
+    values = dict(file["admittance_controller"]["ros__parameters"])
+    assert values.pop("hand_guiding") is False                  # off at start-up
+    assert set(values) <= set(default_parameters())
+    settings_from(values, load_robot(name))
