@@ -266,7 +266,9 @@ class AdmittanceController:
             self.enabled, self.braking = False, not self._reset_pending
         self._reset_pending = False
 
-    def step(self, w, x_d, xdot_d=None, xddot_d=None) -> AdmittanceOutput:
+    def step(self, w, x_d, xdot_d=None, xddot_d=None, periods: int = 1) -> AdmittanceOutput:
+        """One period, or ``periods`` with the wrench held (free-running, when measurements of
+        some periods were skipped: the virtual system keeps real time)."""
         x_d = np.asarray(x_d, dtype=float)
         raw = self.user.raw(w, x_d, xdot_d, xddot_d)
         if not self.active:
@@ -277,12 +279,13 @@ class AdmittanceController:
             self._reset_pending = False
             self.system.reset(x_d)
             self.user.reset(raw)
-        if self.braking:
-            self._brake()
-            w_user = np.zeros(6)
-        else:
-            w_user = self.user.update(raw)
-            self.system.step(w_user)
+        for _ in range(periods):
+            if self.braking:
+                self._brake()
+                w_user = np.zeros(6)
+            else:
+                w_user = self.user.update(raw)
+                self.system.step(w_user)
         s = self.system
         return AdmittanceOutput(True, s.x.copy(), s.v.copy(), s.a.copy(), s.zone, w_user, raw, s.limited.copy())
 

@@ -64,12 +64,14 @@ _DESCRIPTIONS = {
 PARAMS = [ParamSpec("hand_guiding", False, "hand guiding on: this node is the set-point source")] + [
     ParamSpec(name, _D[name], *_DESCRIPTIONS[name][:1], range=_DESCRIPTIONS[name][1]) for name in _D]
 _BUSY = (ProgramStatus.RUNNING, ProgramStatus.STOPPING, ProgramStatus.PAUSED)
+MAX_CATCH_UP = 50      # periods one free-running cycle may integrate (a longer gap is a stall, not a skip)
 
 
 class AdmittanceControllerNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("admittance_controller", **kwargs)
         self.controller: AdmittanceController | None = None
+        self._last_ns: int | None = None
         self.program_state = ProgramStatus.IDLE
         self.create_subscription(ProgramStatus, "program_status", self._on_status, STATUS)
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
@@ -117,7 +119,12 @@ class AdmittanceControllerNode(CdprNode):
             self.report(DiagnosticStatus.ERROR, "non-finite wrench or set-point: hand guiding off", stamp_ns=t_ns)
             s = self.controller.system
             w, x_d, xdot_d, xddot_d = np.zeros(6), s.x.copy(), None, None
-        out = self.controller.step(w, x_d, xdot_d, xddot_d)
+        # lockstep: one period per call; free-running, the periods since the last call (the wrench
+        # of skipped periods held), so the virtual system keeps the simulated or real time
+        periods = 1 if self._last_ns is None else int(np.clip(round((t_ns - self._last_ns) * 1e-9 / self.dt),
+                                                               1, MAX_CATCH_UP))
+        self._last_ns = t_ns
+        out = self.controller.step(w, x_d, xdot_d, xddot_d, periods)
         xdot, xddot = out.twist()
         header = self.header(t_ns, sp.header.frame_id or "base")
         self.setpoint_pub.publish(OperationalSetpoint(

@@ -68,7 +68,7 @@ PARAMS = [
     ParamSpec("frame_id", "base", "frame_id of the set-points", read_only=True),
     ParamSpec("setpoint_source", "", "node whose <name>/setpoint replaces the held set-point while its "
               "<name>/state is enabled (hand guiding); '' = none", read_only=True),
-    ParamSpec("source_timeout", 0.05, "free-running: age of the source's messages that ends forwarding [s]",
+    ParamSpec("source_timeout", 0.5, "free-running: age of the source's messages that ends forwarding [s]",
               range=(1e-3, 10.0)),
 ]
 
@@ -191,7 +191,8 @@ class GCodeInterpreterNode(CdprNode):
         self.create_service(Trigger, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/resume", self._on_resume)
         self.source = self.params.values["setpoint_source"]
-        self.source_msgs: dict[int, dict] = {}        # stamp -> {"state": .., "setpoint": ..}
+        self.source_msgs: dict[int, dict] = {}        # lockstep: stamp -> {"state": .., "setpoint": ..}
+        self.source_latest: dict[str, object] = {}    # free-running: the newest of each
         self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
         self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
         if self.source:
@@ -307,21 +308,21 @@ class GCodeInterpreterNode(CdprNode):
 
     def _on_source(self, key: str):
         def receive(msg):
-            stamp = stamp_ns(msg)
-            self.source_msgs.setdefault(stamp, {})[key] = msg
             if self.sync_mode == "latest":
-                self.source_msgs = {stamp: self.source_msgs[stamp]}     # only the newest matters
-            elif self._waiting_ns is not None and len(self.source_msgs.get(self._last_tick_ns, ())) == 2:
+                self.source_latest[key] = msg                          # only the newest matters
+                return
+            self.source_msgs.setdefault(stamp_ns(msg), {})[key] = msg
+            if self._waiting_ns is not None and len(self.source_msgs.get(self._last_tick_ns, ())) == 2:
                 waiting, self._waiting_ns = self._waiting_ns, None
                 self._tick_exact(waiting)
         return receive
 
     def _source_now(self, stamp: int) -> dict | None:
-        """Free-running: the newest complete source messages if younger than source_timeout."""
-        if not self.source_msgs:
+        """Free-running: the newest source messages if both are younger than source_timeout."""
+        msgs = self.source_latest
+        if len(msgs) < 2 or stamp - min(stamp_ns(m) for m in msgs.values()) > self.values["source_timeout"] * 1e9:
             return None
-        t, msgs = max(self.source_msgs.items())
-        return msgs if len(msgs) == 2 and stamp - t <= self.values["source_timeout"] * 1e9 else None
+        return msgs
 
     def _forward(self, msgs: dict | None) -> None:
         """Hand guiding: the source's set-point replaces the held one; its end keeps the last pose."""
