@@ -142,12 +142,14 @@ class VirtualSystem:
         self.a = np.zeros(6)
         self.zone = self.zones.index(self.x)
 
-    def _matrices(self, c, d, m) -> tuple:
-        key = (c, d, m)
+    def _matrices(self, c, d, m) -> tuple[np.ndarray, np.ndarray]:
+        """(Phi (6, 2, 2), Gamma (6, 2)) of the six axes, cached per zone parameters."""
+        key = (tuple(c), tuple(d), tuple(m))
         if key not in self._cache:
             if len(self._cache) > 256:           # live parameter changes: keep the cache small
                 self._cache.clear()
-            self._cache[key] = exact_step_matrices(c, d, m, self.dt)
+            pairs = [exact_step_matrices(float(ci), float(di), float(mi), self.dt) for ci, di, mi in zip(c, d, m)]
+            self._cache[key] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
         return self._cache[key]
 
     def step(self, w) -> np.ndarray:
@@ -157,12 +159,10 @@ class VirtualSystem:
         zone = self.zones.zones[self.zone]
         c, x_t = self.zones.spring(self.zone, self.x)
         x0, v0 = self.x, self.v
-        x1, v1, a1 = np.empty(6), np.empty(6), np.empty(6)
-        for i in range(6):
-            Phi, Gamma = self._matrices(float(c[i]), float(zone.d[i]), float(zone.m[i]))
-            e1, v1[i] = Phi @ np.array([x0[i] - x_t[i], v0[i]]) + Gamma * w[i]
-            x1[i] = x_t[i] + e1
-            a1[i] = (w[i] - zone.d[i] * v1[i] - c[i] * e1) / zone.m[i]
+        Phi, Gamma = self._matrices(c, zone.d, zone.m)
+        ev = np.einsum("aij,aj->ai", Phi, np.stack([x0 - x_t, v0], axis=1)) + Gamma * w[:, None]
+        x1, v1 = x_t + ev[:, 0], ev[:, 1]
+        a1 = (w - zone.d * v1 - c * ev[:, 0]) / zone.m
         # limits: where the exact step exceeds them, the limited step (trapezoidal position)
         a_mean = (v1 - v0) / self.dt
         limited = (np.abs(a_mean) > self.a_max) | (np.abs(v1) > self.v_max)
