@@ -23,6 +23,11 @@ def test_eigenfrequency_of_table_5_3_from_5_12(c, d, m, f_theo):
     assert damped_eigenfrequency(c, d, m) == pytest.approx(f_theo, abs=0.005)
 
 
+def test_an_overdamped_system_has_no_eigenfrequency():
+    with pytest.raises(ValueError, match="underdamped"):
+        damped_eigenfrequency(100.0, 2 * np.sqrt(100.0 * 2.0), 2.0)
+
+
 @pytest.mark.parametrize("c, d, m, f_theo", TABLE_5_3)
 def test_exact_discretisation_has_the_continuous_eigenfrequency(c, d, m, f_theo):
     """Discrete poles are exp(s T): their angle / T is omega_d of (5.12) to rounding."""

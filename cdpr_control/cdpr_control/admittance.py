@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
-from .admittance_zones import ZoneSet, hard_box, thesis_zones
+from .admittance_zones import ZoneSet, hard_box, per_axis, thesis_zones
 from .dynamics import dynamic_wrench, gravity_wrench
 from .filters import LowPass
 from .kinematics import twist_from_pose_rates
@@ -45,16 +45,12 @@ def exact_step_matrices(c: float, d: float, m: float, dt: float) -> tuple[np.nda
 
 
 def damped_eigenfrequency(c: float, d: float, m: float) -> float:
-    """omega_d,theo of (5.12) in Hz (the thesis' table 5.3 lists it in Hz)."""
-    return float(np.sqrt(c / m - (d / (2.0 * m)) ** 2) / (2.0 * np.pi))
-
-
-def _six(value, name: str, minimum: float = 0.0) -> np.ndarray:
-    v = np.atleast_1d(np.asarray(value, dtype=float))
-    v = np.full(6, v[0]) if v.shape == (1,) else np.repeat(v, 3) if v.shape == (2,) else v
-    if v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(v < minimum):
-        raise ValueError(f"{name} needs 1, 2 or 6 finite values >= {minimum}, got {value!r}")
-    return v
+    """omega_d,theo of (5.12) in Hz (the thesis' table 5.3 lists it in Hz); an overdamped system
+    (d >= 2 sqrt(c m)) does not oscillate: ValueError."""
+    radicand = c / m - (d / (2.0 * m)) ** 2
+    if not radicand > 0.0:
+        raise ValueError(f"c = {c}, d = {d}, m = {m} is not underdamped: no eigenfrequency")
+    return float(np.sqrt(radicand) / (2.0 * np.pi))
 
 
 @dataclass
@@ -70,9 +66,9 @@ class UserWrenchParams:
     def validate(self) -> None:
         if not self.T_filter >= 0.0:
             raise ValueError(f"T_filter must be >= 0 s, got {self.T_filter}")
-        _six(self.dead_band, "dead_band")
-        w_max = _six(self.w_max, "w_max")
-        if np.any(w_max <= _six(self.dead_band, "dead_band")):
+        per_axis(self.dead_band, "dead_band")
+        w_max = per_axis(self.w_max, "w_max")
+        if np.any(w_max <= per_axis(self.dead_band, "dead_band")):
             raise ValueError("w_max must exceed the dead band on every axis")
 
 
@@ -89,8 +85,8 @@ class UserWrench:
     def set_params(self, params: UserWrenchParams) -> None:
         params.validate()
         self.params = params
-        self.dead_band = _six(params.dead_band, "dead_band")
-        self.w_max = _six(params.w_max, "w_max")
+        self.dead_band = per_axis(params.dead_band, "dead_band")
+        self.w_max = per_axis(params.w_max, "w_max")
         self.filter.set_time_constant(params.T_filter)
 
     def raw(self, w, x_d, xdot_d=None, xddot_d=None) -> np.ndarray:
@@ -132,8 +128,8 @@ class VirtualSystem:
     def configure(self, zones: ZoneSet, v_max, a_max, limit_box=None) -> None:
         """Zones, limits [m/s, rad/s], [m/s^2, rad/s^2] and the hard box (lower, upper) or None."""
         self.zones = zones
-        self.v_max = _six(v_max, "v_max", 1e-9)
-        self.a_max = _six(a_max, "a_max", 1e-9)
+        self.v_max = per_axis(v_max, "v_max", strict=True)
+        self.a_max = per_axis(a_max, "a_max", strict=True)
         self.limit_box = None if limit_box is None else (np.asarray(limit_box[0], float), np.asarray(limit_box[1], float))
 
     def reset(self, x, v=None) -> None:
@@ -193,8 +189,8 @@ class AdmittanceParams:
     user: UserWrenchParams = field(default_factory=UserWrenchParams)
 
     def validate(self) -> None:
-        _six(self.v_max, "v_max", 1e-9)
-        _six(self.a_max, "a_max", 1e-9)
+        per_axis(self.v_max, "v_max", strict=True)
+        per_axis(self.a_max, "a_max", strict=True)
         self.user.validate()
 
 
@@ -307,7 +303,7 @@ def default_parameters() -> dict:
     :class:`AdmittanceParams` and :func:`thesis_zones` (6-vectors as lists of 6 floats)."""
     p, z = AdmittanceParams(), thesis_zones()
     rest, free, wall = z.zones
-    six = lambda v: [float(a) for a in _six(v, "value")]             # noqa: E731
+    six = lambda v: [float(a) for a in per_axis(v, "value")]             # noqa: E731
     return {
         "v_max": six(p.v_max), "a_max": six(p.a_max),
         "T_filter": p.user.T_filter, "dead_band": six(p.user.dead_band), "w_max": six(p.user.w_max),

@@ -32,8 +32,9 @@ SHAPES = ("sphere", "box", "outside")
 SPRINGS = ("origin", "border")
 
 
-def _six(value, name: str, positive: bool = False) -> np.ndarray:
-    """A scalar (all six axes), [translational, rotational] or six values."""
+def per_axis(value, name: str, minimum: float = 0.0, strict: bool = False) -> np.ndarray:
+    """Six values per axis [x y z a b c] from a scalar (all axes), [translational, rotational] or
+    six values; each >= minimum (> minimum with ``strict``)."""
     v = np.atleast_1d(np.asarray(value, dtype=float))
     if v.shape == (1,):
         v = np.full(6, v[0])
@@ -41,10 +42,8 @@ def _six(value, name: str, positive: bool = False) -> np.ndarray:
         v = np.repeat(v, 3)
     if v.shape != (6,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} needs 1, 2 or 6 finite values, got {value!r}")
-    if positive and np.any(v <= 0.0):
-        raise ValueError(f"{name} must be > 0 on every axis, got {v.tolist()}")
-    if not positive and np.any(v < 0.0):
-        raise ValueError(f"{name} must be >= 0 on every axis, got {v.tolist()}")
+    if np.any(v <= minimum) if strict else np.any(v < minimum):
+        raise ValueError(f"{name} must be {'>' if strict else '>='} {minimum:g} on every axis, got {v.tolist()}")
     return v
 
 
@@ -66,16 +65,16 @@ class Zone:
             raise ValueError(f"zone {self.name!r}: shape must be one of {SHAPES}, got {self.shape!r}")
         if self.spring not in SPRINGS:
             raise ValueError(f"zone {self.name!r}: spring must be one of {SPRINGS}, got {self.spring!r}")
-        object.__setattr__(self, "c", _six(self.c, f"zone {self.name!r} c"))
-        object.__setattr__(self, "d", _six(self.d, f"zone {self.name!r} d"))
-        object.__setattr__(self, "m", _six(self.m, f"zone {self.name!r} m", positive=True))
+        object.__setattr__(self, "c", per_axis(self.c, f"zone {self.name!r} c"))
+        object.__setattr__(self, "d", per_axis(self.d, f"zone {self.name!r} d"))
+        object.__setattr__(self, "m", per_axis(self.m, f"zone {self.name!r} m", strict=True))
         if self.shape == "sphere":
             radius = float(np.asarray(self.size, dtype=float))
             if not (np.isfinite(radius) and radius > 0.0):
                 raise ValueError(f"zone {self.name!r}: sphere radius must be > 0 m, got {self.size!r}")
             object.__setattr__(self, "size", radius)
         elif self.shape == "box":
-            object.__setattr__(self, "size", _six(self.size, f"zone {self.name!r} box half-widths", positive=True))
+            object.__setattr__(self, "size", per_axis(self.size, f"zone {self.name!r} box half-widths", strict=True))
         elif self.size is not None:
             raise ValueError(f"zone {self.name!r}: an outside zone has no size")
 
@@ -165,7 +164,7 @@ def max_penetration(zones: ZoneSet, w_max, v_max) -> np.ndarray:
     spring energy c p^2 / 2; damping only shortens it). An axis without wall spring is unbounded.
     """
     wall = zones.zones[-1]
-    w_max, v_max = _six(w_max, "w_max"), _six(v_max, "v_max")
+    w_max, v_max = per_axis(w_max, "w_max"), per_axis(v_max, "v_max")
     with np.errstate(divide="ignore"):
         return np.where(wall.c > 0.0, w_max / wall.c + v_max * np.sqrt(wall.m / np.maximum(wall.c, 1e-300)),
                         np.inf)
@@ -212,7 +211,7 @@ def box_from_workspace(robot, x_0, shape, w_max, v_max, zones: ZoneSet, tol: flo
                        f_min=None, f_max=None) -> np.ndarray:
     """The largest box k * shape (half-widths) for the free zone whose hard box lies in the WFW,
     by bisection on k (to ``tol`` relative); ``zones`` gives the wall and the other zones."""
-    shape = _six(shape, "box shape", positive=True)
+    shape = per_axis(shape, "box shape", strict=True)
 
     def fits(k):
         z = ZoneSet(tuple(Zone(zn.name, zn.shape, k * shape if zn.shape == "box" else zn.size,
