@@ -56,7 +56,7 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     forces of ``tension_level`` with the encoders calibrated at home (section 2.3.2); a payload is
     attached at t = 0 (the controller does not know it). ``before_step(k, loop, sim)`` may change
     parameters during the run. A set-point source with a ``bind(loop)`` method (one that closes
-    the loop through a measurement, e.g. :class:`cdpr_sim.hand.HandGuiding`) gets the loop first."""
+    the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True)
     loop = ControlLoop(robot, config.period, params)

@@ -6,7 +6,7 @@ PROFILE is one segment per ``;``: ``T SHAPE DURATION FX FY FZ [MX MY MZ]`` or ``
 (``--absolute``: to t = 0). Together with hand guiding:
 
     cdpr param set /admittance_controller hand_guiding true
-    cdpr hand "0.5 rectangle 0.3 12 0 0; 2 step 0 4 0 0; 4 release"
+    cdpr hand "0.5 half_sine 0.5 13 0 0; 2 step 0 4 0 0; 4 release"
 """
 from __future__ import annotations
 
