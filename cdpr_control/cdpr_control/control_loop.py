@@ -86,6 +86,7 @@ class ControlLoop:
         self.estimator.dq_0 = None
         self.cfc.calibration.set_home(self.robot, f_home)
         self.cfc.controller.dq_0 = None
+        self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
 
     def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
         """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
@@ -112,5 +113,6 @@ class ControlLoop:
                                     fk_converged=self.estimator.result.converged)
         hold = any(fault.holds for fault in faults)
         theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)      # s = 0: IK only (2.3.2)
-        return LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
-                         self.estimator.result.converged)
+        self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
+                               self.estimator.result.converged)
+        return self.state

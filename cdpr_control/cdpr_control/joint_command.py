@@ -1,6 +1,6 @@
 """Joint command: the drive set-point of Fig. 3.4 and (5.10).
 
-    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC + x_Adm} - Δq_CFC
+    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC} - Δq_CFC     (x_d = x_d,Adm while hand guiding)
 
 Δq_CFC (3.23) is the elongation the cable force controller commands beyond the encoder
 calibration's pre-tension, so the winch is shortened by it. The thesis prints (5.1) and (5.10)

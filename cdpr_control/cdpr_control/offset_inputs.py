@@ -1,9 +1,10 @@
 """Offset inputs of the joint command: the x_* terms of (5.1)/(5.10) summed in the IK argument.
 
-    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC + x_Adm} - Δq_CFC
+    θ_d = IK{x_d + x_OSPC + x_LC + x_HPFC} - Δq_CFC
 
 Each controller that corrects the set-point in operational space (OSPC (3.16), load compensation
-(4.6), hybrid position/force control (5.1), admittance control (5.10)) is one *offset input*: a
+(4.6), hybrid position/force control (5.1)) is one *offset input* (admittance control (5.10)
+instead becomes the set-point x_d itself while hand guiding, docs/admittance.md): a
 6-vector [m, m, m, rad, rad, rad] in the base frame, published every control period with a flag
 saying whether it is active. The joint command treats them all alike:
 

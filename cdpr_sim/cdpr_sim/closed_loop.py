@@ -59,10 +59,14 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     forces for its Δq_0 (3.9), (3.23). ``before_step(k, loop, sim)`` may change
     parameters during the run. params None: the robot's parameter file (the node graph's
     configuration, :func:`cdpr_control.controller_params.control_loop_params`). The simulated
-    robot is the plant of ``config`` (by default one that differs from the robot file)."""
+    robot is the plant of ``config`` (by default one that differs from the robot file). A set-point
+    source with a ``bind(loop)`` method (one that closes the loop through a measurement, e.g.
+    :class:`HandGuiding` below) gets the loop first."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True, config=config)
     loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params)
+    if hasattr(setpoints, "bind"):
+        setpoints.bind(loop)
     n = int(round(duration / config.period))
     rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status")}
     faults = []
@@ -82,3 +86,30 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
                 rows[key].append(value)
             faults.append(state.faults)
     return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults)
+
+
+class HandGuiding:
+    """A set-point source for hand guiding (section 5.2): the admittance controller's x_d,Adm.
+
+    As in the node graph, the wrench measured in period k acts on the set-point of period k + 1.
+    Starts holding ``x_hold`` (default the robot's home) with the controller enabled or not as it
+    is; ``outputs`` records every period's :class:`cdpr_control.admittance.AdmittanceOutput`.
+    """
+
+    def __init__(self, controller, x_hold=None):
+        self.controller = controller
+        x = np.array(controller.robot.home if x_hold is None else x_hold, dtype=float)
+        self.setpoint = (x, np.zeros(6), np.zeros(6))
+        self.loop: ControlLoop | None = None
+        self.outputs: list = []
+
+    def bind(self, loop: ControlLoop) -> None:
+        self.loop = loop
+
+    def __call__(self, t):
+        state = None if self.loop is None else self.loop.state
+        if state is not None:
+            out = self.controller.step(state.w, *self.setpoint)
+            self.setpoint = (out.x, *out.twist())
+            self.outputs.append(out)
+        return tuple(v.copy() for v in self.setpoint)

@@ -17,13 +17,19 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
   ``command_timeout``) and fails if it is refused. Numbers are converted to the remote parameter's
   type (integer <-> double) first, via ``<node>/get_parameter_types``.
 
+- ``setpoint_source`` (read-only, e.g. ``admittance_controller``): while that node's
+  ``<source>/state`` says ``enabled`` and no program runs, its ``<source>/setpoint`` is published
+  as the set-point instead of the held one (hand guiding, docs/admittance.md); when it ends, its
+  last pose is held, so a following program starts there. Programs are refused meanwhile. In
+  lockstep the period t_k waits for the source's messages of t_k-1 (its set-point for t_k).
+
 Limit parameters apply to the next program, not to one that is running.
 """
 from __future__ import annotations
 
 import numpy as np
 from cdpr_msgs.action import RunProgram
-from cdpr_msgs.msg import OperationalSetpoint, ProgramStatus
+from cdpr_msgs.msg import ControllerState, OperationalSetpoint, ProgramStatus
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameterTypes, SetParameters
@@ -40,7 +46,7 @@ from cdpr_control.kinematics import twist_from_pose_rates
 from cdpr_control.program_check import check_program
 
 from .base import CdprNode, spin_node
-from .conversions import accel_to_msg, pose_to_msg, twist_to_msg, vector3
+from .conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL, STATUS
 from .sync import stamp_ns
@@ -62,7 +68,13 @@ PARAMS = [
               range=(1e-3, 10.0)),
     ParamSpec("frame_id", "base", "frame_id of the set-points", read_only=True),
     ParamSpec("payload", 0.0, "payload the workspace check of a program assumes [kg]", range=(0.0, 1e5)),
+    ParamSpec("setpoint_source", "", "node whose <name>/setpoint replaces the held set-point while its "
+              "<name>/state is enabled (hand guiding); '' = none", read_only=True),
+    ParamSpec("source_timeout", 0.5, "free-running: age of the source's messages that ends forwarding [s]",
+              range=(1e-3, 10.0)),
 ]
+
+SOURCE_START_TOLERANCE = 1e-3   # m, rad: a source must take over at the held set-point (no jump)
 
 _STATUS = {
     ProgramState.RUNNING: ProgramStatus.RUNNING,
@@ -180,6 +192,14 @@ class GCodeInterpreterNode(CdprNode):
                                           goal_callback=self._on_goal, cancel_callback=self._on_cancel)
         self.create_service(Trigger, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/resume", self._on_resume)
+        self.source = self.params.values["setpoint_source"]
+        self.source_msgs: dict[int, dict] = {}        # lockstep: stamp -> {"state": .., "setpoint": ..}
+        self.source_latest: dict[str, object] = {}    # free-running: the newest of each
+        self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
+        self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
+        if self.source:
+            for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
+                self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
         if self.sync_mode == "exact":
             # lockstep: one period per new winch state, stamped like it (a deterministic data flow;
             # a timer on /clock could not produce the period of t = 0 before the loop has run)
@@ -201,6 +221,9 @@ class GCodeInterpreterNode(CdprNode):
     # ---- action ------------------------------------------------------------------------------
 
     def _on_goal(self, goal) -> GoalResponse:
+        if self.guided is not None and not goal.dry_run:
+            self.get_logger().warn(f"program {goal.name!r} refused: {self.source} is the set-point source")
+            return GoalResponse.REJECT
         if goal.dry_run or self.active is None:
             return GoalResponse.ACCEPT
         self.get_logger().warn(f"program {goal.name!r} refused: {self.active.name!r} is running")
@@ -275,14 +298,59 @@ class GCodeInterpreterNode(CdprNode):
     def _on_state(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)
         if stamp > self._last_tick_ns:
-            self._last_tick_ns = stamp
-            self._tick(stamp)
+            if self.source and self._last_tick_ns >= 0 and len(self.source_msgs.get(self._last_tick_ns, ())) < 2:
+                self._waiting_ns = stamp                 # the source's set-point for this period is not there yet
+                return
+            self._tick_exact(stamp)
 
-    def _tick(self, stamp: int | None = None) -> None:
+    def _tick_exact(self, stamp: int) -> None:
+        previous, self._last_tick_ns = self._last_tick_ns, stamp
+        self._tick(stamp, self.source_msgs.pop(previous, None) if self.source else None)
+        for old in [s for s in self.source_msgs if s < previous]:
+            del self.source_msgs[old]
+
+    def _on_source(self, key: str):
+        def receive(msg):
+            if self.sync_mode == "latest":
+                self.source_latest[key] = msg                          # only the newest matters
+                return
+            self.source_msgs.setdefault(stamp_ns(msg), {})[key] = msg
+            if self._waiting_ns is not None and len(self.source_msgs.get(self._last_tick_ns, ())) == 2:
+                waiting, self._waiting_ns = self._waiting_ns, None
+                self._tick_exact(waiting)
+        return receive
+
+    def _source_now(self, stamp: int) -> dict | None:
+        """Free-running: the newest source messages if both are younger than source_timeout."""
+        msgs = self.source_latest
+        if len(msgs) < 2 or stamp - min(stamp_ns(m) for m in msgs.values()) > self.values["source_timeout"] * 1e9:
+            return None
+        return msgs
+
+    def _forward(self, msgs: dict | None) -> None:
+        """Hand guiding: the source's set-point replaces the held one; its end keeps the last pose."""
+        enabled = msgs is not None and msgs["state"].enabled and self.active is None
+        if enabled and self.guided is None:
+            jump = float(np.abs(pose_from_msg(msgs["setpoint"].pose) - self.q[:6]).max())
+            if jump > SOURCE_START_TOLERANCE:            # it did not start from this set-point
+                self.report(DiagnosticStatus.ERROR, f"{self.source} starts {1e3 * jump:.1f} mm/mrad away "
+                            "from the set-point: not switching")
+                return
+        if enabled:
+            self.guided = msgs["setpoint"]
+            self.q[:6] = pose_from_msg(self.guided.pose)
+            self.xd, self.xdd, self.line = np.zeros(6), np.zeros(6), 0
+        elif self.guided is not None:
+            self.guided = None                           # hold the last forwarded pose, at rest
+            self.get_logger().info(f"{self.source} ended: holding {np.round(self.q[:6], 4).tolist()}")
+
+    def _tick(self, stamp: int | None = None, source_msgs: dict | None = None) -> None:
         stamp = self._stamp_ns() if stamp is None else stamp
         active = self.active
         if active is not None:
             self._step(active)
+        if self.source:
+            self._forward(source_msgs if self.sync_mode == "exact" else self._source_now(stamp))
         self._publish_setpoint(stamp)
         self._publish_status(stamp)
         if active is not None and active.interp.state in TERMINAL_STATES:
@@ -299,6 +367,12 @@ class GCodeInterpreterNode(CdprNode):
         self.forwarder.poll()
 
     def _publish_setpoint(self, stamp: int) -> None:
+        if self.guided is not None:
+            g = self.guided
+            self.setpoint_pub.publish(OperationalSetpoint(
+                header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
+                acceleration=g.acceleration, force=vector3(self.q[6:]), line=0))
+            return
         twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
         self.setpoint_pub.publish(OperationalSetpoint(
             header=self.header(stamp, self.frame_id), pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),

@@ -2,8 +2,9 @@
 
 Subscribes ``setpoint``, ``cable_force_controller/state`` and one ``<name>/state``
 (cdpr_msgs/ControllerState, ``output`` = the 6-vector offset) per entry of ``offset_inputs``
-(``ospc`` by default; hybrid force control, load compensation and admittance control join the
-same way, see :mod:`cdpr_control.offset_inputs`), synchronised per period in lockstep (every
+(``ospc`` by default; hybrid force control and load compensation join the same way, see
+:mod:`cdpr_control.offset_inputs`; admittance control replaces x_d on ``setpoint`` instead),
+synchronised per period in lockstep (every
 declared input is awaited, so every declared offset node must run); free-running, an offset input
 is used while younger than its deadline. For safety it also watches ``winch/state``,
 ``cable_forces``, ``platform/pose`` and ``forward_kinematics/diagnostics``. Publishes
