@@ -32,6 +32,21 @@ def test_loop_refuses_force_control_without_ospc_where_K_g_is_indefinite():
     ControlLoop(robot, 1e-3, ControlLoopParams(mode="ik_only", ospc_enabled=False))  # no force control
 
 
+def test_a_live_switch_off_of_the_ospc_is_refused_with_the_reason():
+    robot = load_robot("ipanema3_mini")
+    loop = ControlLoop(robot, 1e-3, ControlLoopParams())
+    theta = inverse_kinematics(robot, robot.home).q
+    F_s = np.full(robot.m, 10.0)
+    loop.step(0.0, robot.home, np.zeros(6), np.zeros(6), theta, np.zeros(robot.m), F_s)
+    loop.params.ospc_enabled = False
+    for k in range(1, 20):
+        loop.step(k * 1e-3, robot.home, np.zeros(6), np.zeros(6), theta, np.zeros(robot.m), F_s)
+    assert "section 3.1.3" in loop.refusal and loop.blend_ospc.value == 1.0
+    loop.params.mode = "ik_only"                  # no force control: nothing to refuse
+    loop.step(0.02, robot.home, np.zeros(6), np.zeros(6), theta, np.zeros(robot.m), F_s)
+    assert loop.refusal is None
+
+
 def test_ipanema3_needs_tension_for_force_control_without_ospc():
     """IPAnema 3 at home: K_g is indefinite at minimal tension, positive definite at medium tension."""
     robot = load_robot("ipanema3")

@@ -78,6 +78,8 @@ class ControlLoop:
                 raise ValueError(reason)
         self.blend_cfc = Blend(p.transfer_time, dt, force_control and p.cfc_enabled)
         self.blend_ospc = Blend(p.transfer_time, dt, force_control and p.ospc_enabled)
+        self.refusal: str | None = None          # why a live switch-off of the OSPC is not honoured
+        self._checked = (force_control, p.ospc_enabled)
 
     def set_home_calibration(self, f_home) -> None:
         """Δq_0 from the forces f_home (m,) [N] recorded when the encoders were set at home (2.3.2),
@@ -102,7 +104,11 @@ class ControlLoop:
         for blend in (self.blend_cfc, self.blend_ospc):
             blend.set_transfer_time(p.transfer_time)
         s_cfc = self.blend_cfc.update(force_control and p.cfc_enabled)
-        s_ospc = self.blend_ospc.update(force_control and p.ospc_enabled)
+        if (force_control, p.ospc_enabled) != self._checked:    # a live change: check (3.1.3) once
+            self._checked = (force_control, p.ospc_enabled)
+            self.refusal = check_force_control(robot, robot.home, planned_home_forces(robot, p.force),
+                                               p.ospc_enabled) if force_control else None
+        s_ospc = self.blend_ospc.update(force_control and (p.ospc_enabled or self.refusal is not None))
         dq_cfc = s_cfc * self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
         if s_cfc == 0.0:
             self.cfc.controller.pi.reset()           # track: no wind-up while the output is unused
