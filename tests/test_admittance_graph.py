@@ -18,7 +18,8 @@ from cdpr_sim.hand import Hand
 from cdpr_test_nodes.graph import Collector, Spinner, wait_for
 from cdpr_tools.demo_cmd import GRAPH
 from cdpr_tools.hand_cmd import apply_profile
-from cdpr_tools.launch import Launcher, load_launch_file
+from cdpr_tools.launch import Launcher
+from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.program_client import run_program
 from cdpr_tools.ros_graph import graph_node, spin_future, spin_until
 
