@@ -197,6 +197,7 @@ class GCodeInterpreterNode(CdprNode):
         self.source_latest: dict[str, object] = {}    # free-running: the newest of each
         self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
         self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
+        self._last_setpoint: OperationalSetpoint | None = None
         if self.source:
             for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
                 self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
@@ -302,6 +303,11 @@ class GCodeInterpreterNode(CdprNode):
                 self._waiting_ns = stamp                 # the source's set-point for this period is not there yet
                 return
             self._tick_exact(stamp)
+        elif stamp == self._last_tick_ns and self._last_setpoint is not None:
+            # the simulator repeats a state until the period's command comes (its start-up handshake):
+            # a node that subscribed after this period's set-point went out (one process per node,
+            # discovery still running) gets it again, else the lockstep loop never starts
+            self.setpoint_pub.publish(self._last_setpoint)
 
     def _tick_exact(self, stamp: int) -> None:
         previous, self._last_tick_ns = self._last_tick_ns, stamp
@@ -369,14 +375,16 @@ class GCodeInterpreterNode(CdprNode):
     def _publish_setpoint(self, stamp: int) -> None:
         if self.guided is not None:
             g = self.guided
-            self.setpoint_pub.publish(OperationalSetpoint(
+            msg = OperationalSetpoint(
                 header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
-                acceleration=g.acceleration, force=vector3(self.q[6:]), line=0))
-            return
-        twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
-        self.setpoint_pub.publish(OperationalSetpoint(
-            header=self.header(stamp, self.frame_id), pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
-            acceleration=accel_to_msg(accel), force=vector3(self.q[6:]), line=int(self.line)))
+                acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
+        else:
+            twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
+            msg = OperationalSetpoint(
+                header=self.header(stamp, self.frame_id), pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
+                acceleration=accel_to_msg(accel), force=vector3(self.q[6:]), line=int(self.line))
+        self._last_setpoint = msg
+        self.setpoint_pub.publish(msg)
 
     def _publish_status(self, stamp: int, force: bool = False) -> None:
         active = self.active
