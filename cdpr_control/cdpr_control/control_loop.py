@@ -1,8 +1,9 @@
 """The control architecture of Fig. 3.4 as one object: the stages the nodes run, in one process.
 
 Per period: friction compensation (3.44) -> forward kinematics (3.7)-(3.9) and w = -A^T f ->
-force set-point (3.26)-(3.28) -> cable force control (3.19)-(3.23) and OSPC (3.16) -> safety ->
-joint command θ_d = IK{x_d + x_OSPC} - Δq_CFC (5.10). The ROS nodes wrap exactly these stage
+force set-point (3.26)-(3.28) -> hybrid position/force control (5.1), when configured -> cable force
+control (3.19)-(3.23) and OSPC (3.16) -> safety -> joint command θ_d = IK{x_d + x_OSPC + x_HPFC} -
+Δq_CFC (5.1), (5.10). The ROS nodes wrap exactly these stage
 objects one per node; this class chains them directly, which is what the closed-loop tests, the
 benchmarks and offline studies use when the ROS transport is not the subject.
 """
@@ -16,6 +17,7 @@ from .cable_force_control import CableForceControl, CFCParams
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
+from .hybrid_force_control import FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl, select_position_feedback
 from .joint_command import JointCommand
 from .kinematics import inverse_kinematics
 from .ospc import OperationalSpacePositionController, OSPCParams
@@ -32,6 +34,8 @@ class ControlLoopParams:
     force: ForceSetpointParams = field(default_factory=ForceSetpointParams)
     friction: FrictionCompensationParams = field(default_factory=FrictionCompensationParams)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    hpfc: HPFCParams | None = None       # hybrid position/force control stage (5.1); None: not in the loop
+    hpfc_enabled: bool = False           # its `enabled` (M103/M104 switch it in a program)
 
 
 @dataclass
@@ -48,6 +52,7 @@ class LoopState:
     theta_d: np.ndarray      # drive command
     faults: list             # safety faults
     fk_converged: bool
+    hpfc: object = None      # HPFCState of the hybrid position/force control, None without it
 
 
 class ControlLoop:
@@ -61,9 +66,22 @@ class ControlLoop:
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.command = JointCommand(robot, dt)
+        self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
+        self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
+        self.dq_cfc = np.zeros(robot.m)
 
-    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
-        """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
+    def set_parameter(self, node: str, parameter: str, value) -> None:
+        """A parameter command of a program (M103/M104, M101/M102) applied to the stage it names."""
+        if (node, parameter) == ("hybrid_force_controller", "enabled") and self.hpfc is not None:
+            self.hpfc.enabled = bool(value)
+        elif (node, parameter) == ("cable_force_controller", "enabled"):
+            self.cfc.set_params(self.cfc.params, enabled=bool(value))
+        else:
+            raise ValueError(f"the in-process loop has no parameter {node}.{parameter}")
+
+    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s, F_d0=None) -> LoopState:
+        """One period from the set-point (pose, twist, acceleration, desired force F_d,0 of the force
+        axes) and the winch measurements."""
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta)
@@ -71,14 +89,21 @@ class ControlLoop:
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)
-        dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
-        x_ospc = self.ospc.update(x_d, x) if self.params.ospc_enabled else np.zeros(6)
+        hpfc = None if self.hpfc is None else self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w)
+        f_d, paused = (dist.f, False) if hpfc is None else self.coupling.update(hpfc.state, dist.f)
+        if not paused:                                 # section 5.1.2: held during contact establishment
+            self.dq_cfc = self.cfc.update(f_d, f, theta, dist.f_min, dist.f_max)
+        dq_cfc = self.dq_cfc
+        # Fig. 5.2: no position control along the force-controlled task z axis
+        x_fb = x if hpfc is None or hpfc.state not in FORCE_CONTROLLED else select_position_feedback(x_d, x, hpfc.z_t)
+        x_ospc = self.ospc.update(x_d, x_fb) if self.params.ospc_enabled else np.zeros(6)
+        offsets = [x_ospc] if hpfc is None else [x_ospc, hpfc.x]
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
                                     fk_converged=self.estimator.result.converged)
         hold = any(fault.holds for fault in faults)
         if self.params.mode == "force_control":
-            theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)
+            theta_d = self.command.update(x_d, offsets, dq_cfc, hold=hold)
         else:
             theta_d = self.command.update(x_d, hold=hold)
         return LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
-                         self.estimator.result.converged)
+                         self.estimator.result.converged, hpfc)

@@ -31,6 +31,8 @@ class ClosedLoopRun:
     f_d: np.ndarray        # (N, m) force set-points
     status: np.ndarray     # (N,) force distribution status
     faults: list           # per period, the safety faults
+    w_contact: np.ndarray | None = None   # (N, 6) true contact wrench on the platform (with obstacles)
+    hpfc: list | None = None              # per period, the HPFCState (with hybrid force control)
 
 
 def hold(x_d) -> Callable[[float], tuple]:
@@ -41,11 +43,13 @@ def hold(x_d) -> Callable[[float], tuple]:
 
 
 def program(interpolator: Interpolator) -> Callable[[float], tuple]:
-    """A set-point source stepping a G-code interpolator once per period (twists from Kardan rates)."""
+    """A set-point source stepping a G-code interpolator once per period (twists from Kardan rates);
+    it also hands on the force axes F_d,0 and the program's parameter commands (M103 ...), which
+    :func:`run` applies to the loop."""
     def source(t):
         sp = interpolator.step()
         xdot, xddot = twist_from_pose_rates(sp.x, sp.xd, sp.xdd)
-        return sp.x, xdot, xddot
+        return sp.x, xdot, xddot, sp.force, sp.commands
     return source
 
 
@@ -55,13 +59,14 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     """Simulate ``duration`` seconds: the platform starts at rest at x0 (default home) under the QP
     forces of ``tension_level`` with the encoders calibrated at home (section 2.3.2); a payload is
     attached at t = 0 (the controller does not know it). ``before_step(k, loop, sim)`` may change
-    parameters during the run."""
+    parameters during the run. ``setpoints(t)`` returns (x_d, xdot_d, xddot_d), optionally followed
+    by the desired force F_d,0 (3,) and a list of parameter commands."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True)
     loop = ControlLoop(robot, config.period, params)
     n = int(round(duration / config.period))
-    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status")}
-    faults = []
+    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status", "w_contact")}
+    faults, hpfc = [], []
     with Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset) as sim:
         if payload:
             sim.set_payload(payload, payload_com)
@@ -69,11 +74,16 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
         for k in range(n):
             if before_step is not None:
                 before_step(k, loop, sim)
-            x_d, xdot_d, xddot_d = setpoints(out.t)
-            state = loop.step(out.t, x_d, xdot_d, xddot_d, out.theta, out.thetadot, out.F_s)
+            x_d, xdot_d, xddot_d, *rest = setpoints(out.t)
+            for command in rest[1] if len(rest) > 1 else ():
+                loop.set_parameter(command.node, command.parameter, command.value)
+            state = loop.step(out.t, x_d, xdot_d, xddot_d, out.theta, out.thetadot, out.F_s,
+                              rest[0] if rest else None)
             out = sim.step(state.theta_d)
             for key, value in (("t", out.t), ("x_d", x_d), ("x", out.x), ("x_est", state.x), ("f", out.f),
-                               ("f_d", state.f_d), ("status", state.status)):
+                               ("f_d", state.f_d), ("status", state.status), ("w_contact", out.w_contact)):
                 rows[key].append(value)
             faults.append(state.faults)
-    return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults)
+            hpfc.append(state.hpfc)
+    return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults,
+                         hpfc=hpfc if loop.hpfc is not None else None)
