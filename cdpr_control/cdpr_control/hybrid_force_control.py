@@ -43,9 +43,10 @@ IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
 STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "brake", LOST: "contact lost",
                CONTACT: "force control", RELEASE: "release"}
-FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT)   # the task z axis is not position-controlled (Fig. 5.2)
+# The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
+FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 # The CFC pauses during contact establishment (A-C, section 5.1.2) and, departing from the thesis,
-# also in D: see CFCCoupling.
+# also in D and R: see CFCCoupling.
 CFC_PAUSED = FORCE_CONTROLLED
 
 
@@ -312,7 +313,7 @@ class CFCCoupling:
       10 % below F_d with the CFC active on the thesis's moving-average set-point, and the contact
       oscillated with a higher tension level. The cable tension in contact comes from the tension
       level of the distribution at the pause (docs/hybrid_force_control.md).
-    - When the contact ends (R, I) the CFC resumes; its set-point is blended from the one held at
+    - When the contact has ended (I) the CFC resumes; its set-point is blended from the one held at
       the pause to the live one through the moving average of T_MA,HPFC, the thesis's filter
       "to slow down the control loop", so the feed-forward f_d of (3.22) does not step.
     """
