@@ -146,11 +146,11 @@ def test_disabled_gives_zero_offset_and_idle():
 def test_cfc_coupling_pauses_in_contact_and_blends_back_without_a_step():
     c = CFCCoupling(0.01, 1e-3)
     f0, f1 = np.full(8, 7.0), np.full(8, 9.0)
-    assert c.update("I", f0) == (pytest.approx(f0), False) or True
-    out, paused = c.update("A", f0)
-    assert paused and np.allclose(out, f0)
-    out, paused = c.update("D", f1)
-    assert paused and np.allclose(out, f0)                       # held at the pause's set-point
+    out, paused = c.update("I", f0)
+    assert not paused and np.allclose(out, f0)
+    for state, f in (("A", f0), ("B", f1), ("D", f1), ("C", f1), ("D", f1), ("R", f1)):
+        out, paused = c.update(state, f)
+        assert paused and np.allclose(out, f0)                   # held at the pause's set-point
     outs = [c.update("I", f1)[0] for _ in range(20)]
     assert not c.update("I", f1)[1]
     assert np.max(np.abs(np.diff(np.array([f0] + outs), axis=0))) < 0.25 * (f1 - f0).max()
@@ -216,7 +216,14 @@ def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release(
     assert np.all(np.abs(F[-1000:] - 500.0) <= 0.02 * 500.0)       # the last second of the hold
     assert settling < 3.0
     assert r.w_contact[-1, 2] == 0.0
-    np.testing.assert_allclose(r.x[-1, :3], IPANEMA3.home[:3], atol=2e-4)
+    # released without a jump: the platform never moves faster than about v_max,HPFC
+    k_r = int(np.argmax(states == "R"))
+    v = np.linalg.norm(np.diff(r.x[k_r:, :3], axis=0), axis=1) / 1e-3
+    offset = 1e3 * np.linalg.norm(r.x[-1, :3] - IPANEMA3.home[:3])
+    print(f"release: platform speed max {1e3 * v.max():.1f} mm/s; {offset:.1f} mm from the programmed pose "
+          f"{r.t[-1] - r.t[k_r]:.1f} s after the release began")
+    assert v.max() < 2.0 * HPFCParams().v_max
+    assert offset < 5.0
 
 
 def _slice_run(r, k):

@@ -17,7 +17,8 @@ from .cable_force_control import CableForceControl, CFCParams
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
-from .hybrid_force_control import FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl, select_position_feedback
+from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
+                                   select_position_feedback)
 from .joint_command import JointCommand
 from .kinematics import inverse_kinematics
 from .ospc import OperationalSpacePositionController, OSPCParams
