@@ -31,7 +31,7 @@ class ClosedLoopRun:
     f_d: np.ndarray        # (N, m) force set-points
     status: np.ndarray     # (N,) force distribution status
     faults: list           # per period, the safety faults
-    w_contact: np.ndarray | None = None   # (N, 6) true contact wrench on the platform (with obstacles)
+    w_contact: np.ndarray | None = None   # (N, 6) true contact wrench on the platform (0 without obstacles)
     hpfc: list | None = None              # per period, the HPFCState (with hybrid force control)
 
 

@@ -8,8 +8,8 @@ of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control
 
 With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
 ``<force_controller>/state`` and, through :class:`cdpr_control.hybrid_force_control.CFCCoupling`,
-holds Δq_CFC while that controller is in contact (states A-D) and blends its set-point back
-through a moving average of ``T_MA`` afterwards.
+holds Δq_CFC while that controller makes, holds or breaks contact (states A-D, R) and blends its
+set-point back through a moving average of ``T_MA`` afterwards.
 """
 from __future__ import annotations
 

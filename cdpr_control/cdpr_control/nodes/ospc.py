@@ -4,7 +4,7 @@ Subscribes ``setpoint`` (x_d) and ``platform/pose`` (x from the forward kinemati
 ``ospc/state`` (cdpr_msgs/ControllerState, ``output`` = x_OSPC [m, m, m, rad, rad, rad]).
 Disabled, the output is zero (IK-only reference control). With ``force_controller`` naming the
 hybrid force controller, it also subscribes ``<force_controller>/state`` and does not act along
-the force direction F_d,0 of the set-point while that controller is in contact (states A-D,
+the force direction while that controller makes, holds or releases contact (states A-D, R;
 Raibert and Craig's selection, Fig. 5.2).
 """
 from __future__ import annotations
