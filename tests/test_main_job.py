@@ -38,6 +38,7 @@ LOOP_TYPES = {                                   # one message per control perio
     "/force_distribution": "cdpr_msgs/msg/ForceDistribution",
     "/cable_force_controller/state": "cdpr_msgs/msg/ControllerState",
     "/ospc/state": "cdpr_msgs/msg/ControllerState",
+    "/hybrid_force_controller/state": "cdpr_msgs/msg/ControllerState",
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
     "/ground_truth/twist": "geometry_msgs/msg/TwistStamped",
     "/ground_truth/cable_forces": "cdpr_msgs/msg/CableForces",
