@@ -27,7 +27,7 @@ from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
-from cdpr_control.hybrid_force_control import (CONTACT, STATE_NAMES, HPFCParams, HybridForceControl,
+from cdpr_control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceControl,
                                                format_state)
 from cdpr_control.ospc import AXES
 
@@ -84,20 +84,19 @@ class HybridForceControllerNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         stage = self.stage
-        previous = stage.state
         s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
         zero3 = [0.0, 0.0, 0.0]
-        feedforward = np.zeros(6) if s.state in (CONTACT, "I") else s.x
+        feedforward = np.zeros(6) if s.state in (CONTACT, IDLE) else s.x     # the position-controlled x_t
         reference, feedback = np.r_[s.F_d0, zero3], np.r_[s.F_vec, zero3]
         self.publisher.publish(ControllerState(
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference.tolist(), feedback=feedback.tolist(), error=(reference - feedback).tolist(),
             integrator=np.r_[s.integrator * s.z_t, zero3].tolist(), feedforward=feedforward.tolist(),
             output=s.x.tolist(), saturated=[bool(s.saturated)] * 6))
-        if s.state != previous or self._last_diagnostic is None:
-            level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
-            self.report(level, f"state {s.state}: {STATE_NAMES[s.state]}",
-                        {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}, stamp_ns=t_ns)
+        # published when state or saturation change (report() compares level and message)
+        level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
+        self.report(level, f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else ""),
+                    {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}, stamp_ns=t_ns)
 
 
 def main(args=None):
