@@ -34,6 +34,7 @@ Table 5.1's unit of T_d (s^-1) is read as s (a derivative time constant).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,21 +77,29 @@ class HPFCParams:
             raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
 
 
+def _clip(value: float, bound: float) -> float:
+    """value limited to [-bound, bound] (scalar; np.clip costs microseconds per call)."""
+    return max(-bound, min(bound, float(value)))
+
+
+def task_axis(F_d0, z_previous=None) -> np.ndarray:
+    """z axis of the task frame (3,): the direction of F_d,0 (5.2). F_d,0 = 0 has no direction:
+    then z_previous (the last task z axis) is kept, or e_z when there is none."""
+    F = np.asarray(F_d0, dtype=float)
+    norm = math.sqrt(float(F @ F))
+    if norm > 0.0 and math.isfinite(norm):
+        return F / norm
+    return np.array([0.0, 0.0, 1.0]) if z_previous is None else np.asarray(z_previous, dtype=float)
+
+
 def task_frame(F_d0, z_previous=None) -> np.ndarray:
     """R_t (3, 3) of the task frame: z axis along F_d,0 (5.2), so that R_t^T F_d,0 = [0 0 |F_d,0|].
 
     The x axis is the base axis least parallel to z, made orthogonal (deterministic, continuous
-    while F_d,0 turns by less than that axis). F_d,0 = 0 has no direction: then z_previous (the
-    last task z axis) is kept, or e_z when there is none.
+    while F_d,0 turns by less than that axis); z as :func:`task_axis`. The controller itself needs
+    only the z axis: F_d = z_t . F_d,0, F = z_t . F_vec, x_d,HPFC = x_t z_t.
     """
-    F = np.asarray(F_d0, dtype=float)
-    norm = float(np.linalg.norm(F))
-    if norm > 0.0 and np.isfinite(norm):
-        z = F / norm
-    elif z_previous is not None:
-        z = np.asarray(z_previous, dtype=float)
-    else:
-        z = np.array([0.0, 0.0, 1.0])
+    z = task_axis(F_d0, z_previous)
     e = np.eye(3)[int(np.argmin(np.abs(z)))]
     x = e - (e @ z) * z
     x /= np.linalg.norm(x)
@@ -215,15 +224,15 @@ class HybridForceControl:
     def _move(self, v_target: float) -> None:
         """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
         dv = self.params.a_max * self.dt
-        self.v_t += float(np.clip(v_target - self.v_t, -dv, dv))
+        self.v_t += _clip(v_target - self.v_t, dv)
         self.x_t += self.v_t * self.dt
 
     def _release(self) -> None:
         """Back to x_t = 0 at most at v_max, braking in time (v^2 = 2 a |x_t|), no overshoot of 0."""
         p = self.params
         distance = abs(self.x_t)
-        v_stop = np.sqrt(2.0 * p.a_max * distance)
-        target = -np.sign(self.x_t) * min(p.v_max, v_stop)
+        v_stop = math.sqrt(2.0 * p.a_max * distance)
+        target = -math.copysign(min(p.v_max, v_stop), self.x_t)
         self._move(target)
         if self.x_t * (self.x_t - self.v_t * self.dt) <= 0.0 or distance < 1e-9:  # crossed or reached 0
             self.x_t = self.v_t = 0.0
@@ -237,9 +246,8 @@ class HybridForceControl:
         w = np.asarray(w, dtype=float)
         if F_d0.shape != (3,) or not np.all(np.isfinite(F_d0)):
             F_d0 = np.zeros(3)                                   # no valid demand: release
-        R_t = task_frame(F_d0, self.z_t)
-        self.z_t = R_t[:, 2]
-        F_d = float((R_t.T @ F_d0)[2])                           # (5.2)
+        self.z_t = task_axis(F_d0, self.z_t)
+        F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
         if w.shape == (6,) and np.all(np.isfinite(w)):
             F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
         else:                                                    # keep the last estimate
@@ -266,7 +274,7 @@ class HybridForceControl:
             # to standstill where the force is expected to reach F_d: (F_d - F) / K_p ahead, K_p
             # being the effective stiffness (table 5.1), braking at a_max at the latest
             ahead = max(0.0, F_d - F) / p.K_p
-            self._move(min(self.v_t, np.sqrt(2.0 * p.a_max * ahead)))
+            self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
             if self.v_t == 0.0:                                  # standstill: closed-loop force control
                 self._enter(CONTACT)
                 # bumpless: the integral part takes over what the P part does not give (the D part
@@ -280,7 +288,7 @@ class HybridForceControl:
             self.integrator = self.x_t                           # the position-controlled x_t
             self.saturated = abs(self.x_t) >= p.x_max
             if self.saturated:
-                self.x_t = float(np.clip(self.x_t, -p.x_max, p.x_max))
+                self.x_t = _clip(self.x_t, p.x_max)
                 self.v_t = 0.0
         x = np.zeros(6)
         x[:3] = self.x_t * self.z_t                              # R_t [0 0 x_t]
@@ -295,10 +303,10 @@ class HybridForceControl:
         candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
         free = pd + candidate
         blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
-        self.integrator = float(np.clip(self.integrator if blocked else candidate, -p.x_max, p.x_max))
+        self.integrator = _clip(self.integrator if blocked else candidate, p.x_max)
         x_t = pd + self.integrator
         self.saturated = abs(x_t) > p.x_max
-        x_new = float(np.clip(x_t, -p.x_max, p.x_max))
+        x_new = _clip(x_t, p.x_max)
         self.v_t = (x_new - self.x_t) / dt
         self.x_t = x_new
 
