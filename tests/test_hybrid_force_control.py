@@ -17,8 +17,20 @@ from cdpr_sim.simulator import SimConfig
 
 MINI = load_robot("ipanema3_mini")
 IPANEMA3 = load_robot("ipanema3")
-# Mini values of params/ipanema3_mini.yaml
-MINI_HPFC = HPFCParams(K_p=30000.0, T_i=0.3, T_d=0.03, F_th=1.0, v_max=0.002, a_max=1.0, x_max=0.02, T_F=0.01)
+
+
+def shipped_hpfc(robot_name: str) -> HPFCParams:
+    """The hybrid force controller's parameters of the shipped parameter file of a robot."""
+    import yaml
+    from importlib.resources import files
+
+    text = files("cdpr_control.params").joinpath(f"{robot_name}.yaml").read_text()
+    values = yaml.safe_load(text)["hybrid_force_controller"]["ros__parameters"]
+    return HPFCParams(**{k: float(v) for k, v in values.items() if k in HPFCParams.__dataclass_fields__})
+
+
+MINI_HPFC = shipped_hpfc("ipanema3_mini")
+IPANEMA3_HPFC = shipped_hpfc("ipanema3")
 
 
 # ---- library ------------------------------------------------------------------------------
@@ -199,7 +211,7 @@ def floor_program_run(duration=None):
     interp = Interpolator(parse_gcode(programs.read("floor_contact_ipanema3"), start_pose=robot.home), dt=1e-3)
     radius, centre = default_tool(np.asarray(robot.b))
     floor = Plane.floor(robot.home[2] + centre[2] - radius - 0.01, ContactMaterial(stiffness=1e6, damping=1e4))
-    return run(robot, program(interp), duration or interp.duration, ControlLoopParams(hpfc=HPFCParams()),
+    return run(robot, program(interp), duration or interp.duration, ControlLoopParams(hpfc=IPANEMA3_HPFC),
                config=SimConfig(obstacles=(floor,)))
 
 
@@ -222,7 +234,7 @@ def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release(
     offset = 1e3 * np.linalg.norm(r.x[-1, :3] - IPANEMA3.home[:3])
     print(f"release: platform speed max {1e3 * v.max():.1f} mm/s; {offset:.1f} mm from the programmed pose "
           f"{r.t[-1] - r.t[k_r]:.1f} s after the release began")
-    assert v.max() < 2.0 * HPFCParams().v_max
+    assert v.max() < 2.0 * IPANEMA3_HPFC.v_max
     assert offset < 5.0
 
 
@@ -267,3 +279,46 @@ def test_contact_lost_reapproach_and_release_to_the_programmed_pose():
     print(f"\nrelease: platform speed max {1e3 * v.max():.1f} mm/s (v_max,HPFC {1e3 * p.v_max:.0f} mm/s)")
     assert v.max() < 2.0 * p.v_max
 
+
+def cylinder_program_run(stiffness=1e6, friction=0.3):
+    """The shipped cylinder_contact_force.gcode on the IPAnema 3 with its M103/M104 against a barrel
+    of radius 180 mm around a 20 mm tool sphere at the platform origin (so that the origin moves on
+    the programmed 200 mm circle) -> (run, states, F_n along the surface normal, F_d, moving in D)."""
+    from cdpr_control import programs
+    from cdpr_control.force_setpoint import ForceSetpointParams
+    from cdpr_control.gcode import parse_gcode
+    from cdpr_control.interpolation import Interpolator
+    from cdpr_sim.closed_loop import program
+    from cdpr_sim.contacts import Cylinder, PlatformShape
+
+    robot, tool = IPANEMA3, 0.02
+    interp = Interpolator(parse_gcode(programs.read("cylinder_contact_force"), start_pose=robot.home), dt=1e-3)
+    barrel = Cylinder((0.0, 0.0, -0.28), (1.0, 0.0, 0.0), 0.2 - tool, 0.9,
+                      ContactMaterial(stiffness, 0.01 * stiffness, friction))
+    config = SimConfig(obstacles=(barrel,), platform_shape=PlatformShape("sphere", tool, (0.0, 0.0, 0.0)))
+    # f_min of the distribution as params/ipanema3.yaml plans it
+    params = ControlLoopParams(force=ForceSetpointParams(f_min=np.full(robot.m, 150.0)), hpfc=IPANEMA3_HPFC)
+    r = run(robot, program(interp), interp.duration + 0.5, params, config=config)
+    states = np.array([s.state for s in r.hpfc])
+    rel = r.x[:, 1:3] - [0.0, -0.28]
+    normal = np.c_[np.zeros(len(rel)), rel / np.linalg.norm(rel, axis=1)[:, None]]
+    F_n = np.sum(r.w_contact[:, :3] * normal, axis=1)             # the barrel pushes along the normal
+    F_d = np.array([s.F_d for s in r.hpfc])
+    speed = np.r_[0.0, np.linalg.norm(np.diff(r.x_d[:, :3], axis=0), axis=1) / 1e-3]
+    moving = (speed > 0.005) & (states == "D") & (F_d > 49.0)
+    return r, states, F_n, F_d, moving
+
+
+def test_cylinder_program_presses_follows_and_releases():
+    """Section 5.1.3, Fig. 5.7: press 50 N on the barrel (1e6 N/m, friction 0.3), follow it, release."""
+    r, states, F_n, F_d, moving = cylinder_program_run()
+    assert _sequence(r.hpfc) == ["I", "A", "B", "D", "R", "I"]     # never lost the barrel
+    error = np.abs(F_n[moving] - F_d[moving])
+    c = IPANEMA3.cable
+    print(f"\ncylinder: {moving.sum() * 1e-3:.1f} s moving in contact, |F - F_d| max {error.max():.1f} N, "
+          f"rms {np.sqrt(np.mean(error ** 2)):.1f} N, after the first 5 s max "
+          f"{error[5000:].max():.1f} N; cable forces {r.f.min():.0f}..{r.f.max():.0f} N")
+    assert moving.sum() > 40_000                                   # 40 s of following
+    assert error.max() < 30.0 and np.sqrt(np.mean(error ** 2)) < 8.0
+    assert np.all(r.f >= c.f_min) and np.all(r.f <= c.f_max)
+    np.testing.assert_allclose(r.x[-1, :3], r.x_d[-1, :3], atol=1e-3)   # released and back home

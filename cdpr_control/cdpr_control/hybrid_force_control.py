@@ -321,8 +321,8 @@ class CFCCoupling:
       there is against the PID (5.3). In simulation (IPAnema 3, 500 N) the contact force stalled
       10 % below F_d with the CFC active on the thesis's moving-average set-point, and the contact
       oscillated with a higher tension level. The cable tension in contact comes from the tension
-      level of the distribution at the pause; following a surface over a long way needs a running
-      CFC and is not achieved with this (docs/hybrid_force_control.md).
+      level of the distribution at the pause; it suffices for following the barrel of section 5.1.3
+      at 50 N (docs/hybrid_force_control.md).
     - When the contact has ended (I) the CFC resumes; its set-point is blended from the one held at
       the pause to the live one through the moving average of T_MA,HPFC, the thesis's filter
       "to slow down the control loop", so the feed-forward f_d of (3.22) does not step.
