@@ -175,6 +175,12 @@ def test_a_parameter_command_to_a_missing_node_fails_the_program(graph):
     assert not r.success and "nobody" in r.message and r.error_line == 1
 
 
+def test_m103_without_the_hybrid_force_controller_names_the_node(graph):
+    r = result_of(graph, send(graph, "G21 G90\nM103\nG91 G1 X1 F100", "no_hpfc")).result
+    assert not r.success and r.error_line == 2
+    assert "'hybrid_force_controller' is not running" in r.message
+
+
 def test_limit_parameters_are_validated(graph):
     node = graph[0]
     assert not node.set_parameters([Parameter("v_max", value=-1.0)])[0].successful

@@ -41,6 +41,7 @@ LOOP_TYPES = {                                   # one message per control perio
     "/ospc/state": "cdpr_msgs/msg/ControllerState",
     "/admittance_controller/setpoint": "cdpr_msgs/msg/OperationalSetpoint",
     "/admittance_controller/state": "cdpr_msgs/msg/ControllerState",
+    "/hybrid_force_controller/state": "cdpr_msgs/msg/ControllerState",
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
     "/ground_truth/twist": "geometry_msgs/msg/TwistStamped",
     "/ground_truth/cable_forces": "cdpr_msgs/msg/CableForces",

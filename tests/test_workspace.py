@@ -76,7 +76,7 @@ import cdpr_tools
 shares = {{p: get_package_share_directory(p) for p in {PACKAGES!r}}}
 assert all(str(package_share(p)) == s for p, s in shares.items())
 graph = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml")
-print(json.dumps({{"shares": shares, "module": cdpr_tools.__file__, "params": graph.nodes[1].parameters}}))
+print(json.dumps({{"shares": shares, "module": cdpr_tools.__file__, "params": graph.nodes[1].parameters[0]}}))
 """
     env = {**os.environ, "AMENT_PREFIX_PATH": os.pathsep.join([*(str(install / p) for p in PACKAGES), sys.prefix]),
            "PYTHONPATH": os.pathsep.join(site)}
@@ -90,4 +90,4 @@ print(json.dumps({{"shares": shares, "module": cdpr_tools.__file__, "params": gr
         assert share == install / package / "share" / package
         for name in files:
             assert (share / name).is_file(), name
-    assert found["params"] == [str(install / "cdpr_control" / "share" / "cdpr_control" / "params" / "ipanema3_mini.yaml")]
+    assert found["params"] == str(install / "cdpr_control" / "share" / "cdpr_control" / "params" / "ipanema3_mini.yaml")

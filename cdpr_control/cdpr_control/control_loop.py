@@ -1,11 +1,11 @@
 """The control architecture of Fig. 3.4 as one object: the stages the nodes run, in one process.
 
 Per period: friction compensation (3.44) -> forward kinematics (3.7)-(3.9) and w = -A^T f ->
-force set-point (3.26)-(3.28) -> cable force control (3.19)-(3.23) and OSPC (3.16) -> safety ->
-joint command θ_d = IK{x_d + x_OSPC} - Δq_CFC (5.10). Switching between force control and IK-only
-control, or the CFC or OSPC on or off, is bumpless (:mod:`cdpr_control.bumpless`): the outputs
-are blended in and out over ``transfer_time`` and an unused controller's integrator is held at
-zero. The ROS nodes wrap exactly these stage
+force set-point (3.26)-(3.28) -> hybrid position/force control (5.1), when configured -> cable force
+control (3.19)-(3.23) and OSPC (3.16) -> safety -> joint command θ_d = IK{x_d + x_OSPC + x_HPFC} -
+Δq_CFC (5.1), (5.10). Switching between force control and IK-only control, or the CFC or OSPC on or
+off, is bumpless (:mod:`cdpr_control.bumpless`): the outputs are blended in and out over
+``transfer_time`` and an unused controller's integrator is held at zero. The ROS nodes wrap exactly these stage
 objects one per node; this class chains them directly, which is what the closed-loop tests, the
 benchmarks and offline studies use when the ROS transport is not the subject.
 """
@@ -22,6 +22,8 @@ from .calibration import DEFAULT_WINDOW
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
+from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
+                                   select_position_feedback)
 from .joint_command import JointCommand
 from .ospc import OperationalSpacePositionController, OSPCParams
 from .safety import SafetyConfig, SafetyMonitor
@@ -40,6 +42,8 @@ class ControlLoopParams:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     transfer_time: float = 0.5           # s, blend of the CFC and OSPC outputs on a switch (bumpless)
     calibration_window: int = DEFAULT_WINDOW   # samples averaged for the start-up Δq_0 (3.9), (3.23)
+    hpfc: HPFCParams | None = None       # hybrid position/force control stage (5.1); None: not in the loop
+    hpfc_enabled: bool = False           # its `enabled` (M103/M104 switch it in a program)
 
 
 @dataclass
@@ -56,6 +60,7 @@ class LoopState:
     theta_d: np.ndarray      # drive command
     faults: list             # safety faults
     fk_converged: bool
+    hpfc: object = None      # HPFCState of the hybrid position/force control, None without it
 
 
 class ControlLoop:
@@ -78,8 +83,13 @@ class ControlLoop:
                 raise ValueError(reason)
         self.blend_cfc = Blend(p.transfer_time, dt, force_control and p.cfc_enabled)
         self.blend_ospc = Blend(p.transfer_time, dt, force_control and p.ospc_enabled)
+        self.blend_hpfc = Blend(p.transfer_time, dt, force_control)
         self.refusal: str | None = None          # why a live switch-off of the OSPC is not honoured
         self._checked = (force_control, p.ospc_enabled)
+        self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
+        self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
+        self.dq_cfc = np.zeros(robot.m)
+        self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
 
     def set_home_calibration(self, f_home) -> None:
         """Δq_0 from the forces f_home (m,) [N] recorded when the encoders were set at home (2.3.2),
@@ -88,10 +98,19 @@ class ControlLoop:
         self.estimator.dq_0 = None
         self.cfc.calibration.set_home(self.robot, f_home)
         self.cfc.controller.dq_0 = None
-        self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
 
-    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s) -> LoopState:
-        """One period from the set-point (pose, twist, acceleration) and the winch measurements."""
+    def set_parameter(self, node: str, parameter: str, value) -> None:
+        """A parameter command of a program (M103/M104, M101/M102) applied to the stage it names."""
+        if (node, parameter) == ("hybrid_force_controller", "enabled") and self.hpfc is not None:
+            self.hpfc.enabled = bool(value)
+        elif (node, parameter) == ("cable_force_controller", "enabled"):
+            self.params.cfc_enabled = bool(value)        # blended in or out (bumpless)
+        else:
+            raise ValueError(f"the in-process loop has no parameter {node}.{parameter}")
+
+    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s, F_d0=None) -> LoopState:
+        """One period from the set-point (pose, twist, acceleration, desired force F_d,0 of the force
+        axes) and the winch measurements."""
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta)
@@ -101,7 +120,7 @@ class ControlLoop:
         dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)
         p = self.params
         force_control = p.mode == "force_control"
-        for blend in (self.blend_cfc, self.blend_ospc):
+        for blend in (self.blend_cfc, self.blend_ospc, self.blend_hpfc):
             blend.set_transfer_time(p.transfer_time)
         s_cfc = self.blend_cfc.update(force_control and p.cfc_enabled)
         if (force_control, p.ospc_enabled) != self._checked:    # a live change: check (3.1.3) once
@@ -109,16 +128,24 @@ class ControlLoop:
             self.refusal = check_force_control(robot, robot.home, planned_home_forces(robot, p.force),
                                                p.ospc_enabled) if force_control else None
         s_ospc = self.blend_ospc.update(force_control and (p.ospc_enabled or self.refusal is not None))
-        dq_cfc = s_cfc * self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
+        s_hpfc = self.blend_hpfc.update(force_control)
+        hpfc = None if self.hpfc is None else self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w)
+        f_d, paused = (dist.f, False) if hpfc is None else self.coupling.update(hpfc.state, dist.f)
+        if not paused:                                 # section 5.1.2: held during contact establishment
+            self.dq_cfc = self.cfc.update(f_d, f, theta, dist.f_min, dist.f_max)
+        dq_cfc = s_cfc * self.dq_cfc
         if s_cfc == 0.0:
             self.cfc.controller.pi.reset()           # track: no wind-up while the output is unused
-        x_ospc = s_ospc * self.ospc.update(x_d, x)
+        # Fig. 5.2: no position control along the force-controlled task z axis
+        x_fb = x if hpfc is None or hpfc.state not in FORCE_CONTROLLED else select_position_feedback(x_d, x, hpfc.z_t)
+        x_ospc = s_ospc * self.ospc.update(x_d, x_fb)
         if s_ospc == 0.0:
             self.ospc.reset()
+        offsets = [x_ospc] if hpfc is None else [x_ospc, s_hpfc * hpfc.x]
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
                                     fk_converged=self.estimator.result.converged)
         hold = any(fault.holds for fault in faults)
-        theta_d = self.command.update(x_d, [x_ospc], dq_cfc, hold=hold)      # s = 0: IK only (2.3.2)
+        theta_d = self.command.update(x_d, offsets, dq_cfc, hold=hold)       # s = 0: IK only (2.3.2)
         self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
-                               self.estimator.result.converged)
+                               self.estimator.result.converged, hpfc)
         return self.state

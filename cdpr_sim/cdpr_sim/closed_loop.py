@@ -32,6 +32,8 @@ class ClosedLoopRun:
     f_d: np.ndarray        # (N, m) force set-points
     status: np.ndarray     # (N,) force distribution status
     faults: list           # per period, the safety faults
+    w_contact: np.ndarray | None = None   # (N, 6) true contact wrench on the platform (0 without obstacles)
+    hpfc: list | None = None              # per period, the HPFCState (with hybrid force control)
 
 
 def hold(x_d) -> Callable[[float], tuple]:
@@ -42,11 +44,13 @@ def hold(x_d) -> Callable[[float], tuple]:
 
 
 def program(interpolator: Interpolator) -> Callable[[float], tuple]:
-    """A set-point source stepping a G-code interpolator once per period (twists from Kardan rates)."""
+    """A set-point source stepping a G-code interpolator once per period (twists from Kardan rates);
+    it also hands on the force axes F_d,0 and the program's parameter commands (M103 ...), which
+    :func:`run` applies to the loop."""
     def source(t):
         sp = interpolator.step()
         xdot, xddot = twist_from_pose_rates(sp.x, sp.xd, sp.xdd)
-        return sp.x, xdot, xddot
+        return sp.x, xdot, xddot, sp.force, sp.commands
     return source
 
 
@@ -59,17 +63,18 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     forces for its Δq_0 (3.9), (3.23). ``before_step(k, loop, sim)`` may change
     parameters during the run. params None: the robot's parameter file (the node graph's
     configuration, :func:`cdpr_control.controller_params.control_loop_params`). The simulated
-    robot is the plant of ``config`` (by default one that differs from the robot file). A set-point
-    source with a ``bind(loop)`` method (one that closes the loop through a measurement, e.g.
-    :class:`HandGuiding` below) gets the loop first."""
+    robot is the plant of ``config`` (by default one that differs from the robot file).
+    ``setpoints(t)`` returns (x_d, xdot_d, xddot_d), optionally followed by the desired force F_d,0
+    (3,) and a list of parameter commands; a set-point source with a ``bind(loop)`` method (one that
+    closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True, config=config)
     loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params)
     if hasattr(setpoints, "bind"):
         setpoints.bind(loop)
     n = int(round(duration / config.period))
-    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status")}
-    faults = []
+    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status", "w_contact")}
+    faults, hpfc = [], []
     with Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset) as sim:
         loop.set_home_calibration(calibration_forces(sim, tension_level))     # Δq_0 of the encoders' set-up
         if payload:
@@ -78,14 +83,19 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
         for k in range(n):
             if before_step is not None:
                 before_step(k, loop, sim)
-            x_d, xdot_d, xddot_d = setpoints(out.t)
-            state = loop.step(out.t, x_d, xdot_d, xddot_d, out.theta, out.thetadot, out.F_s)
+            x_d, xdot_d, xddot_d, *rest = setpoints(out.t)
+            for command in rest[1] if len(rest) > 1 else ():
+                loop.set_parameter(command.node, command.parameter, command.value)
+            state = loop.step(out.t, x_d, xdot_d, xddot_d, out.theta, out.thetadot, out.F_s,
+                              rest[0] if rest else None)
             out = sim.step(state.theta_d)
             for key, value in (("t", out.t), ("x_d", x_d), ("x", out.x), ("x_est", state.x), ("f", out.f),
-                               ("f_d", state.f_d), ("status", state.status)):
+                               ("f_d", state.f_d), ("status", state.status), ("w_contact", out.w_contact)):
                 rows[key].append(value)
             faults.append(state.faults)
-    return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults)
+            hpfc.append(state.hpfc)
+    return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults,
+                         hpfc=hpfc if loop.hpfc is not None else None)
 
 
 class HandGuiding:

@@ -254,6 +254,22 @@ class Simulator:
         self._pulse = None
         self._external = bool(self._w_cont.any())
 
+    def place_obstacle(self, index: int, position=None, material=None) -> None:
+        """Move obstacle ``index`` of ``config.obstacles`` at run time: a plane to pass through
+        ``position`` (3,), a cylinder to be centred there [m, base frame]; optionally a new
+        ContactMaterial. Contact is then made or lost by the physics, not by a script."""
+        body = self._obstacles[index]
+        pb, cid = self._pb, self._client
+        if position is not None:
+            position = np.asarray(position, dtype=float)
+            if position.shape != (3,) or not np.all(np.isfinite(position)):
+                raise ValueError(f"obstacle position must be 3 finite numbers, got {position}")
+            _, orientation = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+            pb.resetBasePositionAndOrientation(body, position.tolist(), orientation, physicsClientId=cid)
+        if material is not None:
+            pb.changeDynamics(body, -1, contactStiffness=material.stiffness, contactDamping=material.damping,
+                              lateralFriction=material.friction, physicsClientId=cid)
+
     def close(self) -> None:
         if self._client is not None:
             self._pb.disconnect(physicsClientId=self._client)

@@ -19,6 +19,8 @@ from cdpr_control.robot import load_robot
 GRAPH = Path(__file__).parent / "graphs" / "closed_loop.yaml"
 BAGS = Path(__file__).resolve().parents[2] / "bags"
 DEFAULT_PROGRAM = {"ipanema3_mini": "cuboid_mini", "ipanema3": "rectangle"}
+#: the surface a contact program (hybrid position/force control, section 5.1) presses on
+PROGRAM_SURFACE = {"floor_contact_ipanema3": "floor", "cylinder_contact_force": "cylinder"}
 
 
 def add_parser(sub) -> None:
@@ -30,6 +32,11 @@ def add_parser(sub) -> None:
                    help="joint_command mode: the thesis' force control or the IK-only reference")
     p.add_argument("--plant", choices=("mismatched", "nominal"), default="mismatched",
                    help="the simulated robot: its own parameters (default) or the robot file itself")
+    p.add_argument("--surface", choices=("auto", "none", "floor", "cylinder"), default="auto",
+                   help="contact surface in the simulator: floor 10 mm below the tool tip at home, or the "
+                        "barrel of cylinder_contact_force (r = 180 mm + 20 mm tool at the platform origin); "
+                        "auto: the one the program needs")
+    p.add_argument("--contact-stiffness", type=float, default=1e6, help="surface stiffness [N/m] (damping 1 %% of it)")
     p.add_argument("--output", help="bag directory (default: bags/demo_<robot>_<date-time>)")
     p.add_argument("--timeout", type=float, default=900.0, help="wall-clock limit for the program [s]")
     p.set_defaults(run=run)
@@ -41,6 +48,20 @@ def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
     if path.suffix == ".gcode" or path.exists():
         return path.stem, path.read_text()
     return name, programs.read(name)
+
+
+def surface_parameters(robot, surface: str, stiffness: float) -> dict:
+    """Parameters of winch_platform_sim that place a contact surface (docs/hybrid_force_control.md)."""
+    if surface == "none":
+        return {}
+    from cdpr_sim.contacts import default_tool
+    material = {"contact_stiffness": stiffness, "contact_damping": 0.01 * stiffness, "contact_friction": 0.3}
+    if surface == "floor":
+        radius, centre = default_tool(robot.b)
+        return {"floor": True, "floor_height": float(robot.home[2] + centre[2] - radius - 0.01), **material}
+    return {"cylinder": True, "cylinder_center": [0.0, 0.0, -0.28], "cylinder_axis": [1.0, 0.0, 0.0],
+            "cylinder_radius": 0.18, "cylinder_length": 0.9, "platform_shape": "sphere", "tool_radius": 0.02,
+            "tool_offset": [0.0, 0.0, 0.0], **material}
 
 
 def run(args) -> int:
@@ -58,11 +79,13 @@ def run(args) -> int:
     bag = Path(args.output) if args.output else BAGS / f"demo_{args.robot}_{stamp}"
     description = load_launch_file(GRAPH, {"robot": args.robot})
     description.record = RecordSpec(output=str(bag))
+    surface = PROGRAM_SURFACE.get(name, "none") if args.surface == "auto" else args.surface
     for spec in description.nodes:
         if spec.module.endswith("joint_command"):
             spec.parameters.append({"mode": args.controller})
         if spec.module.endswith("winch_platform_sim"):
             spec.parameters.append({"plant": args.plant})
+            spec.parameters.append(surface_parameters(robot, surface, args.contact_stiffness))
     print(f"[demo] {robot.name} ({args.plant} plant): program {name!r} through the node graph ({args.mode}, {args.controller}), "
           f"recording to {bag}", flush=True)
     wall0 = time.perf_counter()
@@ -100,7 +123,8 @@ def run(args) -> int:
 
 
 RECORDED = {"/winch/state", "/winch/command", "/setpoint", "/ground_truth/pose", "/ground_truth/cable_forces",
-            "/cable_forces", "/force_distribution", "/platform/pose", "/cable_force_controller/state", "/ospc/state"}
+            "/cable_forces", "/force_distribution", "/platform/pose", "/cable_force_controller/state", "/ospc/state",
+            "/hybrid_force_controller/state"}
 
 
 def _wait_for_recorder(launch, timeout: float = 60.0) -> None:

@@ -26,6 +26,7 @@ import importlib
 import importlib.metadata
 import inspect
 import os
+import re
 import signal
 import subprocess
 import sys

@@ -5,6 +5,11 @@ Subscribes ``force_distribution`` (f_d, limits), ``cable_forces`` (f at the plat
 (cdpr_msgs/ControllerState, ``output`` = Δq_CFC [m] per cable). Disabled, it publishes Δq_CFC = 0:
 the IK-only reference control of section 2.3.2. The computation, including the stiffness model
 of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control.CableForceControl`.
+
+With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
+``<force_controller>/state`` and, through :class:`cdpr_control.hybrid_force_control.CFCCoupling`,
+holds Δq_CFC while that controller makes, holds or breaks contact (states A-D, R) and blends its
+set-point back through a moving average of ``T_MA`` afterwards.
 """
 from __future__ import annotations
 
@@ -14,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
+from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state
 
 from .base import CdprNode, spin_node
 from .parameters import ParameterSet, ParamSpec
@@ -32,7 +38,11 @@ PARAMS = [
     ParamSpec("widen_factor", _D.widen_factor, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
     ParamSpec("stiffness_model", _D.stiffness_model, "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
               "nonlinear (secant of (2.16)-(2.17))", choices=("linear", "nonlinear")),
+    ParamSpec("T_MA", HPFCParams().T_MA, "moving average T_MA,HPFC of the set-point after a contact [s], "
+              "table 5.1 (section 5.1.2)", range=(0.0, 60.0)),
 ]
+FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose <name>/state pauses this "
+                             "controller in contact (5.1.2); empty: none", read_only=True)
 
 
 class CableForceControllerNode(CdprNode):
@@ -40,13 +50,21 @@ class CableForceControllerNode(CdprNode):
         super().__init__("cable_force_controller", **kwargs)
         self.names = [f"cable_{i + 1}" for i in range(self.robot.m)]
         self.stage: CableForceControl | None = None
+        self.coupling: CFCCoupling | None = None
+        self.dq_held = np.zeros(self.robot.m)
+        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
+        self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
-        self.sync = StampSync(self, {
+        inputs = {
             "f_d": (ForceDistribution, "force_distribution"),
             "f": (CableForces, "cable_forces"),
             "theta": (JointState, "winch/state"),
-        }, primary="f", callback=self._cycle, mode=self.sync_mode)
+        }
+        if self.force_controller:
+            inputs["hpfc"] = (ControllerState, f"{self.force_controller}/state")
+        self.sync = StampSync(self, inputs, primary="f", callback=self._cycle, mode=self.sync_mode,
+                              optional=("hpfc",) if self.force_controller else ())
 
     @staticmethod
     def _cfc_params(v: dict) -> CFCParams:
@@ -62,6 +80,10 @@ class CableForceControllerNode(CdprNode):
             self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"])
         else:
             self.stage.set_params(self._cfc_params(v), enabled=v["enabled"])
+        if self.coupling is None:
+            self.coupling = CFCCoupling(v["T_MA"], self.dt)
+        else:
+            self.coupling.set_time_constant(v["T_MA"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         fd_msg = msgs["f_d"]
@@ -76,9 +98,14 @@ class CableForceControllerNode(CdprNode):
             state.output = [0.0] * m
             self.publisher.publish(state)
             return
-        dq = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
+        hpfc = msgs.get("hpfc")
+        contact_state = parse_state(hpfc.controller) if hpfc is not None else None
+        f_d, paused = self.coupling.update(contact_state or "I", f_d)
+        if not paused:                      # held while the hybrid force controller is in contact
+            self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
+        dq = self.dq_held
         c = stage.controller
-        if stage.enabled:
+        if stage.enabled and c.f_filtered is not None:
             state.feedback = c.f_filtered.tolist()
             state.integrator = c.pi.integrator.tolist()
             state.feedforward = f_d.tolist()

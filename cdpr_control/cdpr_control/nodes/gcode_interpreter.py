@@ -133,7 +133,8 @@ class ParameterForwarder:
                 future.add_done_callback(lambda f: self._set(setter, command, self._coerce(command.value, f), on_done))
         elif self.node.get_clock().now().nanoseconds >= deadline:
             self._pending = None
-            on_done(False, f"no parameter service of node {command.node!r}")
+            on_done(False, f"node {command.node!r} is not running (no parameter service within "
+                           f"command_timeout); start it, e.g. with the closed_loop graph")
 
     @staticmethod
     def _coerce(value, types_future):

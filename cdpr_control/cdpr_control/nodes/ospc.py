@@ -2,7 +2,10 @@
 
 Subscribes ``setpoint`` (x_d) and ``platform/pose`` (x from the forward kinematics); publishes
 ``ospc/state`` (cdpr_msgs/ControllerState, ``output`` = x_OSPC [m, m, m, rad, rad, rad]).
-Disabled, the output is zero (IK-only reference control).
+Disabled, the output is zero (IK-only reference control). With ``force_controller`` naming the
+hybrid force controller, it also subscribes ``<force_controller>/state`` and does not act along
+the force direction while that controller makes, holds or releases contact (states A-D, R;
+Raibert and Craig's selection, Fig. 5.2).
 """
 from __future__ import annotations
 
@@ -11,11 +14,12 @@ from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 
+from cdpr_control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
 from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.stability import check_force_control, planned_home_forces
 
 from .base import CdprNode, spin_node
-from .conversions import pose_from_msg
+from .conversions import from_vector3, pose_from_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -27,6 +31,8 @@ PARAMS = [
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
 ]
+FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose force axis is not "
+                             "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
 
 
 class OSPCNode(CdprNode):
@@ -35,12 +41,15 @@ class OSPCNode(CdprNode):
         self.controller: OperationalSpacePositionController | None = None
         self.enabled = True
         self.precondition: str | None = None
+        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
+        force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
-        self.sync = StampSync(self, {
-            "setpoint": (OperationalSetpoint, "setpoint"),
-            "pose": (PoseStamped, "platform/pose"),
-        }, primary="pose", callback=self._cycle, mode=self.sync_mode)
+        inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "pose": (PoseStamped, "platform/pose")}
+        if force_controller:
+            inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
+        self.sync = StampSync(self, inputs, primary="pose", callback=self._cycle, mode=self.sync_mode,
+                              optional=("hpfc",) if force_controller else ())
 
     @staticmethod
     def _ospc_params(v: dict) -> OSPCParams:
@@ -67,6 +76,13 @@ class OSPCNode(CdprNode):
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d = pose_from_msg(msgs["setpoint"].pose)
         x = pose_from_msg(msgs["pose"].pose)
+        hpfc = msgs.get("hpfc")
+        if hpfc is not None and parse_state(hpfc.controller) in FORCE_CONTROLLED:
+            # the force axis: F_d,0 (A-D), or the direction of the offset while releasing (R)
+            axis = next((a for a in (from_vector3(msgs["setpoint"].force), np.asarray(hpfc.output[:3]))
+                         if np.any(a != 0.0)), None)
+            if axis is not None:
+                x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
         state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
                                 names=list(AXES), reference=x_d.tolist(), feedback=x.tolist(),
                                 error=(x_d - x).tolist())

@@ -6,7 +6,8 @@ publishes ``winch/state`` (JointState: position theta [m], velocity thetadot [m/
 [N]), ``/clock``, the ground truth ``ground_truth/pose`` (PoseStamped), ``ground_truth/twist``
 (TwistStamped, [v; omega] base frame), ``ground_truth/cable_forces`` (cdpr_msgs/CableForces at
 the platform), ``ground_truth/external_wrench`` and, with obstacles, ``ground_truth/contact_wrench``
-(WrenchStamped about the platform origin) and ``/diagnostics``. Services ``sim/set_payload``
+(WrenchStamped about the platform origin) and ``/diagnostics``. The surfaces (``floor``,
+``wall``, ``cylinder``) are placed by parameters; their position and material are live. Services ``sim/set_payload``
 (cdpr_msgs/SetPayload) and ``sim/apply_wrench`` (cdpr_msgs/ApplyWrench).
 
 Time (``sync_mode``, shared with the control nodes): ``exact`` is lockstep, the node owns /clock
@@ -78,18 +79,18 @@ def _specs(robot) -> list[ParamSpec]:
         ParamSpec("encoder_calibration", "home_tension", "home_tension: theta = IK{home} at home under the start-up "
                   "tension (2.3.2); none: theta = unstretched length", choices=("home_tension", "none"), read_only=True),
         ParamSpec("floor", False, "a floor plane", read_only=True),
-        ParamSpec("floor_height", float(robot.workspace_min[2]) - 0.5, "floor height [m]", read_only=True),
+        ParamSpec("floor_height", float(robot.workspace_min[2]) - 0.5, "floor height [m]; live: moves the floor"),
         ParamSpec("wall", False, "a wall plane", read_only=True),
-        ParamSpec("wall_point", [float(robot.workspace_max[0]) + 0.5, 0.0, 0.0], "a point of the wall [m]", read_only=True),
+        ParamSpec("wall_point", [float(robot.workspace_max[0]) + 0.5, 0.0, 0.0], "a point of the wall [m]; live: moves the wall"),
         ParamSpec("wall_normal", [-1.0, 0.0, 0.0], "outward wall normal [-]", read_only=True),
         ParamSpec("cylinder", False, "a cylinder (the oil barrel of section 5.1.3)", read_only=True),
-        ParamSpec("cylinder_center", [0.0, 0.0, float(robot.workspace_min[2])], "cylinder centre [m]", read_only=True),
+        ParamSpec("cylinder_center", [0.0, 0.0, float(robot.workspace_min[2])], "cylinder centre [m]; live: moves the cylinder"),
         ParamSpec("cylinder_axis", [0.0, 1.0, 0.0], "cylinder axis direction [-]", read_only=True),
         ParamSpec("cylinder_radius", 0.3, "cylinder radius [m]", (1e-4, 100.0), read_only=True),
         ParamSpec("cylinder_length", 0.9, "cylinder length [m]", (1e-4, 100.0), read_only=True),
-        ParamSpec("contact_stiffness", 1e5, "obstacle stiffness per contact point [N/m]", (1.0, 1e10), read_only=True),
-        ParamSpec("contact_damping", 1e3, "obstacle damping per contact point [N s/m]", (0.0, 1e8), read_only=True),
-        ParamSpec("contact_friction", 0.5, "Coulomb friction coefficient of the obstacles [-]", (0.0, 10.0), read_only=True),
+        ParamSpec("contact_stiffness", 1e5, "obstacle stiffness per contact point [N/m]", (1.0, 1e10)),
+        ParamSpec("contact_damping", 1e3, "obstacle damping per contact point [N s/m]", (0.0, 1e8)),
+        ParamSpec("contact_friction", 0.5, "Coulomb friction coefficient of the obstacles [-]", (0.0, 10.0)),
         ParamSpec("platform_shape", "sphere", "platform contact shape: sphere (tool tip) or box (spanning b_i)",
                   choices=("sphere", "box"), read_only=True),
         ParamSpec("tool_radius", tool_radius, "tool tip sphere radius [m]", (1e-4, 10.0), read_only=True),
@@ -170,6 +171,16 @@ class WinchPlatformSimNode(CdprNode):
         if hasattr(self, "sim"):                       # a live change of speed restarts the pacing
             self._wall_start = time.monotonic()
             self._steps_at_start = self.sim.steps
+            self._place_obstacles(v)
+
+    def _place_obstacles(self, v: dict) -> None:
+        """Move the surfaces to their (live) parameters: contact is then made or lost physically."""
+        material = ContactMaterial(v["contact_stiffness"], v["contact_damping"], v["contact_friction"])
+        places = [(0.0, 0.0, v["floor_height"])] if v["floor"] else []
+        places += [tuple(v["wall_point"])] if v["wall"] else []
+        places += [tuple(v["cylinder_center"])] if v["cylinder"] else []
+        for index, position in enumerate(places):
+            self.sim.place_obstacle(index, position, material)
 
     def _build_simulator(self, v: dict) -> Simulator:
         robot = self.robot

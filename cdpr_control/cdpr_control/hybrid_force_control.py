@@ -1,0 +1,367 @@
+"""Hybrid position and force control (HPFC), thesis section 5.1, Fig. 5.3 and Fig. 5.4.
+
+The CNC (the G-code interpolator) delivers the path x_d and the desired force F_d,0 (force axes
+U V W, base frame, the force the platform exerts on the environment). This module turns them and
+the measured wrench w into the position offset x_d,HPFC of (5.1),
+
+    θ_d = IK{x_d + x_d,HPFC} + Δq_d,CFC ,
+
+which the joint command adds like every other offset input (:mod:`cdpr_control.offset_inputs`).
+
+- Task frame (5.2): R_t has its z axis along F_d,0, so F_d,t = R_t^T F_d,0 = [0 0 F_d]; the
+  contact force F is the same projection of the measured contact force vector.
+- Contact force: the measured wrench minus the weight of the platform and of a known payload,
+  F_vec = -(w_F - (m_p + m_load) g) (w is the external wrench on the platform, A^T f = -w, (2.10);
+  the platform pushes the environment with the opposite of what the environment pushes it with).
+- State machine of Fig. 5.4: A approach along the task z axis at v_max,HPFC until F >= F_th;
+  B brake to standstill; D closed-loop force control with the PID (5.3); C contact lost
+  (F < F_th in D): approach again. The output is x_t along the task z axis, x_d,HPFC = R_t [0 0 x_t].
+- Release (not in Fig. 5.4, see docs/hybrid_force_control.md): when the desired force falls below
+  F_th or the controller is disabled, x_t returns to zero at v_max,HPFC with the same
+  acceleration limit (state R), then the controller is idle (state I) and the platform is back
+  under pure position control at the programmed pose, without a jump.
+- PID (5.3) on e_F = F_d - F with output saturation |x_t| <= x_max and anti-windup (conditional
+  integration and clamping as :mod:`cdpr_control.pi_control`); the D part acts on the (low-pass
+  filtered) measured force only, so a step of F_d does not kick the output.
+- Section 5.1.2's changes of the cable force control: paused in A-C (here also in D and R, a
+  departure explained at :class:`CFCCoupling`), its set-point through a moving average of
+  T_MA,HPFC.
+
+Units: (5.3) is printed as x_t / e_F = K_p (1 + 1/(s T_i) + s T_d) with K_p = 22,000 N/m "gain
+(stiffness)" (table 5.1); a position per force is m/N, so the gain applied is 1 / K_p: the
+controller moves by the force error divided by the expected stiffness of robot and environment.
+Table 5.1's unit of T_d (s^-1) is read as s (a derivative time constant).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .filters import LowPass
+
+IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
+STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
+STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "brake", LOST: "contact lost",
+               CONTACT: "force control", RELEASE: "release"}
+# The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
+FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
+# The CFC pauses during contact establishment (A-C, section 5.1.2) and, departing from the thesis,
+# also in D and R: see CFCCoupling.
+CFC_PAUSED = FORCE_CONTROLLED
+
+
+@dataclass
+class HPFCParams:
+    """Parameters of the hybrid position and force control (defaults: table 5.1, IPAnema 3)."""
+
+    K_p: float = 22000.0         # N/m, proportional gain (stiffness), table 5.1; output gain is 1/K_p
+    T_i: float = 2.6             # s, integrator reset time, table 5.1
+    T_d: float = 0.03            # s, derivative time constant, table 5.1
+    T_MA: float = 2.0            # s, moving average of the CFC's wrench input, table 5.1
+    F_th: float = 25.0           # N, threshold force of contact detection, table 5.1
+    v_max: float = 0.05          # m/s, maximal approach velocity, table 5.1
+    a_max: float = 0.5           # m/s^2, acceleration of x_t in A, B, C, R (ASSUMPTION: braking from
+                                 # 50 mm/s takes 0.1 s and 2.5 mm)
+    x_max: float = 0.1           # m, saturation of x_t, also the farthest approach (ASSUMPTION)
+    T_F: float = 0.05            # s, PT1 on the contact force (ASSUMPTION: sensor noise, D part)
+    payload: float = 0.0         # kg, known payload whose weight is no contact force
+
+    def validate(self) -> None:
+        checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
+                  "F_th": self.F_th > 0.0, "v_max": self.v_max > 0.0, "a_max": self.a_max > 0.0,
+                  "x_max": self.x_max > 0.0, "T_F": self.T_F >= 0.0, "payload": self.payload >= 0.0}
+        bad = [k for k, ok in checks.items() if not (ok and np.isfinite(getattr(self, k)))]
+        if bad:
+            raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
+
+
+def _clip(value: float, bound: float) -> float:
+    """value limited to [-bound, bound] (scalar; np.clip costs microseconds per call)."""
+    return max(-bound, min(bound, float(value)))
+
+
+def task_axis(F_d0, z_previous=None) -> np.ndarray:
+    """z axis of the task frame (3,): the direction of F_d,0 (5.2). F_d,0 = 0 has no direction:
+    then z_previous (the last task z axis) is kept, or e_z when there is none."""
+    F = np.asarray(F_d0, dtype=float)
+    norm = math.sqrt(float(F @ F))
+    if norm > 0.0 and math.isfinite(norm):
+        return F / norm
+    return np.array([0.0, 0.0, 1.0]) if z_previous is None else np.asarray(z_previous, dtype=float)
+
+
+def task_frame(F_d0, z_previous=None) -> np.ndarray:
+    """R_t (3, 3) of the task frame: z axis along F_d,0 (5.2), so that R_t^T F_d,0 = [0 0 |F_d,0|].
+
+    The x axis is the base axis least parallel to z, made orthogonal (deterministic, continuous
+    while F_d,0 turns by less than that axis); z as :func:`task_axis`. The controller itself needs
+    only the z axis: F_d = z_t . F_d,0, F = z_t . F_vec, x_d,HPFC = x_t z_t.
+    """
+    z = task_axis(F_d0, z_previous)
+    e = np.eye(3)[int(np.argmin(np.abs(z)))]
+    x = e - (e @ z) * z
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def contact_force(w, mass: float, gravity) -> np.ndarray:
+    """Force vector (3,) the platform exerts on the environment: -(w_F - m g) (section 5.1.2).
+
+    w is the measured wrench (6,) of (2.11) (external wrench on the platform, gravity included),
+    mass the platform's plus a known payload's [kg], gravity (3,) [m/s^2].
+    """
+    return -(np.asarray(w, dtype=float)[:3] - mass * np.asarray(gravity, dtype=float))
+
+
+def select_position_feedback(x_d, x, z_t) -> np.ndarray:
+    """The pose feedback for position control with the task z axis force-controlled (Fig. 5.2).
+
+    Raibert and Craig's selection matrix applied to the pose error: the returned x' gives
+    x_d - x' = (I - S) (x_d - x) with S = z_t z_t^T on the translation, so an operational-space
+    position controller does not act (and does not integrate) along the force direction.
+    """
+    x_d, x = np.asarray(x_d, dtype=float), np.asarray(x, dtype=float)
+    z = np.asarray(z_t, dtype=float)
+    out = x.copy()
+    out[:3] += z * (z @ (x_d[:3] - x[:3]))
+    return out
+
+
+class MovingAverage:
+    """Mean of the last N = max(1, round(T / dt)) samples of a vector signal (running sum, ring buffer).
+
+    The first sample (or :meth:`reset`) fills the window, so the output starts without transient.
+    """
+
+    def __init__(self, T: float, dt: float):
+        if not (T >= 0.0 and dt > 0.0):
+            raise ValueError(f"need T >= 0 s and dt > 0 s, got T={T}, dt={dt}")
+        self.dt = dt
+        self.n = max(1, int(round(T / dt)))
+        self.T = T
+        self.buffer: np.ndarray | None = None
+        self.y: np.ndarray | None = None
+
+    def reset(self, value=None) -> None:
+        if value is None:
+            self.buffer = self.y = None
+            return
+        value = np.array(value, dtype=float)
+        self.buffer = np.tile(value, (self.n, 1))
+        self.index = 0
+        self.sum = value * self.n
+        self.count = 0
+        self.y = value.copy()
+
+    def update(self, u) -> np.ndarray:
+        u = np.asarray(u, dtype=float)
+        if self.buffer is None:
+            self.reset(u)
+            return self.y
+        self.sum += u - self.buffer[self.index]
+        self.buffer[self.index] = u
+        self.index = (self.index + 1) % self.n
+        self.count += 1
+        if self.count >= self.n:                 # recompute now and then: no drift of the running sum
+            self.sum = self.buffer.sum(axis=0)
+            self.count = 0
+        self.y = self.sum / self.n
+        return self.y
+
+
+@dataclass
+class HPFCState:
+    """What one period computed (the content of ``hybrid_force_controller/state``)."""
+
+    state: str                   # I, A, B, C, D, R
+    active: bool                 # output in use (enabled, or releasing after a disable)
+    z_t: np.ndarray              # (3,) task z axis (direction of F_d,0) in the base frame
+    F_d0: np.ndarray             # (3,) desired force F_d,0 [N], base frame
+    F_vec: np.ndarray            # (3,) measured contact force vector (filtered) [N], base frame
+    F_d: float                   # desired force along z_t [N] (5.2)
+    F: float                     # measured contact force along z_t [N]
+    e_F: float                   # F_d - F [N]
+    x_t: float                   # offset along z_t [m]
+    v_t: float                   # its rate [m/s]
+    integrator: float            # integral part of x_t [m]
+    saturated: bool              # |x_t| at x_max
+    x: np.ndarray                # (6,) x_d,HPFC = [R_t [0 0 x_t]; 0 0 0] [m, rad]
+
+
+class HybridForceControl:
+    """The contact state machine of Fig. 5.4 with the PID (5.3): F_d,0 and w -> x_d,HPFC."""
+
+    def __init__(self, robot, dt: float, params: HPFCParams | None = None, enabled: bool = False):
+        self.robot = robot
+        self.dt = dt
+        self.enabled = enabled
+        self.state = IDLE
+        self.z_t = np.array([0.0, 0.0, 1.0])
+        self.x_t = 0.0
+        self.v_t = 0.0
+        self.integrator = 0.0
+        self.saturated = False
+        self.F_prev: float | None = None
+        self.force_filter = LowPass(0.0, dt)
+        self.set_params(params or HPFCParams())
+
+    def set_params(self, params: HPFCParams) -> None:
+        """Apply new parameters live (the state and x_t are kept)."""
+        params.validate()
+        self.params = params
+        self.force_filter.set_time_constant(params.T_F)
+        self.mass = self.robot.platform.mass + params.payload
+
+    def _enter(self, state: str) -> None:
+        """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
+        change, up to a force error over K_p per period, is no velocity to carry on with)."""
+        if self.state == CONTACT:
+            self.v_t = 0.0
+        self.state = state
+
+    def _move(self, v_target: float) -> None:
+        """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
+        dv = self.params.a_max * self.dt
+        self.v_t += _clip(v_target - self.v_t, dv)
+        self.x_t += self.v_t * self.dt
+
+    def _release(self) -> None:
+        """Back to x_t = 0 at most at v_max, braking in time (v^2 = 2 a |x_t|), no overshoot of 0."""
+        p = self.params
+        distance = abs(self.x_t)
+        v_stop = math.sqrt(2.0 * p.a_max * distance)
+        target = -math.copysign(min(p.v_max, v_stop), self.x_t)
+        self._move(target)
+        if self.x_t * (self.x_t - self.v_t * self.dt) <= 0.0 or distance < 1e-9:  # crossed or reached 0
+            self.x_t = self.v_t = 0.0
+        if self.x_t == 0.0:
+            self.state = IDLE
+
+    def update(self, F_d0, w) -> HPFCState:
+        """One period: desired force F_d,0 (3,) [N] and measured wrench w (6,) -> HPFCState."""
+        p, dt = self.params, self.dt
+        F_d0 = np.asarray(F_d0, dtype=float)
+        w = np.asarray(w, dtype=float)
+        if F_d0.shape != (3,) or not np.all(np.isfinite(F_d0)):
+            F_d0 = np.zeros(3)                                   # no valid demand: release
+        self.z_t = task_axis(F_d0, self.z_t)
+        F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
+        if w.shape == (6,) and np.all(np.isfinite(w)):
+            F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
+        else:                                                    # keep the last estimate
+            F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
+        F = float(self.z_t @ F_vec)
+        e_F = F_d - F
+        dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
+        self.F_prev = F
+
+        wanted = self.enabled and F_d >= p.F_th
+        if not wanted:
+            if self.state not in (IDLE, RELEASE):
+                self._enter(RELEASE)
+        elif self.state in (IDLE, RELEASE):
+            self._enter(APPROACH)
+        if self.state == CONTACT and F < p.F_th:                 # Fig. 5.4: contact lost
+            self._enter(LOST)
+        if self.state in (APPROACH, LOST):
+            if F >= p.F_th:
+                self._enter(BRAKE)
+            else:
+                self._move(p.v_max)
+        if self.state == BRAKE:
+            # to standstill where the force is expected to reach F_d: (F_d - F) / K_p ahead, K_p
+            # being the effective stiffness (table 5.1), braking at a_max at the latest
+            ahead = max(0.0, F_d - F) / p.K_p
+            self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
+            if self.v_t == 0.0:                                  # standstill: closed-loop force control
+                self._enter(CONTACT)
+                # bumpless: the integral part takes over what the P part does not give (the D part
+                # of the contact transient is left out: it would stay in the integrator)
+                self.integrator = self.x_t - e_F / p.K_p
+        if self.state == CONTACT:
+            self._pid(e_F, dF)
+        elif self.state == RELEASE:
+            self._release()
+        if self.state in (APPROACH, LOST, BRAKE, RELEASE):
+            self.integrator = self.x_t                           # the position-controlled x_t
+            self.saturated = abs(self.x_t) >= p.x_max
+            if self.saturated:
+                self.x_t = _clip(self.x_t, p.x_max)
+                self.v_t = 0.0
+        x = np.zeros(6)
+        x[:3] = self.x_t * self.z_t                              # R_t [0 0 x_t]
+        return HPFCState(self.state, self.enabled or self.state != IDLE, self.z_t.copy(), F_d0.copy(),
+                         np.array(F_vec, dtype=float), F_d, F, e_F, self.x_t, self.v_t, self.integrator,
+                         self.saturated, x)
+
+    def _pid(self, e_F: float, dF: float) -> None:
+        """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
+        p, dt = self.params, self.dt
+        pd = (e_F - p.T_d * dF) / p.K_p
+        candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
+        free = pd + candidate
+        blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
+        self.integrator = _clip(self.integrator if blocked else candidate, p.x_max)
+        x_t = pd + self.integrator
+        self.saturated = abs(x_t) > p.x_max
+        x_new = _clip(x_t, p.x_max)
+        self.v_t = (x_new - self.x_t) / dt
+        self.x_t = x_new
+
+
+class CFCCoupling:
+    """Section 5.1.2's changes of the cable force control under hybrid force control.
+
+    - The CFC is paused during contact establishment (A-C): its output Δq_CFC is held and its state
+      does not change, since the abruptly changing cable forces would destabilise it (thesis).
+    - Departure: it stays paused in D and R (the release). Its set-point f_d is the distribution of the measured wrench,
+      which contains the contact force; the CFC's integral action then holds whatever contact force
+      there is against the PID (5.3). In simulation (IPAnema 3, 500 N) the contact force stalled
+      10 % below F_d with the CFC active on the thesis's moving-average set-point, and the contact
+      oscillated with a higher tension level. The cable tension in contact comes from the tension
+      level of the distribution at the pause; it suffices for following the barrel of section 5.1.3
+      at 50 N (docs/hybrid_force_control.md).
+    - When the contact has ended (I) the CFC resumes; its set-point is blended from the one held at
+      the pause to the live one through the moving average of T_MA,HPFC, the thesis's filter
+      "to slow down the control loop", so the feed-forward f_d of (3.22) does not step.
+    """
+
+    def __init__(self, T_MA: float, dt: float):
+        self.dt = dt
+        self.average = MovingAverage(T_MA, dt)
+        self.weight = 0.0                       # share of the filtered set-point, 0..1
+
+    def set_time_constant(self, T_MA: float) -> None:
+        if max(1, int(round(T_MA / self.dt))) != self.average.n:
+            last = self.average.y
+            self.average = MovingAverage(T_MA, self.dt)
+            self.average.reset(last)
+
+    def update(self, state: str, f_d) -> tuple[np.ndarray, bool]:
+        """-> (the set-point for the CFC, paused)."""
+        f_d = np.asarray(f_d, dtype=float)
+        if state in CFC_PAUSED:
+            if self.average.y is None or self.weight == 0.0:
+                self.average.reset(f_d)             # the set-point at the pause, held
+            self.weight = 1.0
+            return self.average.y.copy(), True
+        if self.weight > 0.0:
+            self.weight = max(0.0, self.weight - self.dt / max(self.average.T, self.dt))
+        if self.weight == 0.0:
+            self.average.reset(None)
+            return f_d, False
+        filtered = self.average.update(f_d)
+        return self.weight * filtered + (1.0 - self.weight) * f_d, False
+
+
+def format_state(controller: str, state: str) -> str:
+    """The ``controller`` field of the HPFC's ControllerState: ``<name>:<state>``."""
+    return f"{controller}:{state}"
+
+
+def parse_state(controller_field: str) -> str | None:
+    """The state letter of a ``<name>:<state>`` controller field, None when it carries none."""
+    _, sep, state = controller_field.rpartition(":")
+    return state if sep and state in STATES else None

@@ -1,0 +1,107 @@
+"""Node ``hybrid_force_controller``: hybrid position and force control, thesis section 5.1 (Fig. 5.3).
+
+Subscribes ``setpoint`` (cdpr_msgs/OperationalSetpoint; ``force`` = F_d,0, the force axes U V W),
+``platform/wrench`` (geometry_msgs/WrenchStamped, the measured wrench w (2.11)) and
+``platform/pose`` (the pose estimate, which paces the node with the forward kinematics); publishes
+``hybrid_force_controller/state`` (cdpr_msgs/ControllerState) every period, enabled or not, and
+``/diagnostics`` when the contact state changes. The joint command adds the state's ``output``
+(x_d,HPFC) to x_d when ``hybrid_force_controller`` is one of its ``offset_inputs``.
+
+ControllerState fields (names x y z a b c, base frame):
+
+- ``controller``: ``hybrid_force_controller:<state>``, the state of Fig. 5.4: I idle, A approach,
+  B brake, C contact lost, D force control, R release;
+- ``enabled``: the output is in use (``enabled``, or releasing after a disable);
+- ``reference``: F_d,0 [N] and 0 0 0; ``feedback``: the contact force vector F [N] and 0 0 0;
+  ``error``: their difference (e_F = F_d - F is its component along the task z axis);
+- ``output``: x_d,HPFC = [R_t [0 0 x_t]; 0 0 0] [m, rad]; ``integrator``: the same direction times
+  the integral part of x_t; ``feedforward``: the position-controlled part of x_t (A, B, C, R);
+- ``saturated``: |x_t| at ``x_max`` (all six entries alike).
+
+The computation is :class:`cdpr_control.hybrid_force_control.HybridForceControl`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from cdpr_msgs.msg import ControllerState, OperationalSetpoint
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+
+from cdpr_control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceControl,
+                                               format_state)
+from cdpr_control.ospc import AXES
+
+from .base import CdprNode, spin_node
+from .conversions import from_vector3, wrench_from_msg
+from .parameters import ParameterSet, ParamSpec
+from .qos import CONTROL
+from .sync import StampSync
+
+NAME = "hybrid_force_controller"
+_D = HPFCParams()          # the one source of the defaults (table 5.1)
+PARAMS = [
+    ParamSpec("enabled", False, "hybrid position/force control on (M103) or off (M104; releases the contact)"),
+    ParamSpec("K_p", _D.K_p, "proportional gain K_p,HPFC (effective stiffness) [N/m], output e_F / K_p (5.3), "
+              "table 5.1", range=(1.0, 1e9)),
+    ParamSpec("T_i", _D.T_i, "integrator reset time T_i,HPFC [s] (5.3), table 5.1", range=(1e-3, 1e4)),
+    ParamSpec("T_d", _D.T_d, "derivative time constant T_d,HPFC [s] (5.3), table 5.1", range=(0.0, 10.0)),
+    ParamSpec("F_th", _D.F_th, "threshold force F_th of contact detection [N], table 5.1", range=(1e-3, 1e5)),
+    ParamSpec("v_max", _D.v_max, "maximal approach velocity v_max,HPFC [m/s], table 5.1", range=(1e-5, 1.0)),
+    ParamSpec("a_max", _D.a_max, "acceleration of x_t when approaching, braking, releasing [m/s^2]",
+              range=(1e-4, 100.0)),
+    ParamSpec("x_max", _D.x_max, "saturation of x_t, farthest approach [m]", range=(1e-5, 1.0)),
+    ParamSpec("T_F", _D.T_F, "PT1 time constant on the contact force [s]", range=(0.0, 1.0)),
+    ParamSpec("payload", _D.payload, "known payload whose weight is no contact force [kg]", range=(0.0, 1e4)),
+]
+
+
+class HybridForceControllerNode(CdprNode):
+    def __init__(self, **kwargs):
+        super().__init__(NAME, **kwargs)
+        self.stage: HybridForceControl | None = None
+        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
+        self.sync = StampSync(self, {
+            "setpoint": (OperationalSetpoint, "setpoint"),
+            "wrench": (WrenchStamped, "platform/wrench"),
+            "pose": (PoseStamped, "platform/pose"),
+        }, primary="pose", callback=self._cycle, mode=self.sync_mode)
+
+    @staticmethod
+    def _hpfc_params(v: dict) -> HPFCParams:
+        # T_MA filters the CFC's input: a parameter of cable_force_controller
+        return HPFCParams(**{name: float(v[name]) for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
+
+    def _validate(self, v: dict) -> None:
+        self._hpfc_params(v).validate()
+
+    def _apply(self, v: dict) -> None:
+        if self.stage is None:
+            self.stage = HybridForceControl(self.robot, self.dt, self._hpfc_params(v), enabled=v["enabled"])
+        else:
+            self.stage.set_params(self._hpfc_params(v))
+            self.stage.enabled = v["enabled"]
+
+    def _cycle(self, msgs: dict, t_ns: int) -> None:
+        stage = self.stage
+        s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
+        zero3 = [0.0, 0.0, 0.0]
+        feedforward = np.zeros(6) if s.state in (CONTACT, IDLE) else s.x     # the position-controlled x_t
+        reference, feedback = np.r_[s.F_d0, zero3], np.r_[s.F_vec, zero3]
+        self.publisher.publish(ControllerState(
+            header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
+            reference=reference.tolist(), feedback=feedback.tolist(), error=(reference - feedback).tolist(),
+            integrator=np.r_[s.integrator * s.z_t, zero3].tolist(), feedforward=feedforward.tolist(),
+            output=s.x.tolist(), saturated=[bool(s.saturated)] * 6))
+        # published when state or saturation change (report() compares level and message)
+        level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
+        self.report(level, f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else ""),
+                    {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}, stamp_ns=t_ns)
+
+
+def main(args=None):
+    spin_node(HybridForceControllerNode, args)
+
+
+if __name__ == "__main__":
+    main()
