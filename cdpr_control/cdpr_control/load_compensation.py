@@ -252,15 +252,14 @@ class LoadCompensation:
         zh = self.z_history
         return ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
 
-    def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None, w=None) -> None:
+    def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
 
         x: the estimated pose (forward kinematics), needed for acceleration_source = estimated.
         """
         shifted = self._shifted(x_d, xdot_d, xddot_d)
         xs, xdots, xddots = shifted[:6], shifted[6:12], shifted[12:]
-        if w is None:
-            w = -np.asarray(AT) @ np.asarray(f, dtype=float)                # (2.11) at x_d
+        w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
         if self.m_hat is None:
             self.m_hat = self.m_p
         if not np.all(np.isfinite(w)):
@@ -288,7 +287,7 @@ class LoadCompensation:
         normal = self.cog_filter.mean
         return np.linalg.pinv(normal[:9].reshape(3, 3), rcond=1e-3) @ normal[9:]   # minimum norm
 
-    def update(self, x_d, xdot_d, xddot_d, f, x=None, ik_d=None, w=None) -> np.ndarray:
+    def update(self, x_d, xdot_d, xddot_d, f, x=None, ik_d=None) -> np.ndarray:
         """One period: set-point (pose, twist, acceleration), the measured forces f at the platform
         [N] and the estimated pose x -> x_d,LC (6,) [m, m, m, rad, rad, rad] as a pose offset (zero
         when disabled).
@@ -298,7 +297,7 @@ class LoadCompensation:
         x_d = np.asarray(x_d, dtype=float)
         ik = inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d
         f = np.asarray(f, dtype=float)
-        self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x, w)
+        self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x)
         self.m_c = self.m_hat - self.m_p
         self.cog = self._centre_of_gravity()
         p = self.params
@@ -345,7 +344,6 @@ class LoadCompensationStage:
         from .control_loop import OffsetOutput
 
         lc = self.compensation
-        x = lc.update(inputs.x_d, inputs.xdot_d, inputs.xddot_d, inputs.f, inputs.x, inputs.ik_d,
-                      inputs.w if lc.params.acceleration_source == "estimated" else None)
+        x = lc.update(inputs.x_d, inputs.xdot_d, inputs.xddot_d, inputs.f, inputs.x, inputs.ik_d)
         w = lc.payload_wrench(inputs.x_d, inputs.xdot_d, inputs.xddot_d) if self.feed_force_setpoint else None
         return OffsetOutput(lc.params.enabled, x, w)
