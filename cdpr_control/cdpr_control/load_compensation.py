@@ -136,7 +136,7 @@ def twist_to_pose_offset(dx, phi) -> np.ndarray:
     """A small displacement in twist coordinates (dr, dθ) as a pose offset (dr, dφ) in Kardan angles
     at the orientation φ: dθ = H(φ) dφ (kinematics.kardan_rate_matrix)."""
     dx = np.asarray(dx, dtype=float)
-    return np.r_[dx[:3], np.linalg.solve(kardan_rate_matrix(phi), dx[3:])]
+    return np.concatenate((dx[:3], np.linalg.solve(kardan_rate_matrix(phi), dx[3:])))
 
 
 def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -150,7 +150,7 @@ def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> n
     omega = xdot[3:]
     a_c = xddot[:3] + cross(xddot[3:], c) + cross(omega, cross(omega, c))
     f = mass * (np.asarray(robot.gravity, dtype=float) - a_c)
-    return np.r_[f, cross(c, f)]
+    return np.concatenate((f, cross(c, f)))
 
 
 @dataclass
@@ -234,7 +234,7 @@ class LoadCompensation:
 
     def _shifted(self, x_d, xdot_d, xddot_d) -> np.ndarray:
         """The set-point of time_shift ago (a ring buffer; it starts filled with the first one)."""
-        sample = np.r_[x_d, xdot_d, xddot_d]
+        sample = np.concatenate((x_d, xdot_d, xddot_d))
         if self.delay is None:
             self.delay = np.tile(sample, (self._delay_n + 1, 1))
         self.delay[self.delay_index] = sample
@@ -279,13 +279,16 @@ class LoadCompensation:
         RT = rotation_matrix(xs[3:]).T
         f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
         S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
-        self.cog_filter.update(np.r_[(S.T @ S).ravel(), -S.T @ tau_p])
+        self.cog_filter.update(np.concatenate(((S.T @ S).ravel(), -S.T @ tau_p)))
 
     def _centre_of_gravity(self) -> np.ndarray | None:
         if self.m_c <= self.params.cog_min_mass or self.cog_filter.mean is None:
             return None
         normal = self.cog_filter.mean
-        return np.linalg.pinv(normal[:9].reshape(3, 3), rcond=1e-3) @ normal[9:]   # minimum norm
+        # minimum-norm solution: the right-hand side has no part along the unobservable direction
+        # (the force), so a Tikhonov term far below the observable eigenvalues leaves it at zero
+        N = normal[:9].reshape(3, 3)
+        return np.linalg.solve(N + 1e-9 * np.trace(N) * np.eye(3), normal[9:])
 
     def update(self, x_d, xdot_d, xddot_d, f, x=None, ik_d=None) -> np.ndarray:
         """One period: set-point (pose, twist, acceleration), the measured forces f at the platform
@@ -316,7 +319,7 @@ class LoadCompensation:
                     self.x_target = target
             except np.linalg.LinAlgError:
                 pass                                      # singular K_x: keep the last target
-        step = self.dt * np.r_[np.full(3, p.v_max), np.full(3, p.omega_max)]
+        step = self.dt * np.repeat((p.v_max, p.omega_max), 3)
         change = self.output_filter.update(self.x_target) - self.x_lc
         self.rate_limited = np.abs(change) > step
         self.x_lc = self.x_lc + np.clip(change, -step, step)
