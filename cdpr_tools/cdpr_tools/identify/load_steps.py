@@ -12,7 +12,8 @@ stage, in one of the controller configurations of :data:`CONFIGS`:
 - ``ik_lc``: IK-only + load compensation (4.6), as in the thesis' experiment;
 - ``ospc``: OSPC on the elastic forward kinematics (3.16), cable force control off;
 - ``ospc_lc``: both;
-- ``force_control``: the thesis' force control (CFC + OSPC, Fig. 3.4), the default graph;
+- ``force_control``: the thesis' force control (CFC + OSPC, Fig. 3.4), the default graph, with the
+  identified payload in the force distribution's model wrench (``payload_input``);
 - ``force_control_lc``: force control + load compensation.
 """
 from __future__ import annotations
@@ -60,7 +61,9 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
     lc_enabled = CONFIGS[config][2]
     params = lc_params or LoadCompensationParams()
     params = LoadCompensationParams(**{**params.__dict__, "enabled": lc_enabled})
-    stage = LoadCompensationStage(robot, 1e-3, params)
+    # with cable force control the identified payload also feeds the force distribution's model
+    # wrench, as the parameter files set it (force_distribution.payload_input)
+    stage = LoadCompensationStage(robot, 1e-3, params, feed_force_setpoint=CONFIGS[config][0])
     lc = stage.compensation
     log = {"payload": [], "m_c": [], "guarded": []}
     current = [payload0]
