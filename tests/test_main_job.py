@@ -38,6 +38,8 @@ LOOP_TYPES = {                                   # one message per control perio
     "/force_distribution": "cdpr_msgs/msg/ForceDistribution",
     "/cable_force_controller/state": "cdpr_msgs/msg/ControllerState",
     "/ospc/state": "cdpr_msgs/msg/ControllerState",
+    "/load_compensation/state": "cdpr_msgs/msg/ControllerState",
+    "/load_compensation/payload": "geometry_msgs/msg/InertiaStamped",
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
     "/ground_truth/twist": "geometry_msgs/msg/TwistStamped",
     "/ground_truth/cable_forces": "cdpr_msgs/msg/CableForces",

@@ -3,7 +3,7 @@
 ; /sim/set_payload in the graph): the dwell at the start lets the load identification (4.4) settle.
 %
 N10 G21 G90 G17          (mm, absolute, XY plane)
-N20 G4 P2.0              (the payload put on, identified at home)
+N20 G4 P4.0              (the payload put on, identified at home)
 N30 G1 X2000 Y2000 Z1000 F30000   (500 mm/s to the thesis' pose)
 N40 G4 P1.5              (hold there)
 N50 G1 X0 Y0 Z500        (back home)
