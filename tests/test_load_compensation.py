@@ -150,7 +150,7 @@ def test_rate_limit_bounds_the_output_step():
 
 # --- closed loop (in process, simulator) ------------------------------------------------------
 
-def _steps(robot, config, position, step_mass, steps=1, dwell=1.5):
+def _steps(robot, config, position, step_mass, steps=1, dwell=5.0):
     from cdpr_tools.identify import load_steps
 
     run = load_steps.payload_steps(robot, config, position=position, step_mass=step_mass, steps=steps, dwell=dwell)
@@ -164,7 +164,7 @@ def test_payload_steps_at_standstill_sag_cut_by_90_percent_and_estimate_within_t
     """Section 4.1.3 (Fig. 4.6), shortened to one step on and off: IK-only sags (mm/kg reported in
     docs/load_compensation.md), IK-only + LC cuts the static sag by >= 90 %; the estimate is within
     ``tolerance`` of the payload 0.7 .. 1.0 s after the start of each step and at its end (mean over
-    the last 0.3 s): 3 % (the issue's figure) on the Mini, 5 % on the IPAnema 3, whose simulated
+    the last 0.3 s of each 5 s step): 3 % (the issue's figure) on the Mini, 5 % on the IPAnema 3, whose simulated
     platform still swings under the 32 kg (3.7-4.4 % measured)."""
     from cdpr_tools.identify.load_steps import sag_per_kg
 
@@ -174,7 +174,7 @@ def test_payload_steps_at_standstill_sag_cut_by_90_percent_and_estimate_within_t
     for a, b in zip(s_ik["steps"], s_lc["steps"]):
         if a["payload_kg"] > 0.0:
             assert abs(b["z_error_mm"] - s_lc["unloaded_z_error_mm"]) <= 0.1 * abs(a["z_error_mm"] - s_ik["unloaded_z_error_mm"])
-    n_rest, n_dwell = 500, 1500
+    n_rest, n_dwell = 500, 5000
     for j, row in enumerate(s_lc["steps"]):
         start = n_rest + j * n_dwell
         payload = row["payload_kg"]
@@ -184,7 +184,7 @@ def test_payload_steps_at_standstill_sag_cut_by_90_percent_and_estimate_within_t
     assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
 
 
-def test_disabling_live_and_guard_do_not_jump_the_command():
+def test_disabling_live_does_not_jump_the_command():
     """Disabled live under 64 kg, x_d,LC leaves through the joint command's ramp: no θ_d step."""
     from cdpr_control.load_compensation import LoadCompensationStage
     from cdpr_sim.closed_loop import hold, run

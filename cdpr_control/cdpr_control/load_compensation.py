@@ -166,8 +166,8 @@ class LoadCompensationParams:
     platform_mass: float = 0.0      # kg, the platform's own mass m_p; 0 = the robot file's
     torque: bool = False            # also compensate the payload's moment (needs the identified cog)
     cog_min_mass: float = 5.0       # kg, the payload's cog is identified (and published) above this m_c
-    T_output: float = 0.3           # s, PT1 on C_x w_c: keeps the compensation below the platform's modes
-    v_max: float = 0.1              # m/s, rate limit of the translation of x_d,LC
+    T_output: float = 1.0           # s, PT1 on C_x w_c: keeps the compensation loop below the platform modes
+    v_max: float = 0.02             # m/s, rate limit of the translation of x_d,LC
     omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
 
     def validate(self) -> None:
