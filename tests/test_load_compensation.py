@@ -206,3 +206,41 @@ def test_disabling_live_does_not_jump_the_command():
     offset = np.abs(inverse_kinematics(MINI, MINI.home + r.offsets["load_compensation"][1490]).q
                     - inverse_kinematics(MINI, MINI.home).q).max()
     assert ramp <= 1.5 * offset * 1e-3 / 0.2                # the 0.2 s ramp, no step
+
+
+MOVE = """G21 G90 G17
+G4 P4.0
+G1 X1000 Y1000 Z800 F30000
+G4 P0.5
+M30
+"""
+
+
+@pytest.fixture(scope="module")
+def move_program(tmp_path_factory):
+    """A shortened payload_moves_ipanema3: the payload put on and identified at home, one move
+    towards r = [2, 2, 1] m (to [1, 1, 0.8] m)."""
+    path = tmp_path_factory.mktemp("program") / "move.gcode"
+    path.write_text(MOVE)
+    return str(path)
+
+
+@pytest.mark.parametrize("payload", [40.0, 80.0])
+def test_estimate_while_moving_within_5_percent_with_force_control(move_program, payload):
+    """Section 4.1.3 (Fig. 4.7) with the default graph's controller: away from the acceleration
+    singularity the estimate stays within 5 % of the payload during the move."""
+    from cdpr_tools.identify import load_steps
+
+    run = load_steps.payload_program(IPANEMA3, "force_control", payload, move_program)
+    summary = load_steps.program_summary(run, payload)
+    assert summary["motion_start_s"] > 3.9
+    assert summary["max_estimate_error_percent"] <= 5.0
+
+
+def test_pose_error_while_moving_lower_with_load_compensation(move_program):
+    """IK-only with and without x_d,LC on the move with 40 kg: the compensation lowers the error."""
+    from cdpr_tools.identify import load_steps
+
+    errors = {config: load_steps.program_summary(load_steps.payload_program(IPANEMA3, config, 40.0, move_program),
+                                                 40.0)["rms_position_error_mm"] for config in ("ik", "ik_lc")}
+    assert errors["ik_lc"] < 0.5 * errors["ik"]
