@@ -76,24 +76,24 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
             sim.set_payload(mass)
             current[0] = mass
 
-    def record(k):
+    def record():
         log["payload"].append(current[0])
         log["m_c"].append(lc.m_c)
         log["guarded"].append(lc.guarded)
 
     def step_hook(k, loop, sim):
         if k > 0:
-            record(k - 1)                 # the state the loop computed in period k - 1
+            record()                      # the state the loop computed in period k - 1
         before_step(k, loop, sim)
 
     r = run(robot, setpoints, duration, loop_params(config), x0=x0, payload=payload0, before_step=step_hook,
             offset_stages={"load_compensation": stage})
-    record(len(r.t) - 1)
+    record()
     return PayloadRun(config, r.t, np.array(log["payload"]), np.array(log["m_c"]), np.array(log["guarded"]),
                       r.x_d, r.x, r.offsets["load_compensation"], r.theta_d)
 
 
-def step_schedule(step_mass: float, steps: int, dwell: float, rest: float) -> np.ndarray:
+def step_schedule(step_mass: float, steps: int) -> np.ndarray:
     """Payload [kg] per dwell interval: 0, then up in ``steps`` steps and down again to 0."""
     up = step_mass * np.arange(1, steps + 1)
     return np.r_[0.0, up, up[-2::-1], 0.0]
@@ -114,7 +114,7 @@ def payload_steps(robot="ipanema3", config: str = "ik_lc", position=(-1.0, -1.0,
 
     x = robot.home.copy()
     x[:3] = position
-    masses = step_schedule(step_mass, steps, dwell, rest)
+    masses = step_schedule(step_mass, steps)
     n_rest, n_dwell, n_ramp = (int(round(v / 1e-3)) for v in (rest, dwell, ramp))
 
     def payload_at(k):
