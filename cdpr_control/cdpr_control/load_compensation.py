@@ -43,6 +43,7 @@ from .stiffness import operational_stiffness
 STIFFNESS_MODELS = ("linear", "nonlinear")
 ACCELERATION_SOURCES = ("commanded", "estimated")
 VELOCITY_BASE = 0.01     # s, difference quotient of the estimated velocity (smooths sensor noise)
+COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period into its window
 
 
 def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
@@ -55,13 +56,15 @@ def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float
 
 class MovingAverage:
     """Mean of the last n samples (n = round(T / dt), at least 1); the first sample fills the window,
-    so the average starts there instead of rising from zero."""
+    so the average starts there instead of rising from zero. A running sum, re-summed once per
+    window against rounding drift."""
 
     def __init__(self, T: float, dt: float, size: int = 1):
         if not (T >= 0.0 and dt > 0.0):
             raise ValueError(f"need T >= 0 s and dt > 0 s, got T={T}, dt={dt}")
         self.dt, self.size = dt, size
         self.buffer: np.ndarray | None = None
+        self.sum: np.ndarray | None = None
         self.index = 0
         self.set_window(T)
 
@@ -69,26 +72,31 @@ class MovingAverage:
         """Change the window; a running average restarts filled with its current mean (no jump)."""
         if not T >= 0.0:
             raise ValueError(f"window must be >= 0 s, got {T}")
+        mean = self.mean if self.buffer is not None else None
         self.T = T
         self.n = max(int(round(T / self.dt)), 1)
-        if self.buffer is not None:
-            self.reset(self.mean)
+        if mean is not None:
+            self.reset(mean)
 
     def reset(self, value=None) -> None:
         self.buffer = None if value is None else np.tile(np.asarray(value, dtype=float), (self.n, 1))
+        self.sum = None if value is None else self.buffer.sum(axis=0)
         self.index = 0
 
     @property
     def mean(self) -> np.ndarray | None:
-        return None if self.buffer is None else self.buffer.mean(axis=0)
+        return None if self.buffer is None else self.sum / self.n
 
     def update(self, value) -> np.ndarray:
         value = np.asarray(value, dtype=float).reshape(self.size)
         if self.buffer is None:
             self.reset(value)
         else:
+            self.sum += value - self.buffer[self.index]
             self.buffer[self.index] = value
             self.index = (self.index + 1) % self.n
+            if self.index == 0:
+                self.sum = self.buffer.sum(axis=0)
         return self.mean
 
 
@@ -197,7 +205,8 @@ class LoadCompensation:
     def __init__(self, robot, dt: float, params: LoadCompensationParams | None = None):
         self.robot, self.dt = robot, dt
         self.wrench_filter = MovingAverage(0.24, dt, size=2)    # w_z and the commanded ẍ_z of (4.4)
-        self.cog_filter = MovingAverage(0.24, dt, size=12)     # normal equations of τ = c × f
+        self.cog_filter = MovingAverage(0.24, dt * COG_DECIMATION, size=12)   # normal equations of τ = c × f
+        self.samples = 0
         self.delay: np.ndarray | None = None                   # (n + 1, 18) x_d, ẋ_d, ẍ_d
         self.delay_index = 0
         self.z_history: list[float] = []                       # estimated z of the last window + h
@@ -274,6 +283,9 @@ class LoadCompensation:
         if self.guarded:
             return                                                           # hold the estimate
         self.m_hat = float(estimate)
+        self.samples += 1
+        if self.samples % COG_DECIMATION:
+            return
         # payload share of the wrench, in the platform frame: τ_p = c × f_p = -[f_p] c
         w_p = w - platform_wrench(self.robot, xs, xdots, xddots)
         RT = rotation_matrix(xs[3:]).T
