@@ -63,8 +63,15 @@ def test_last_setpoint_is_the_programmed_end_point(sampled):
     assert np.all(s.xd[-1] == 0) and np.all(s.xdd[-1] == 0)
 
 
-def test_samples_stay_in_the_mini_workspace(sampled):
-    _, _, s = sampled
+def test_samples_stay_in_the_workspace_of_their_robot(sampled):
+    """Programs named *_ipanema3 are for the IPAnema 3 (its workspace box), the others for the Mini."""
+    name, _, s = sampled
+    if name.endswith("_ipanema3.gcode"):
+        from cdpr_control.robot import load_robot
+
+        robot = load_robot("ipanema3")
+        assert np.all(s.x[:, :3] >= robot.workspace_min) and np.all(s.x[:, :3] <= robot.workspace_max)
+        return
     assert np.all(np.abs(s.x[:, 0]) <= 0.15 + 1e-12)
     assert np.all(np.abs(s.x[:, 1:3]) <= 0.1 + 1e-12)
 

@@ -42,6 +42,8 @@ LOOP_TYPES = {                                   # one message per control perio
     "/admittance_controller/setpoint": "cdpr_msgs/msg/OperationalSetpoint",
     "/admittance_controller/state": "cdpr_msgs/msg/ControllerState",
     "/hybrid_force_controller/state": "cdpr_msgs/msg/ControllerState",
+    "/load_compensation/state": "cdpr_msgs/msg/ControllerState",
+    "/load_compensation/payload": "geometry_msgs/msg/InertiaStamped",
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
     "/ground_truth/twist": "geometry_msgs/msg/TwistStamped",
     "/ground_truth/cable_forces": "cdpr_msgs/msg/CableForces",

@@ -8,6 +8,12 @@ off, is bumpless (:mod:`cdpr_control.bumpless`): the outputs are blended in and 
 ``transfer_time`` and an unused controller's integrator is held at zero. The ROS nodes wrap exactly these stage
 objects one per node; this class chains them directly, which is what the closed-loop tests, the
 benchmarks and offline studies use when the ROS transport is not the subject.
+
+Offset stages are the further offset inputs of the joint command (load compensation (4.6), ...):
+objects with ``offset(inputs: LoopInputs) -> OffsetOutput``, computed after the forward kinematics and
+summed by the same :class:`cdpr_control.offset_inputs.OffsetInputs` as in the joint command node
+(enable, ramped switching over ``transfer_time``). A stage may also hand the force set-point a model
+wrench (an identified payload), added to w_dyn of (3.26).
 """
 from __future__ import annotations
 
@@ -25,6 +31,7 @@ from .friction_compensation import FrictionCompensation, FrictionCompensationPar
 from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
                                    select_position_feedback)
 from .joint_command import JointCommand
+from .offset_inputs import OffsetInputs, OffsetSample
 from .ospc import OperationalSpacePositionController, OSPCParams
 from .safety import SafetyConfig, SafetyMonitor
 from .stability import check_force_control, planned_home_forces
@@ -47,6 +54,30 @@ class ControlLoopParams:
 
 
 @dataclass
+class LoopInputs:
+    """What an offset stage sees in a period (the content of the topics it would subscribe)."""
+
+    t: float
+    x_d: np.ndarray          # set-point pose, twist, acceleration
+    xdot_d: np.ndarray
+    xddot_d: np.ndarray
+    theta: np.ndarray        # encoder cable lengths
+    f: np.ndarray            # cable forces at the platform (friction-compensated)
+    x: np.ndarray            # pose estimate (forward kinematics)
+    w: np.ndarray            # measured wrench
+    ik_d: object             # inverse_kinematics(robot, x_d)
+
+
+@dataclass
+class OffsetOutput:
+    """An offset stage's output for a period (its ControllerState.enabled and .output)."""
+
+    active: bool
+    x: np.ndarray                        # offset [m, m, m, rad, rad, rad]
+    w_model: np.ndarray | None = None    # wrench added to the force set-point's model wrench w_dyn
+
+
+@dataclass
 class LoopState:
     """What one period computed (the content of the nodes' topics)."""
 
@@ -61,10 +92,11 @@ class LoopState:
     faults: list             # safety faults
     fk_converged: bool
     hpfc: object = None      # HPFCState of the hybrid position/force control, None without it
+    offsets: dict = field(default_factory=dict)   # per offset stage, its output x (6,)
 
 
 class ControlLoop:
-    def __init__(self, robot, dt: float, params: ControlLoopParams | None = None):
+    def __init__(self, robot, dt: float, params: ControlLoopParams | None = None, offset_stages: dict | None = None):
         p = params or ControlLoopParams()
         self.robot, self.dt, self.params = robot, dt, p
         self.friction = FrictionCompensation(robot, dt, p.friction)
@@ -89,6 +121,8 @@ class ControlLoop:
         self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
         self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
         self.dq_cfc = np.zeros(robot.m)
+        self.offset_stages = dict(offset_stages or {})
+        self.offsets = OffsetInputs(self.offset_stages, dt, p.transfer_time)
         self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
 
     def set_home_calibration(self, f_home) -> None:
@@ -117,7 +151,10 @@ class ControlLoop:
         ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)
-        dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT)
+        inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w, ik_d)
+        outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
+        w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
+        dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT, w_model=sum(w_models) if w_models else None)
         p = self.params
         force_control = p.mode == "force_control"
         for blend in (self.blend_cfc, self.blend_ospc, self.blend_hpfc):
@@ -144,8 +181,14 @@ class ControlLoop:
         offsets = [x_ospc] if hpfc is None else [x_ospc, s_hpfc * hpfc.x]
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
                                     fk_converged=self.estimator.result.converged)
+        self.offsets.ramp_time = p.transfer_time
+        samples = {name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()} if force_control else {}
+        offset, offset_faults = self.offsets.update(t, samples)               # ik_only: ramped out
+        offsets.append(offset)
+        faults += offset_faults
         hold = any(fault.holds for fault in faults)
         theta_d = self.command.update(x_d, offsets, dq_cfc, hold=hold)       # s = 0: IK only (2.3.2)
         self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
-                               self.estimator.result.converged, hpfc)
+                               self.estimator.result.converged, hpfc,
+                               {name: out.x for name, out in outputs.items()})
         return self.state

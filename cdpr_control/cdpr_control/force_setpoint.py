@@ -113,14 +113,18 @@ class ForceSetpoint:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
 
-    def update(self, x_d, xdot_d, xddot_d, w, AT=None) -> DistributionResult:
+    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None) -> DistributionResult:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
 
-        AT: the structure matrix at x_d when the caller has it (else computed here).
+        AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
+        known wrench beyond the platform's own (an identified payload, load_compensation) added to
+        w_dyn, so that it is not part of the saturated disturbance of (3.24).
         """
         if self.f_ref_override is None:
             self._ramp_level()
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
+        if w_model is not None:
+            w_dyn = w_dyn + w_model
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and np.all(np.isfinite(w)):

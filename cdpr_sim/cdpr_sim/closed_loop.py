@@ -30,8 +30,10 @@ class ClosedLoopRun:
     x_est: np.ndarray      # (N, 6) forward kinematics estimate
     f: np.ndarray          # (N, m) true cable forces at the platform
     f_d: np.ndarray        # (N, m) force set-points
+    theta_d: np.ndarray    # (N, m) drive command
     status: np.ndarray     # (N,) force distribution status
     faults: list           # per period, the safety faults
+    offsets: dict          # per offset stage, (N, 6) its output
     w_contact: np.ndarray | None = None   # (N, 6) true contact wrench on the platform (0 without obstacles)
     hpfc: list | None = None              # per period, the HPFCState (with hybrid force control)
 
@@ -56,7 +58,8 @@ def program(interpolator: Interpolator) -> Callable[[float], tuple]:
 
 def run(robot, setpoints: Callable[[float], tuple], duration: float, params: ControlLoopParams | None = None,
         x0=None, tension_level: float = 0.0, payload: float = 0.0, payload_com=(0.0, 0.0, 0.0),
-        config: SimConfig = SimConfig(), before_step: Callable | None = None) -> ClosedLoopRun:
+        config: SimConfig = SimConfig(), before_step: Callable | None = None,
+        offset_stages: dict | None = None) -> ClosedLoopRun:
     """Simulate ``duration`` seconds: the platform starts at rest at x0 (default home) under the QP
     forces of ``tension_level`` with the encoders calibrated at home (section 2.3.2); a payload is
     attached at t = 0 (the controller does not know it); the loop gets the home calibration's
@@ -66,15 +69,19 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     robot is the plant of ``config`` (by default one that differs from the robot file).
     ``setpoints(t)`` returns (x_d, xdot_d, xddot_d), optionally followed by the desired force F_d,0
     (3,) and a list of parameter commands; a set-point source with a ``bind(loop)`` method (one that
-    closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first."""
+    closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first;
+    ``offset_stages`` are further offset inputs of the joint command (see
+    :class:`cdpr_control.control_loop.ControlLoop`)."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True, config=config)
-    loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params)
+    loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params,
+                       offset_stages)
     if hasattr(setpoints, "bind"):
         setpoints.bind(loop)
     n = int(round(duration / config.period))
-    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "status", "w_contact")}
+    rows = {k: [] for k in ("t", "x_d", "x", "x_est", "f", "f_d", "theta_d", "status", "w_contact")}
     faults, hpfc = [], []
+    offsets = {name: [] for name in loop.offset_stages}
     with Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset) as sim:
         loop.set_home_calibration(calibration_forces(sim, tension_level))     # Δq_0 of the encoders' set-up
         if payload:
@@ -90,11 +97,15 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
                               rest[0] if rest else None)
             out = sim.step(state.theta_d)
             for key, value in (("t", out.t), ("x_d", x_d), ("x", out.x), ("x_est", state.x), ("f", out.f),
-                               ("f_d", state.f_d), ("status", state.status), ("w_contact", out.w_contact)):
+                               ("f_d", state.f_d), ("theta_d", state.theta_d), ("status", state.status),
+                               ("w_contact", out.w_contact)):
                 rows[key].append(value)
             faults.append(state.faults)
             hpfc.append(state.hpfc)
+            for name, value in state.offsets.items():
+                offsets[name].append(value)
     return ClosedLoopRun(**{k: np.array(v) for k, v in rows.items()}, faults=faults,
+                         offsets={name: np.array(v).reshape(-1, 6) for name, v in offsets.items()},
                          hpfc=hpfc if loop.hpfc is not None else None)
 
 

@@ -6,6 +6,8 @@
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
+    cdpr identify load-steps OUTDIR [--robot NAME] [--configs ik,ik_lc,...] [--step-mass KG] [--steps N]
+    cdpr identify load-program OUTDIR [--robot NAME] [--payloads 40,80] [--program NAME]
 """
 from __future__ import annotations
 
@@ -62,6 +64,28 @@ def add_parser(sub) -> None:
     r.add_argument("--robot", default="ipanema3_mini")
     r.add_argument("--seed", type=int, default=1)
     r.set_defaults(run=run_record)
+
+    ls = what.add_parser("load-steps", help="online load identification and compensation (4.4)-(4.6): payload "
+                         "steps at standstill in the simulator (section 4.1.3, Fig. 4.6)")
+    ls.add_argument("outdir", help="directory for load_compensation_steps.png and .json")
+    ls.add_argument("--robot", default="ipanema3")
+    ls.add_argument("--configs", default="ik,ik_lc,ospc,force_control,force_control_lc",
+                    help="controller configurations (cdpr_tools.identify.load_steps.CONFIGS), comma-separated")
+    ls.add_argument("--position", nargs=3, type=float, default=(-1.0, -1.0, 0.5), metavar=("X", "Y", "Z"),
+                    help="platform position [m] (default: the thesis' -1 -1 0.5)")
+    ls.add_argument("--step-mass", type=float, default=8.0, help="payload step [kg] (default 8)")
+    ls.add_argument("--steps", type=int, default=16, help="steps up, then the same down (default 16)")
+    ls.add_argument("--dwell", type=float, default=1.5, help="time per step [s] (default 1.5)")
+    ls.set_defaults(run=run_load_steps)
+
+    lp = what.add_parser("load-program", help="a program run with payloads, with and without load "
+                         "compensation (section 4.1.3, Fig. 4.7)")
+    lp.add_argument("outdir", help="directory for load_compensation_program.png and .json")
+    lp.add_argument("--robot", default="ipanema3")
+    lp.add_argument("--payloads", default="40,80", help="payloads [kg], comma-separated (default 40,80)")
+    lp.add_argument("--program", default="payload_moves_ipanema3", help="shipped program or .gcode file")
+    lp.add_argument("--configs", default="ik,ik_lc", help="controller configurations, comma-separated")
+    lp.set_defaults(run=run_load_program)
 
 
 def run_friction(args) -> int:
@@ -158,6 +182,37 @@ def run_record(args) -> int:
     from cdpr_tools.identify.experiments import record_experiments
 
     record_experiments(args.outdir, args.robot, args.seed, progress=lambda line: print(line, flush=True))
+    return 0
+
+
+def run_load_steps(args) -> int:
+    from cdpr_tools.identify.load_steps import CONFIGS, run_experiment
+
+    configs = [c for c in args.configs.split(",") if c]
+    unknown = set(configs) - set(CONFIGS)
+    if unknown:
+        raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
+    summary = run_experiment(args.outdir, args.robot, configs, position=tuple(args.position),
+                             step_mass=args.step_mass, steps=args.steps, dwell=args.dwell,
+                             progress=lambda line: print(line, flush=True))
+    for name, s in summary.items():
+        print(f"{name:18s} sag {s['sag_mm_per_kg']:6.3f} mm/kg  worst static z error {s['max_abs_z_error_mm']:6.1f} mm")
+    return 0
+
+
+def run_load_program(args) -> int:
+    from cdpr_tools.identify.load_steps import CONFIGS, run_program_experiment
+
+    configs = [c for c in args.configs.split(",") if c]
+    unknown = set(configs) - set(CONFIGS)
+    if unknown:
+        raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
+    payloads = [float(m) for m in args.payloads.split(",") if m]
+    summary = run_program_experiment(args.outdir, args.robot, configs, payloads, args.program,
+                                     progress=lambda line: print(line, flush=True))
+    for key, s in summary.items():
+        print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
+              f"estimate error {s['max_estimate_error_percent']:5.1f} %")
     return 0
 
 

@@ -10,6 +10,11 @@ w_d = w_dyn with ``wrench_source = model`` (3.1). The tension level 0..1 sets
 f_ref = f_min + level (f_max - f_min) (3.27), ramped at ``tension_rate``: 0 is the minimal
 tension (QP), 0.5 the medium one (= ACF). The computation is
 :class:`cdpr_control.force_setpoint.ForceSetpoint`.
+
+With ``payload_input`` (read-only) it also subscribes ``load_compensation/payload``
+(geometry_msgs/InertiaStamped) and adds the identified payload's wrench (a point mass at its cog,
+:func:`cdpr_control.load_compensation.payload_wrench`) to the model wrench w_dyn, so that a heavy
+payload is not clipped by the disturbance saturation and enters f_d also with ``wrench_source: model``.
 """
 from __future__ import annotations
 
@@ -17,11 +22,12 @@ import numpy as np
 from cdpr_msgs.msg import ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import InertiaStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
+from cdpr_control.load_compensation import payload_wrench
 
 from .base import CdprNode, spin_node
 from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg, wrench_to_msg
@@ -54,12 +60,17 @@ class ForceDistributionNode(CdprNode):
         ]
         self.stage: ForceSetpoint | None = None
         self.params = ParameterSet(self, specs, self._validate, self._apply)
+        payload = ParamSpec("payload_input", False, "add the payload identified by load_compensation "
+                            "(load_compensation/payload) to the model wrench w_dyn", read_only=True)
+        self.declare_parameter(payload.name, payload.default, payload.descriptor())
+        self.payload_input = bool(self.get_parameter(payload.name).value)
         self.publisher = self.create_publisher(ForceDistribution, "force_distribution", CONTROL)
         self.create_service(SetTensionLevel, "force_distribution/set_tension_level", self._on_set_tension_level)
-        self.sync = StampSync(self, {
-            "setpoint": (OperationalSetpoint, "setpoint"),
-            "wrench": (WrenchStamped, "platform/wrench"),
-        }, primary="wrench", callback=self._cycle, mode=self.sync_mode)
+        inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
+        if self.payload_input:
+            inputs["payload"] = (InertiaStamped, "load_compensation/payload")
+        self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
+                              optional=("payload",) if self.payload_input else ())
 
     @staticmethod
     def _stage_params(v: dict) -> ForceSetpointParams:
@@ -96,8 +107,12 @@ class ForceDistributionNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         sp = msgs["setpoint"]
-        res = self.stage.update(pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration),
-                                wrench_from_msg(msgs["wrench"].wrench))
+        x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+        w_model = None
+        if "payload" in msgs:
+            p = msgs["payload"].inertia
+            w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (p.com.x, p.com.y, p.com.z))
+        res = self.stage.update(x_d, xdot_d, xddot_d, wrench_from_msg(msgs["wrench"].wrench), w_model=w_model)
         self.publisher.publish(ForceDistribution(
             header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),
             f_max=res.f_max.tolist(), w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),

@@ -1,0 +1,364 @@
+"""Online load identification and load compensation, thesis section 4.1.2 (Fig. 4.5).
+
+Identification: the measured wrench w = -A^T(x_d) f (2.11), with A^T at the desired pose (the
+thesis assumes a small pose error), and the commanded acceleration, shifted by the time the
+platform needs to follow it, give the platform mass of the vertical force equilibrium
+
+    m̂_p = -w_z / (ẍ_d,z - g)                                         (4.4)
+
+(g = the z component of the gravity vector, -9.81 m/s²), averaged over a moving window (240 ms in
+the thesis). Where ẍ_d,z - g comes near zero (the platform falling at nearly 1 g) (4.4) divides
+noise by nothing: the estimate then holds its last value.
+
+Compensation: the payload m_c = m̂_p - m_p (m_p the platform's own mass) is compensated by the
+wrench w_c = [0 0 -m_c g 0 0 0] (= [0 0 m_c |g| 0 0 0], the negative of its weight). The compliance
+C_x = K_x^-1 (4.5) of the operational stiffness (2.22) at x_d and the measured forces, in the sign
+convention of :mod:`cdpr_control.stiffness` (an external wrench dw displaces the platform by
+C_x dw), turns it into the offset that lifts the set-point by the sag the elastic cables allow:
+
+    x_d,LC = C_x w_c                                                  (4.6)
+
+(4.6) is a linearisation at the current pose and forces; K_l in K_x is the linear (2.15) or the
+tangent of the non-linear (2.16)-(2.17) cable model. x_d,LC is slew-rate limited so that a load
+step does not step the command.
+
+Optionally the centre of gravity of the payload follows from the torque part: the payload's
+share of the measured wrench, [f_p; τ_p] = w - w_platform (the model wrench of the empty platform
+(2.33)), satisfies τ_p = c × f_p; the least-squares c over the window (in the platform frame) is
+observable only across f_p (at standstill: c_x, c_y; c_z needs horizontal accelerations), the
+minimum-norm solution leaves the unobservable part at zero.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import cable
+from .dynamics import platform_wrench
+from .filters import LowPass
+from .kinematics import cross, inverse_kinematics, kardan_rate_matrix, rotation_matrix
+from .stiffness import operational_stiffness
+
+STIFFNESS_MODELS = ("linear", "nonlinear")
+ACCELERATION_SOURCES = ("commanded", "estimated")
+VELOCITY_BASE = 0.01     # s, difference quotient of the estimated velocity (smooths sensor noise)
+COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period into its window
+
+
+def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
+    """m̂_p = -w_z / (ẍ_d,z - g) (4.4) [kg]; None where |ẍ_d,z - g| < guard [m/s²] (held)."""
+    denominator = xddot_z - g_z
+    if not abs(denominator) >= guard or not np.isfinite(w_z):
+        return None
+    return -w_z / denominator
+
+
+class MovingAverage:
+    """Mean of the last n samples (n = round(T / dt), at least 1); the first sample fills the window,
+    so the average starts there instead of rising from zero. A running sum, re-summed once per
+    window against rounding drift."""
+
+    def __init__(self, T: float, dt: float, size: int = 1):
+        if not (T >= 0.0 and dt > 0.0):
+            raise ValueError(f"need T >= 0 s and dt > 0 s, got T={T}, dt={dt}")
+        self.dt, self.size = dt, size
+        self.buffer: np.ndarray | None = None
+        self.sum: np.ndarray | None = None
+        self.index = 0
+        self.set_window(T)
+
+    def set_window(self, T: float) -> None:
+        """Change the window; a running average restarts filled with its current mean (no jump)."""
+        if not T >= 0.0:
+            raise ValueError(f"window must be >= 0 s, got {T}")
+        mean = self.mean if self.buffer is not None else None
+        self.T = T
+        self.n = max(int(round(T / self.dt)), 1)
+        if mean is not None:
+            self.reset(mean)
+
+    def reset(self, value=None) -> None:
+        self.buffer = None if value is None else np.tile(np.asarray(value, dtype=float), (self.n, 1))
+        self.sum = None if value is None else self.buffer.sum(axis=0)
+        self.index = 0
+
+    @property
+    def mean(self) -> np.ndarray | None:
+        return None if self.buffer is None else self.sum / self.n
+
+    def update(self, value) -> np.ndarray:
+        value = np.asarray(value, dtype=float).reshape(self.size)
+        if self.buffer is None:
+            self.reset(value)
+        else:
+            self.sum += value - self.buffer[self.index]
+            self.buffer[self.index] = value
+            self.index = (self.index + 1) % self.n
+            if self.index == 0:
+                self.sum = self.buffer.sum(axis=0)
+        return self.mean
+
+
+def cable_stiffness_model(robot, ik, f, model: str) -> np.ndarray:
+    """K_l (m,) [N/m] of (2.20) at the free lengths l_t = q + l_0 (2.14) of the IK ``ik``:
+
+    linear: k_spec / l_t (2.15) with the nominal k_spec (the thesis' model in 4.1.3);
+    nonlinear: df/dΔq of the progressive cable (2.16)-(2.17) at the forces f.
+    """
+    l_t = cable.total_free_length(robot, ik.q)
+    if model == "linear":
+        return robot.cable.k_spec_nominal / l_t
+    if model == "nonlinear":
+        return cable.tangent_stiffness(robot, f, l_t)
+    raise ValueError(f"stiffness model must be one of {STIFFNESS_MODELS}, got {model!r}")
+
+
+def compliance(ik, f, k_l) -> np.ndarray:
+    """C_x = K_x^-1 (4.5) of K_x = K_g + K_c (2.22) (stiffness.operational_stiffness) [(6, 6)].
+
+    Twist coordinates (dr, dθ about the base axes), as K_x. Raises numpy.linalg.LinAlgError where
+    K_x is singular (a slack configuration).
+    """
+    return np.linalg.inv(operational_stiffness(ik, f, k_l))
+
+
+def load_offset(C_x, m_c: float, gravity, cog=None, R=None) -> np.ndarray:
+    """x_d,LC = C_x w_c (4.6) [m, m, m, rad, rad, rad] (twist coordinates) for a payload m_c [kg].
+
+    w_c is the wrench that compensates the payload's weight m_c g (gravity (3,) the base-frame
+    vector, so w_c = [0 0 m_c |g| 0 0 0] = -m_c [g; 0] as in the thesis); with ``cog`` (3,) the
+    payload's centre of gravity in the platform frame and R the platform orientation, also its
+    moment -(R c) × m_c g. C_x w_c is the displacement the cables would allow under w_c: the
+    platform sinks by it under the payload, so the set-point is raised by it.
+    """
+    weight = m_c * np.asarray(gravity, dtype=float)
+    w_c = np.zeros(6)
+    w_c[:3] = -weight
+    if cog is not None:
+        w_c[3:] = -cross(np.asarray(R, dtype=float) @ np.asarray(cog, dtype=float), weight)
+    return np.asarray(C_x) @ w_c
+
+
+def twist_to_pose_offset(dx, phi) -> np.ndarray:
+    """A small displacement in twist coordinates (dr, dθ) as a pose offset (dr, dφ) in Kardan angles
+    at the orientation φ: dθ = H(φ) dφ (kinematics.kardan_rate_matrix)."""
+    dx = np.asarray(dx, dtype=float)
+    return np.concatenate((dx[:3], np.linalg.solve(kardan_rate_matrix(phi), dx[3:])))
+
+
+def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Wrench (6,) of a point-mass payload [kg] at ``cog`` (platform frame) on the moving platform,
+    about the platform origin in the base frame: what it adds to the w of (2.10), (2.33):
+
+        f = m (g - a_c),  τ = (R c) × f,  a_c = a + ω̇ × R c + ω × (ω × R c) .
+    """
+    x, xdot, xddot = (np.asarray(v, dtype=float) for v in (x, xdot, xddot))
+    c = rotation_matrix(x[3:]) @ np.asarray(cog, dtype=float)
+    omega = xdot[3:]
+    a_c = xddot[:3] + cross(xddot[3:], c) + cross(omega, cross(omega, c))
+    f = mass * (np.asarray(robot.gravity, dtype=float) - a_c)
+    return np.concatenate((f, cross(c, f)))
+
+
+@dataclass
+class LoadCompensationParams:
+    """Parameters of :class:`LoadCompensation` (the node's defaults are these)."""
+
+    enabled: bool = True            # x_d,LC out (the identification runs regardless)
+    T_filter: float = 0.24          # s, moving-average window of the mass estimate (section 4.1.2)
+    time_shift: float = 0.01        # s, the commanded acceleration is delayed by this before (4.4) (T_d,w of (3.25))
+    accel_guard: float = 2.0        # m/s², |ẍ_z - g| below this holds the estimate (4.4)
+    acceleration_source: str = "commanded"   # ẍ_z of (4.4): commanded (time-shifted, thesis) or estimated (FK pose)
+    stiffness_model: str = "nonlinear"   # K_l in K_x (2.22): linear (2.15) or nonlinear (2.16)-(2.17)
+    platform_mass: float = 0.0      # kg, the platform's own mass m_p; 0 = the robot file's
+    torque: bool = False            # also compensate the payload's moment (needs the identified cog)
+    cog_min_mass: float = 5.0       # kg, the payload's cog is identified (and published) above this m_c
+    T_output: float = 1.0           # s, PT1 on C_x w_c: keeps the compensation loop below the platform modes
+    v_max: float = 0.02             # m/s, rate limit of the translation of x_d,LC
+    omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
+
+    def validate(self) -> None:
+        if self.acceleration_source not in ACCELERATION_SOURCES:
+            raise ValueError(f"acceleration_source must be one of {ACCELERATION_SOURCES}, "
+                             f"got {self.acceleration_source!r}")
+        if self.stiffness_model not in STIFFNESS_MODELS:
+            raise ValueError(f"stiffness_model must be one of {STIFFNESS_MODELS}, got {self.stiffness_model!r}")
+        for name in ("T_filter", "time_shift", "accel_guard", "platform_mass", "cog_min_mass", "T_output", "v_max",
+                     "omega_max"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if self.accel_guard <= 0.0:
+            raise ValueError("accel_guard must be > 0 m/s² (else (4.4) may divide by zero)")
+
+
+class LoadCompensation:
+    """Load identification (4.4) and compensation (4.5)-(4.6), one control period per update.
+
+    State after update: ``m_hat`` (filtered total platform mass [kg]), ``m_c`` (payload [kg]),
+    ``guarded`` (the estimate held: (4.4) near its singularity or invalid input), ``cog``
+    (the payload's centre of gravity in the platform frame [m], None until m_c > cog_min_mass),
+    ``x_target`` (C_x w_c before the rate limit, as a pose offset) and ``x_lc`` (the output).
+    """
+
+    def __init__(self, robot, dt: float, params: LoadCompensationParams | None = None):
+        self.robot, self.dt = robot, dt
+        self.wrench_filter = MovingAverage(0.24, dt, size=2)    # w_z and the commanded ẍ_z of (4.4)
+        self.cog_filter = MovingAverage(0.24, dt * COG_DECIMATION, size=12)   # normal equations of τ = c × f
+        self.samples = 0
+        self.delay: np.ndarray | None = None                   # (n + 1, 18) x_d, ẋ_d, ẍ_d
+        self.delay_index = 0
+        self.z_history: list[float] = []                       # estimated z of the last window + h
+        self.m_hat: float | None = None
+        self.m_c = 0.0
+        self.guarded = True
+        self.cog: np.ndarray | None = None
+        self.x_target = np.zeros(6)
+        self.output_filter = LowPass(0.3, dt)
+        self.output_filter.reset(np.zeros(6))
+        self.x_lc = np.zeros(6)
+        self.rate_limited = np.zeros(6, dtype=bool)
+        self.set_params(params or LoadCompensationParams())
+
+    def set_params(self, p: LoadCompensationParams) -> None:
+        p.validate()
+        self.params = p
+        self.wrench_filter.set_window(p.T_filter)
+        self.cog_filter.set_window(p.T_filter)
+        self.output_filter.set_time_constant(p.T_output)
+        n = int(round(p.time_shift / self.dt))
+        if self.delay is None or len(self.delay) != n + 1:
+            last = None if self.delay is None else self.delay[(self.delay_index - 1) % len(self.delay)]
+            self.delay = None if last is None else np.tile(last, (n + 1, 1))
+            self.delay_index = 0
+            self._delay_n = n
+        if not p.enabled:
+            self.x_lc = np.zeros(6)          # re-enabling starts from zero
+            self.output_filter.reset(np.zeros(6))
+
+    @property
+    def m_p(self) -> float:
+        return self.params.platform_mass or self.robot.platform.mass
+
+    def _shifted(self, x_d, xdot_d, xddot_d) -> np.ndarray:
+        """The set-point of time_shift ago (a ring buffer; it starts filled with the first one)."""
+        sample = np.concatenate((x_d, xdot_d, xddot_d))
+        if self.delay is None:
+            self.delay = np.tile(sample, (self._delay_n + 1, 1))
+        self.delay[self.delay_index] = sample
+        self.delay_index = (self.delay_index + 1) % len(self.delay)
+        return self.delay[self.delay_index]                   # written _delay_n periods ago
+
+    def _estimated_acceleration(self, z: float) -> float | None:
+        """Mean vertical acceleration of the estimated pose over the window, (v(t) - v(t - T)) / T
+        with v a difference quotient over VELOCITY_BASE; None until the history is long enough."""
+        n, h = self.wrench_filter.n, max(int(round(VELOCITY_BASE / self.dt)), 1)
+        self.z_history.append(z)
+        del self.z_history[:-(n + h + 1)]
+        if len(self.z_history) < n + h + 1:
+            return None
+        zh = self.z_history
+        return ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
+
+    def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
+        """One sample of (4.4) and of the cog's normal equations into the moving averages.
+
+        x: the estimated pose (forward kinematics), needed for acceleration_source = estimated.
+        """
+        shifted = self._shifted(x_d, xdot_d, xddot_d)
+        xs, xdots, xddots = shifted[:6], shifted[6:12], shifted[12:]
+        w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
+        if self.m_hat is None:
+            self.m_hat = self.m_p
+        if not np.all(np.isfinite(w)):
+            self.guarded = True
+            return                                                           # hold the estimate
+        w_z, a = self.wrench_filter.update([w[2], xddots[2]])               # means over the window
+        if self.params.acceleration_source == "estimated" and x is not None and np.isfinite(x[2]):
+            a_est = self._estimated_acceleration(float(x[2]))
+            a = a if a_est is None else a_est          # commanded until the history spans a window
+        estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
+        self.guarded = estimate is None
+        if self.guarded:
+            return                                                           # hold the estimate
+        self.m_hat = float(estimate)
+        self.samples += 1
+        if self.samples % COG_DECIMATION:
+            return
+        # payload share of the wrench, in the platform frame: τ_p = c × f_p = -[f_p] c
+        w_p = w - platform_wrench(self.robot, xs, xdots, xddots)
+        RT = rotation_matrix(xs[3:]).T
+        f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
+        S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
+        self.cog_filter.update(np.concatenate(((S.T @ S).ravel(), -S.T @ tau_p)))
+
+    def _centre_of_gravity(self) -> np.ndarray | None:
+        if self.m_c <= self.params.cog_min_mass or self.cog_filter.mean is None:
+            return None
+        normal = self.cog_filter.mean
+        # minimum-norm solution: the right-hand side has no part along the unobservable direction
+        # (the force), so a Tikhonov term far below the observable eigenvalues leaves it at zero
+        N = normal[:9].reshape(3, 3)
+        return np.linalg.solve(N + 1e-9 * np.trace(N) * np.eye(3), normal[9:])
+
+    def update(self, x_d, xdot_d, xddot_d, f, x=None, ik_d=None) -> np.ndarray:
+        """One period: set-point (pose, twist, acceleration), the measured forces f at the platform
+        [N] and the estimated pose x -> x_d,LC (6,) [m, m, m, rad, rad, rad] as a pose offset (zero
+        when disabled).
+
+        ik_d: inverse_kinematics(robot, x_d) when the caller has it.
+        """
+        x_d = np.asarray(x_d, dtype=float)
+        ik = inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d
+        f = np.asarray(f, dtype=float)
+        self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x)
+        self.m_c = self.m_hat - self.m_p
+        self.cog = self._centre_of_gravity()
+        p = self.params
+        if not p.enabled:
+            self.x_lc = np.zeros(6)
+            self.output_filter.reset(np.zeros(6))
+            self.rate_limited[:] = False
+            return self.x_lc.copy()
+        if np.all(np.isfinite(f)):
+            try:
+                C_x = compliance(ik, f, cable_stiffness_model(self.robot, ik, f, p.stiffness_model))   # (4.5)
+                cog = self.cog if p.torque else None
+                dx = load_offset(C_x, self.m_c, self.robot.gravity, cog, rotation_matrix(x_d[3:]))    # (4.6)
+                target = twist_to_pose_offset(dx, x_d[3:])
+                if np.all(np.isfinite(target)):
+                    self.x_target = target
+            except np.linalg.LinAlgError:
+                pass                                      # singular K_x: keep the last target
+        step = self.dt * np.repeat((p.v_max, p.omega_max), 3)
+        change = self.output_filter.update(self.x_target) - self.x_lc
+        self.rate_limited = np.abs(change) > step
+        self.x_lc = self.x_lc + np.clip(change, -step, step)
+        return self.x_lc.copy()
+
+    def payload_wrench(self, x_d, xdot_d, xddot_d) -> np.ndarray:
+        """The wrench of the identified payload (point mass m_c at its cog, or at the platform origin
+        while the cog is not identified) for the force distribution's model wrench (2.33)."""
+        cog = np.zeros(3) if self.cog is None else self.cog
+        return payload_wrench(self.robot, x_d, xdot_d, xddot_d, self.m_c, cog)
+
+
+class LoadCompensationStage:
+    """:class:`LoadCompensation` as an offset stage of :class:`cdpr_control.control_loop.ControlLoop`
+    (what the ``load_compensation`` node and the joint command do over topics). With
+    ``feed_force_setpoint`` the identified payload's wrench joins the force set-point's model wrench
+    (the force_distribution node's ``payload_input``)."""
+
+    def __init__(self, robot, dt: float, params: LoadCompensationParams | None = None,
+                 feed_force_setpoint: bool = False):
+        self.compensation = LoadCompensation(robot, dt, params)
+        self.feed_force_setpoint = feed_force_setpoint
+
+    def offset(self, inputs):
+        from .control_loop import OffsetOutput
+
+        lc = self.compensation
+        x = lc.update(inputs.x_d, inputs.xdot_d, inputs.xddot_d, inputs.f, inputs.x, inputs.ik_d)
+        w = lc.payload_wrench(inputs.x_d, inputs.xdot_d, inputs.xddot_d) if self.feed_force_setpoint else None
+        return OffsetOutput(lc.params.enabled, x, w)

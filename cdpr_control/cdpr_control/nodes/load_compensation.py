@@ -1,0 +1,118 @@
+"""Node ``load_compensation``: online load identification (4.4) and load compensation (4.5)-(4.6), Fig. 4.5.
+
+Subscribes ``setpoint`` (x_d, ẋ_d, ẍ_d), ``cable_forces`` (f at the platform) and ``platform/pose``
+(the forward kinematics' x, used with ``acceleration_source: estimated``). Publishes every period,
+enabled or not:
+
+- ``load_compensation/state`` (cdpr_msgs/ControllerState): ``output`` = x_d,LC [m, m, m, rad, rad,
+  rad], an offset input of the joint command (docs/control.md); ``feedforward`` = C_x w_c before
+  the output filter and rate limit; ``reference`` = x_d; ``saturated`` = rate limit active per axis;
+  ``enabled`` = the ``enabled`` parameter (disabled: output zero, the joint command ramps it out).
+- ``load_compensation/payload`` (geometry_msgs/InertiaStamped, frame ``platform``): ``m`` = the
+  estimated payload m_c = m̂_p - m_p [kg]; ``com`` = its centre of gravity in the platform frame
+  [m] once m_c exceeds ``cog_min_mass`` (before: zero, the platform origin); the inertia entries
+  are zero (not identified). The force distribution takes it into its model wrench with its
+  ``payload_input`` parameter.
+
+The computation is :class:`cdpr_control.load_compensation.LoadCompensation`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from cdpr_msgs.msg import CableForces, ControllerState, OperationalSetpoint
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import Inertia, InertiaStamped, PoseStamped, Vector3
+
+from cdpr_control.load_compensation import (ACCELERATION_SOURCES, STIFFNESS_MODELS, LoadCompensation,
+                                            LoadCompensationParams)
+from cdpr_control.ospc import AXES
+
+from .base import CdprNode, spin_node
+from .conversions import accel_from_msg, pose_from_msg, twist_from_msg
+from .parameters import ParameterSet, ParamSpec
+from .qos import CONTROL
+from .sync import StampSync
+
+D = LoadCompensationParams        # the defaults are the library's (one source)
+PARAMS = [
+    ParamSpec("enabled", D.enabled, "add x_d,LC to the set-point (the identification runs regardless)"),
+    ParamSpec("T_filter", D.T_filter, "moving-average window of the mass estimate (4.4) [s] (thesis: 0.24 s)",
+              range=(0.0, 10.0)),
+    ParamSpec("time_shift", D.time_shift, "delay of the commanded acceleration in (4.4) [s]", range=(0.0, 0.5)),
+    ParamSpec("accel_guard", D.accel_guard, "|ẍ_z - g| below this holds the estimate [m/s^2]", range=(1e-3, 9.81)),
+    ParamSpec("acceleration_source", D.acceleration_source, "ẍ_z of (4.4): commanded (time-shifted ẍ_d, thesis) "
+              "or estimated (from the forward kinematics' pose)", choices=ACCELERATION_SOURCES),
+    ParamSpec("stiffness_model", D.stiffness_model, "K_l in K_x (2.22): linear k_spec/l_t (2.15) or the tangent of "
+              "the non-linear cable (2.16)-(2.17)", choices=STIFFNESS_MODELS),
+    ParamSpec("platform_mass", D.platform_mass, "the platform's own mass m_p [kg]; 0 = the robot file's",
+              range=(0.0, 1e4)),
+    ParamSpec("torque", D.torque, "also compensate the moment of the payload at its identified cog"),
+    ParamSpec("cog_min_mass", D.cog_min_mass, "payload above which its centre of gravity is identified [kg]",
+              range=(0.0, 1e4)),
+    ParamSpec("T_output", D.T_output, "PT1 time constant on C_x w_c [s]", range=(0.0, 10.0)),
+    ParamSpec("v_max", D.v_max, "rate limit of the translation of x_d,LC [m/s]", range=(0.0, 10.0)),
+    ParamSpec("omega_max", D.omega_max, "rate limit of the rotation of x_d,LC [rad/s]", range=(0.0, 10.0)),
+]
+
+
+class LoadCompensationNode(CdprNode):
+    def __init__(self, **kwargs):
+        super().__init__("load_compensation", **kwargs)
+        self.stage: LoadCompensation | None = None
+        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.state_pub = self.create_publisher(ControllerState, "load_compensation/state", CONTROL)
+        self.payload_pub = self.create_publisher(InertiaStamped, "load_compensation/payload", CONTROL)
+        self.sync = StampSync(self, {
+            "setpoint": (OperationalSetpoint, "setpoint"),
+            "f": (CableForces, "cable_forces"),
+            "pose": (PoseStamped, "platform/pose"),
+        }, primary="f", callback=self._cycle, mode=self.sync_mode)
+
+    @staticmethod
+    def _stage_params(v: dict) -> LoadCompensationParams:
+        return LoadCompensationParams(**{spec.name: v[spec.name] for spec in PARAMS})
+
+    def _validate(self, v: dict) -> None:
+        self._stage_params(v).validate()
+
+    def _apply(self, v: dict) -> None:
+        if self.stage is None:
+            self.stage = LoadCompensation(self.robot, self.dt, self._stage_params(v))
+        else:
+            self.stage.set_params(self._stage_params(v))
+
+    def _cycle(self, msgs: dict, t_ns: int) -> None:
+        sp = msgs["setpoint"]
+        x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+        f = np.asarray(msgs["f"].f, dtype=float)
+        x = pose_from_msg(msgs["pose"].pose) if "pose" in msgs else None
+        header = self.header(t_ns)
+        lc = self.stage
+        valid = f.shape == (self.robot.m,) and np.all(np.isfinite(np.r_[x_d, xdot_d, xddot_d]))
+        if valid:
+            x_lc = lc.update(x_d, xdot_d, xddot_d, f, x)
+        else:
+            x_lc = lc.x_lc.copy() if lc.params.enabled else np.zeros(6)     # hold: never NaN
+        enabled = lc.params.enabled
+        self.state_pub.publish(ControllerState(
+            header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
+            reference=x_d.tolist(), feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
+            saturated=[bool(s) for s in lc.rate_limited]))
+        com = Vector3() if lc.cog is None else Vector3(x=float(lc.cog[0]), y=float(lc.cog[1]), z=float(lc.cog[2]))
+        self.payload_pub.publish(InertiaStamped(header=self.header(t_ns, "platform"),
+                                                inertia=Inertia(m=float(lc.m_c), com=com)))
+        if not valid:
+            self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite): holding", stamp_ns=t_ns)
+        elif lc.guarded:
+            self.report(DiagnosticStatus.WARN, "estimate held (acceleration near g or invalid wrench)", stamp_ns=t_ns)
+        else:
+            self.report(DiagnosticStatus.OK, "ok" if enabled else "identifying (compensation disabled)",
+                        stamp_ns=t_ns)
+
+
+def main(args=None):
+    spin_node(LoadCompensationNode, args)
+
+
+if __name__ == "__main__":
+    main()
