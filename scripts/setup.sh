@@ -49,6 +49,9 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 PY="$VENV/bin/python"
 mkdir -p "$ROOT/build"
+# `colcon build` in this tree must not take the ROS 2 packages inside .venv or the build of
+# cdpr_msgs below for packages of the workspace
+touch "$VENV/COLCON_IGNORE" "$ROOT/build/COLCON_IGNORE"
 PIP=("$PY" -m pip --disable-pip-version-check -q)
 
 h=$(hash_of requirements.txt constraints.txt)
@@ -74,7 +77,7 @@ if ! fresh msgs "$h"; then
   stamp msgs "$h"
 fi
 
-h=$(hash_of cdpr_control/pyproject.toml cdpr_sim/pyproject.toml cdpr_tools/pyproject.toml)
+h=$(hash_of cdpr_control/pyproject.toml cdpr_sim/pyproject.toml cdpr_tools/pyproject.toml cdpr_*/setup.py cdpr_*/setup.cfg)
 if ! fresh project "$h"; then
   say "installing cdpr_control, cdpr_sim, cdpr_tools (editable)"
   "${PIP[@]}" install --no-deps --no-build-isolation --config-settings editable_mode=compat \

@@ -49,7 +49,7 @@ def test_cli_reports_the_bag(lift_bag, tmp_path, capsys):
 
 def test_cli_trajectory_at_three_tension_levels(tmp_path):
     out = tmp_path / "trip.json"
-    assert cdpr(["analyze", "energy", "--trajectory", "reference_trip", "--start", "0", "-1.2", "0.5",
+    assert cdpr(["analyze", "energy", "--trajectory", "reference_trip_ipanema3", "--start", "0", "-1.2", "0.5",
                  "--payload", "100", "--json", str(out)]) == 0
     r = json.loads(out.read_text())
     assert r["minimal"]["E_el_Wh"] < r["medium"]["E_el_Wh"] < r["maximal"]["E_el_Wh"]

@@ -1,6 +1,9 @@
 """Hybrid position and force control, thesis section 5.1: task frame (5.2), contact force, the
 state machine of Fig. 5.4 with the PID (5.3), the moving average, the CFC coupling, and contact
-runs against the simulator's surfaces (in-process closed loop, nominal plant = robot file)."""
+runs against the simulator's surfaces (in-process closed loop, nominal plant = robot file: the 2 %
+criteria of section 5.1.3 are about the control law with a calibrated force sensor; the mismatched
+plant's sensor gain and offset errors alone move the true contact force by about 2 % on the Mini,
+docs/hybrid_force_control.md)."""
 import itertools
 
 import numpy as np
@@ -183,7 +186,7 @@ def _floor_run(robot, hpfc, F_d, gap, duration, before_step=None, stiffness=1e6,
     force = force or (lambda t: np.array([0.0, 0.0, -F_d]))
     source = lambda t: (robot.home, np.zeros(6), np.zeros(6), force(t))   # noqa: E731
     return run(robot, source, duration, ControlLoopParams(hpfc=hpfc, hpfc_enabled=True),
-               config=SimConfig(obstacles=(floor,)), before_step=before_step)
+               config=SimConfig(plant="nominal", obstacles=(floor,)), before_step=before_step)
 
 
 def contact_figures(r, F_d, dt=1e-3):
@@ -212,7 +215,7 @@ def floor_program_run(duration=None):
     radius, centre = default_tool(np.asarray(robot.b))
     floor = Plane.floor(robot.home[2] + centre[2] - radius - 0.01, ContactMaterial(stiffness=1e6, damping=1e4))
     return run(robot, program(interp), duration or interp.duration, ControlLoopParams(hpfc=IPANEMA3_HPFC),
-               config=SimConfig(obstacles=(floor,)))
+               config=SimConfig(plant="nominal", obstacles=(floor,)))
 
 
 def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release():
@@ -295,7 +298,7 @@ def cylinder_program_run(stiffness=1e6, friction=0.3):
     interp = Interpolator(parse_gcode(programs.read("cylinder_contact_force"), start_pose=robot.home), dt=1e-3)
     barrel = Cylinder((0.0, 0.0, -0.28), (1.0, 0.0, 0.0), 0.2 - tool, 0.9,
                       ContactMaterial(stiffness, 0.01 * stiffness, friction))
-    config = SimConfig(obstacles=(barrel,), platform_shape=PlatformShape("sphere", tool, (0.0, 0.0, 0.0)))
+    config = SimConfig(plant="nominal", obstacles=(barrel,), platform_shape=PlatformShape("sphere", tool, (0.0, 0.0, 0.0)))
     # f_min of the distribution as params/ipanema3.yaml plans it
     params = ControlLoopParams(force=ForceSetpointParams(f_min=np.full(robot.m, 150.0)), hpfc=IPANEMA3_HPFC)
     r = run(robot, program(interp), interp.duration + 0.5, params, config=config)

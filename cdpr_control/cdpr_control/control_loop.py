@@ -110,14 +110,16 @@ class ControlLoop:
         self.command = JointCommand(robot, dt)
         force_control = p.mode == "force_control"
         if force_control:
-            reason = check_force_control(robot, robot.home, planned_home_forces(robot, p.force), p.ospc_enabled)
+            # (3.1.3) concerns the cable force control without OSPC; neither on is position control
+            reason = check_force_control(robot, robot.home, planned_home_forces(robot, p.force),
+                                         p.ospc_enabled or not p.cfc_enabled)
             if reason:
                 raise ValueError(reason)
         self.blend_cfc = Blend(p.transfer_time, dt, force_control and p.cfc_enabled)
         self.blend_ospc = Blend(p.transfer_time, dt, force_control and p.ospc_enabled)
         self.blend_hpfc = Blend(p.transfer_time, dt, force_control)
         self.refusal: str | None = None          # why a live switch-off of the OSPC is not honoured
-        self._checked = (force_control, p.ospc_enabled)
+        self._checked = (force_control, p.ospc_enabled, p.cfc_enabled)
         self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
         self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
         self.dq_cfc = np.zeros(robot.m)
@@ -160,10 +162,10 @@ class ControlLoop:
         for blend in (self.blend_cfc, self.blend_ospc, self.blend_hpfc):
             blend.set_transfer_time(p.transfer_time)
         s_cfc = self.blend_cfc.update(force_control and p.cfc_enabled)
-        if (force_control, p.ospc_enabled) != self._checked:    # a live change: check (3.1.3) once
-            self._checked = (force_control, p.ospc_enabled)
+        if (force_control, p.ospc_enabled, p.cfc_enabled) != self._checked:   # a live change: check (3.1.3) once
+            self._checked = (force_control, p.ospc_enabled, p.cfc_enabled)
             self.refusal = check_force_control(robot, robot.home, planned_home_forces(robot, p.force),
-                                               p.ospc_enabled) if force_control else None
+                                               p.ospc_enabled or not p.cfc_enabled) if force_control else None
         s_ospc = self.blend_ospc.update(force_control and (p.ospc_enabled or self.refusal is not None))
         s_hpfc = self.blend_hpfc.update(force_control)
         hpfc = None if self.hpfc is None else self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w)

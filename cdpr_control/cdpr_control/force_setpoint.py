@@ -117,21 +117,19 @@ class ForceSetpoint:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
 
         AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
-        known wrench beyond the platform's own (an identified payload, load_compensation) added to
-        w_dyn, so that it is not part of the saturated disturbance of (3.24).
+        known wrench beyond the platform's own (an identified payload, load_compensation): it is not
+        part of the saturated disturbance of (3.24), and the model-only set-point (3.1) includes it.
         """
         if self.f_ref_override is None:
             self._ramp_level()
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
-        if w_model is not None:
-            w_dyn = w_dyn + w_model
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and np.all(np.isfinite(w)):
             self.w_d = self.smith.update(w, w_dyn, self.w_dist_max,             # (3.26), disturbance
-                                         self.wrench_filter.update)            # filtered, saturated
+                                         self.wrench_filter.update, w_model)   # filtered, saturated
         else:
-            self.w_d = w_dyn                                                  # (3.1)
+            self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
         if AT is None:
             AT = kernels.inverse_kinematics(self.robot, x_d).AT
         return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)

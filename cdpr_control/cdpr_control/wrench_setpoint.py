@@ -45,10 +45,13 @@ class WrenchSetpoint:
         self._buffer[:] = fill
         self._last = fill.copy()
 
-    def update(self, w, w_dyn, w_dist_max=None, dist_filter=None) -> np.ndarray:
+    def update(self, w, w_dyn, w_dist_max=None, dist_filter=None, w_known=None) -> np.ndarray:
         """One period: measured wrench w and model wrench w_dyn -> w_d (3.26), optionally with
         the disturbance w - w_dyn(t - T_d,w) filtered (``dist_filter``, a callable such as
-        LowPass.update) and then saturated to ±w_dist_max (6,)."""
+        LowPass.update) and then saturated to ±w_dist_max (6,) about ``w_known``, a part of the
+        disturbance that is known (an identified payload): it does not count against the limit,
+        and it changes nothing else (adding it to w_dyn instead would count it twice while the
+        filter catches up, a positive feedback through the payload estimate)."""
         w_dyn = np.asarray(w_dyn, dtype=float)
         self._buffer[self._index] = w_dyn
         self._index = (self._index + 1) % (self.delay + 1)
@@ -58,5 +61,6 @@ class WrenchSetpoint:
         if dist_filter is not None:
             w_dist = dist_filter(w_dist)
         if w_dist_max is not None:
-            w_dist = np.clip(w_dist, -w_dist_max, w_dist_max)
+            known = 0.0 if w_known is None else np.asarray(w_known, dtype=float)
+            w_dist = known + np.clip(w_dist - known, -w_dist_max, w_dist_max)
         return w_dyn + w_dist

@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     p.add_argument("--robot", default=None, help="robot name or YAML (default: ipanema3 for --trajectory, "
                    "ipanema3_mini for a bag)")
     p.add_argument("--sensor", action="store_true", help="forces from F_s via friction compensation, not ground truth")
-    p.add_argument("--trajectory", metavar="PROGRAM", help="G-code program: shipped name (e.g. reference_trip) or file")
+    p.add_argument("--trajectory", metavar="PROGRAM", help="G-code program: shipped name (e.g. reference_trip_ipanema3) or file")
     p.add_argument("--start", type=float, nargs="+", metavar="X", help="start pose x y z [a b c] (default: robot home)")
     p.add_argument("--payload", type=float, default=0.0, help="payload on the platform [kg] (trajectory)")
     p.add_argument("--v-max", type=float, default=1.5, help="path velocity limit [m/s] (default 1.5, Fig. 4.34)")

@@ -17,7 +17,7 @@ angles of the swivelling pulleys:
 The reference trip of Fig. 4.34 (:data:`REFERENCE_TRIP`): 100 kg lifted by 1.0 m, moved 2.4 m and
 lowered by 1.0 m at 1.5 m/s, 5 m/s^2, 20 m/s^3, QP at minimal forces; the thesis reports 4.12 Wh
 and a peak of about 8 kW (section 4.4.3). The thesis does not give the start point; the program
-(programs/reference_trip.gcode) moves relatively from where it starts.
+(programs/reference_trip_ipanema3.gcode) moves relatively from where it starts.
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ class TripSpec:
 
 # Fig. 4.34: start point and direction ASSUMPTION (the thesis shows them only in a picture): the
 # lift starts at the height of the workspace centre, the 2.4 m move along y is centred on it.
-REFERENCE_TRIP = TripSpec("reference_trip", (0.0, -1.2, 0.5, 0.0, 0.0, 0.0), 100.0, 1.5, 5.0, 20.0)
+REFERENCE_TRIP = TripSpec("reference_trip_ipanema3", (0.0, -1.2, 0.5, 0.0, 0.0, 0.0), 100.0, 1.5, 5.0, 20.0)
 THESIS_REFERENCE_TRIP = {"energy_Wh": 4.12, "peak_power_W": 8000.0}     # section 4.4.3
 
 

@@ -7,11 +7,10 @@ from :mod:`cdpr_control.scene`. Inputs: ``platform/pose`` (the estimate of the f
 remap to ``ground_truth/pose`` to see the simulator's), ``cable_forces``, ``setpoint``,
 ``platform/wrench``.
 
-The 1 kHz loop pays nothing for the view: the inputs are *sampled*, not subscribed with callbacks.
-Their subscriptions (keep-last 1) belong to a hidden helper node that no executor spins, and a
-timer at ``rate`` [Hz] (steady clock, so also in a lockstep simulation running slower than real
-time) takes the newest message of each and publishes one MarkerArray (frame and anchors once a
-second). The loop's publishers only hand each message to one more reader; the figure is in
+The inputs are only kept (the newest of each, keep-last 1): composed with the loop they arrive as
+in-process objects, about a microsecond a message; a timer at ``rate`` [Hz] (steady clock, so also
+in a lockstep simulation running slower than real time) draws them into one MarkerArray (frame and
+anchors included every time, so a viewer that joins late has them). The figure is in
 docs/visualization.md (benchmarks/bench_visualization.py).
 
 tf2_msgs is not among the ROS 2 wheels on PyPI, so there is no ``/tf``: every marker is in ``base``
@@ -24,7 +23,6 @@ from builtin_interfaces.msg import Duration
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -52,34 +50,22 @@ class VisualizationNode(CdprNode):
         super().__init__("visualization", **kwargs)
         self.params = ParameterSet(self, PARAMS, lambda v: None, self._apply)
         self.marker_pub = self.create_publisher(MarkerArray, "visualization/markers", CONTROL)
-        # the hidden sampler: same context, remappings and namespace, never spun (its own name
-        # first: the first matching __node rule wins over the launcher's)
-        name = f"_{self.get_name()}_sampler"
-        self._sampler = Node(name, context=self.context, namespace=self.get_namespace(),
-                             cli_args=["--ros-args", "-r", f"__node:={name}", *(kwargs.get("cli_args") or [])],
-                             start_parameter_services=False, enable_rosout=False)
-        self._subs = {key: self._sampler.create_subscription(cls, topic, _unused, SAMPLED)
-                      for key, (cls, topic) in INPUTS.items()}
         self.latest: dict = {}
+        for key, (cls, topic) in INPUTS.items():
+            self.create_subscription(cls, topic, self._keep(key), SAMPLED)
         rate = self.get_parameter("rate").value
-        self.static_every = max(1, round(rate))  # frame and anchors once a second: they do not move
-        self.ticks = 0
         self.markers = Markers()
         self.create_timer(1.0 / rate, self.publish_markers, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _apply(self, v: dict) -> None:
         self.force_scale = float(v["force_scale"]) or None
 
-    def sample(self) -> None:
-        """Take the newest message of each input, if one came since the last tick."""
-        for key, sub in self._subs.items():
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is not None:
-                self.latest[key] = taken[0]
+    def _keep(self, key: str):
+        def keep(msg) -> None:
+            self.latest[key] = msg
+        return keep
 
     def publish_markers(self) -> None:
-        self.sample()
         pose = self.latest.get("pose")
         if pose is None:
             return
@@ -90,16 +76,7 @@ class VisualizationNode(CdprNode):
                         w=None if wrench is None else wrench_from_msg(wrench.wrench), force_scale=self.force_scale)
         if not np.all(np.isfinite(view.cables)):
             return  # a pose outside the model (cable inside a pulley): nothing sensible to draw
-        self.marker_pub.publish(self.markers.build(view, pose.header.stamp, static=self.ticks % self.static_every == 0))
-        self.ticks += 1
-
-    def destroy_node(self):
-        self._sampler.destroy_node()
-        return super().destroy_node()
-
-
-def _unused(msg) -> None:  # the sampler's subscriptions are read with take_message, never called back
-    raise AssertionError("the visualization sampler is never spun")
+        self.marker_pub.publish(self.markers.build(view, pose.header.stamp))
 
 
 def _points(array) -> list[Point]:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_control.control_loop import ControlLoopParams
+from cdpr_control.controller_params import control_loop_params
 from cdpr_control.load_compensation import LoadCompensationParams, LoadCompensationStage
 from cdpr_control.robot import load_robot
 
@@ -51,14 +52,17 @@ class PayloadRun:
     theta_d: np.ndarray      # (N, m) drive command
 
 
-def loop_params(config: str) -> ControlLoopParams:
+def loop_params(config: str, robot="ipanema3_mini") -> ControlLoopParams:
+    """The robot's parameter file (as the node graph runs it) with the configuration's controllers."""
     cfc, ospc, _, _ = CONFIGS[config]
-    return ControlLoopParams(mode="force_control", cfc_enabled=cfc, ospc_enabled=ospc)
+    return control_loop_params(robot, mode="force_control", cfc_enabled=cfc, ospc_enabled=ospc)
 
 
-def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, payload0=0.0):
-    """Closed loop with the load compensation stage; payload_at(k) -> mass to set before step k or None."""
+def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, payload0=0.0, plant="mismatched"):
+    """Closed loop with the load compensation stage; payload_at(k) -> mass to set before step k or None;
+    ``plant``: the simulator's (cdpr_sim.plant: mismatched by default, or nominal)."""
     from cdpr_sim.closed_loop import run
+    from cdpr_sim.simulator import SimConfig
 
     lc_enabled = CONFIGS[config][2]
     params = lc_params or LoadCompensationParams()
@@ -86,8 +90,8 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
             record()                      # the state the loop computed in period k - 1
         before_step(k, loop, sim)
 
-    r = run(robot, setpoints, duration, loop_params(config), x0=x0, payload=payload0, before_step=step_hook,
-            offset_stages={"load_compensation": stage})
+    r = run(robot, setpoints, duration, loop_params(config, robot), x0=x0, payload=payload0, before_step=step_hook,
+            offset_stages={"load_compensation": stage}, config=SimConfig(plant=plant))
     record()
     return PayloadRun(config, r.t, np.array(log["payload"]), np.array(log["m_c"]), np.array(log["guarded"]),
                       r.x_d, r.x, r.offsets["load_compensation"], r.theta_d)
@@ -101,7 +105,7 @@ def step_schedule(step_mass: float, steps: int) -> np.ndarray:
 
 def payload_steps(robot="ipanema3", config: str = "ik_lc", position=(-1.0, -1.0, 0.5), step_mass: float = 8.0,
                   steps: int = 16, dwell: float = 1.5, rest: float = 0.5, ramp: float = 0.3,
-                  lc_params: LoadCompensationParams | None = None) -> PayloadRun:
+                  lc_params: LoadCompensationParams | None = None, plant: str = "mismatched") -> PayloadRun:
     """Payload steps at standstill (section 4.1.3, Fig. 4.6): ``rest`` s unloaded, then a step of
     ``step_mass`` every ``dwell`` s up to steps * step_mass and back to zero.
 
@@ -126,7 +130,7 @@ def payload_steps(robot="ipanema3", config: str = "ik_lc", position=(-1.0, -1.0,
         return float(masses[j - 1] + s * (masses[j] - masses[j - 1]))
 
     duration = rest + dwell * (len(masses) - 1)
-    return _run(robot, hold(x), duration, config, x, payload_at, lc_params)
+    return _run(robot, hold(x), duration, config, x, payload_at, lc_params, plant=plant)
 
 
 def step_summary(run: PayloadRun, dwell: float, rest: float, window: float = 0.3, settle: float = 1.0) -> dict:
@@ -160,7 +164,7 @@ def sag_per_kg(summary: dict) -> float:
 
 def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40.0,
                     program: str = "payload_moves_ipanema3", lc_params: LoadCompensationParams | None = None,
-                    tail: float = 0.5, ramp: float = 0.3) -> PayloadRun:
+                    tail: float = 0.5, ramp: float = 0.3, plant: str = "mismatched") -> PayloadRun:
     """A program run with ``payload`` kg put on the platform (cosine over ``ramp`` s) at its start
     (Fig. 4.7); ``program`` a shipped program name or a .gcode file."""
     from cdpr_control import programs
@@ -176,7 +180,8 @@ def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40
     def payload_at(k):
         return payload * (1.0 if k >= n_ramp else 0.5 * (1.0 - np.cos(np.pi * (k + 1) / n_ramp)))
 
-    return _run(robot, program_source(interp), interp.duration + tail, config, robot.home, payload_at, lc_params)
+    return _run(robot, program_source(interp), interp.duration + tail, config, robot.home, payload_at, lc_params,
+                plant=plant)
 
 
 def plot_steps(runs: dict, path, title: str = "") -> Path:
