@@ -1,12 +1,13 @@
 """Node ``load_compensation`` on typed topics: lockstep periods publish the state (x_d,LC) and the
 payload (geometry_msgs/InertiaStamped) every period, enabled or not; a live disable zeroes the output;
-a rejected parameter keeps the old value; the force distribution takes the payload into w_dyn."""
+a rejected parameter keeps the old value; the force distribution takes the payload as the known part of its disturbance."""
 import time
 
 import numpy as np
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
+from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
+rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
 from geometry_msgs.msg import InertiaStamped, PoseStamped, WrenchStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402

@@ -34,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import cable
+from . import cable, kernels
 from .dynamics import platform_wrench
 from .filters import LowPass
-from .kinematics import cross, inverse_kinematics, kardan_rate_matrix, rotation_matrix
+from .kinematics import cross, kardan_rate_matrix, rotation_matrix
 from .stiffness import operational_stiffness
 
 STIFFNESS_MODELS = ("linear", "nonlinear")
@@ -310,7 +310,7 @@ class LoadCompensation:
         ik_d: inverse_kinematics(robot, x_d) when the caller has it.
         """
         x_d = np.asarray(x_d, dtype=float)
-        ik = inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d
+        ik = kernels.inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d   # compiled: every period
         f = np.asarray(f, dtype=float)
         self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x)
         self.m_c = self.m_hat - self.m_p
