@@ -213,3 +213,22 @@ def test_clock_reaches_every_sim_time_node_in_one_delivery(spaces):
         publisher.publish(msg)
         assert registry.deliveries == before + 1
         assert [n.get_clock().now().nanoseconds for n in nodes] == [sec * 10**9 + 250_000_000] * 3
+
+
+def test_has_subscribers_sees_local_and_outside_subscriptions(spaces):
+    """has_subscribers (nodes skip building messages nobody takes, e.g. the simulator's ground truth):
+    false alone, true with a subscription in the process, true with one only over DDS."""
+    from cdpr_control.nodes.intraprocess import has_subscribers
+    graph, outside = spaces(), spaces()
+    node = graph.node("ipc_wanted")
+    publisher = node.create_publisher(Int64, "/ipc_wanted/n", CONTROL)
+    assert not has_subscribers(publisher)
+    subscription = node.create_subscription(Int64, "/ipc_wanted/n", lambda msg: None, CONTROL)
+    assert has_subscribers(publisher)
+    node.destroy_subscription(subscription)
+    wait_for(lambda: publisher.get_subscription_count() == 0, "the local subscription to go")
+    assert not has_subscribers(publisher)
+    outside.node("ipc_wanted_outside", cls=Node).create_subscription(Int64, "/ipc_wanted/n", lambda msg: None, CONTROL)
+    wait_for(lambda: has_subscribers(publisher), "the outside subscription to be seen")
+    plain = outside.node("ipc_plain", cls=Node).create_publisher(Int64, "/ipc_plain/n", CONTROL)
+    assert not has_subscribers(plain)   # a plain rclpy publisher: its DDS count

@@ -209,7 +209,6 @@ class AdmittanceOutput:
 
     zone: int                # index of the zone (0 = first); -1 while inactive
     w_user: np.ndarray       # w_Adm of (5.9) as used [N, N m]
-    w_raw: np.ndarray        # w - w_g + w_dyn before tare, filter and dead band
     limited: np.ndarray      # (6,) bool: a velocity, acceleration or hard-box limit acted
 
 
@@ -266,11 +265,11 @@ class AdmittanceController:
         """One period, or ``periods`` with the wrench held (free-running, when measurements of
         some periods were skipped: the virtual system keeps real time)."""
         x_d = np.asarray(x_d, dtype=float)
-        raw = self.user.raw(w, x_d, xdot_d, xddot_d)
         if not self.active:
             self.system.reset(x_d)
-            return AdmittanceOutput(False, x_d.copy(), np.zeros(6), np.zeros(6), -1, np.zeros(6), raw,
+            return AdmittanceOutput(False, x_d.copy(), np.zeros(6), np.zeros(6), -1, np.zeros(6),
                                     np.zeros(6, dtype=bool))
+        raw = self.user.raw(w, x_d, xdot_d, xddot_d)
         if self._reset_pending:                            # switch-on: no jump, no start-up force
             self._reset_pending = False
             self.system.reset(x_d)
@@ -283,7 +282,7 @@ class AdmittanceController:
                 w_user = self.user.update(raw)
                 self.system.step(w_user)
         s = self.system
-        return AdmittanceOutput(True, s.x.copy(), s.v.copy(), s.a.copy(), s.zone, w_user, raw, s.limited.copy())
+        return AdmittanceOutput(True, s.x.copy(), s.v.copy(), s.a.copy(), s.zone, w_user, s.limited.copy())
 
     def _brake(self) -> None:
         s = self.system

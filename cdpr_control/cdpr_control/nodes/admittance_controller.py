@@ -64,6 +64,8 @@ _DESCRIPTIONS = {
 PARAMS = [ParamSpec("hand_guiding", False, "hand guiding on: this node is the set-point source")] + [
     ParamSpec(name, _D[name], *_DESCRIPTIONS[name][:1], range=_DESCRIPTIONS[name][1]) for name in _D]
 _BUSY = (ProgramStatus.RUNNING, ProgramStatus.STOPPING, ProgramStatus.PAUSED)
+_ZEROS = [0.0] * 6
+_ZERO_TWIST, _ZERO_ACCEL = twist_to_msg(_ZEROS), accel_to_msg(_ZEROS)  # shared: messages are never modified
 MAX_CATCH_UP = 50      # periods one free-running cycle may integrate (a longer gap is a stall, not a skip)
 
 
@@ -110,6 +112,9 @@ class AdmittanceControllerNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         sp = msgs["setpoint"]
+        if not self.controller.active:
+            self._idle(sp, t_ns)
+            return
         w = wrench_from_msg(msgs["wrench"].wrench)
         x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
         if not all(np.all(np.isfinite(v)) for v in (w, x_d, xdot_d, xddot_d)):
@@ -141,8 +146,19 @@ class AdmittanceControllerNode(CdprNode):
             level = DiagnosticStatus.WARN if out.limited.any() else DiagnosticStatus.OK
             self.report(level, f"hand guiding, {state}" + (" (limited)" if out.limited.any() else ""),
                         stamp_ns=t_ns)
-        elif np.all(np.isfinite(w)):
-            self.report(DiagnosticStatus.OK, "idle", stamp_ns=t_ns)
+
+    def _idle(self, sp: OperationalSetpoint, t_ns: int) -> None:
+        """Not guiding: the set-point passes through at rest (what the controller returns then), without
+        the controller's work (this node runs every period of every graph, mostly idle)."""
+        header = self.header(t_ns, sp.header.frame_id or "base")
+        self.setpoint_pub.publish(OperationalSetpoint(
+            header=header, pose=sp.pose, velocity=_ZERO_TWIST, acceleration=_ZERO_ACCEL, force=sp.force, line=0))
+        x_0, x_d = self.controller.zones.x_0, pose_from_msg(sp.pose)
+        self.state_pub.publish(ControllerState(
+            header=header, controller="admittance_controller", enabled=False, names=list(AXES),
+            reference=x_0.tolist(), feedback=_ZEROS, error=(x_d - x_0).tolist(),
+            feedforward=_ZEROS, output=x_d.tolist(), saturated=[False] * 6))
+        self.report(DiagnosticStatus.OK, "idle", stamp_ns=t_ns)
 
 
 def main(args=None):

@@ -17,6 +17,8 @@ import math
 import numpy as np
 from geometry_msgs.msg import Accel, Point, Pose, Quaternion, Twist, Vector3, Wrench
 
+from . import message_init  # noqa: F401  (the message classes' fast constructors, installed on import)
+
 
 def bare(cls):
     """A message instance without any field set (each must be set, through its ``_name`` slot)."""

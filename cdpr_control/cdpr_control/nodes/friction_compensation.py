@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from cdpr_control.friction_compensation import FrictionCompensation, FrictionCompensationParams
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control import kernels
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
@@ -87,7 +87,7 @@ class FrictionCompensationNode(CdprNode):
             _, theta, thetadot = self.command
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
-        beta = inverse_kinematics(self.robot, pose_from_msg(msgs["setpoint"].pose)).beta
+        beta = kernels.inverse_kinematics(self.robot, pose_from_msg(msgs["setpoint"].pose)).beta
         f = self.stage.update(F_s, theta, thetadot, beta)
         self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.robot.cable.f_min.tolist(),
                                            f_max=self.robot.cable.f_max.tolist()))

@@ -50,6 +50,11 @@ from rclpy.time import Time
 from rclpy.time_source import TimeSource
 
 BUDGET_S = 0.005        # longest time one drain keeps the executor from other events [s]
+# runner.spin: longest slice of a lockstep chain between two executor turns [s]. One turn of the
+# SingleThreadedExecutor rebuilds its wait set over every entity of the composed graph (about 1.6 ms
+# for closed_loop.yaml's 14 nodes), so a turn every 5 ms cost a quarter of the loop; every 20 ms
+# leaves timers and services at most 20 ms late.
+PUMP_SLICE_S = 0.02
 RECENT = 64             # local messages per topic remembered to recognise their DDS copies
 ENV = "CDPR_INTRA_PROCESS"  # "0": every node of the process uses DDS only (the baseline transport)
 
@@ -169,8 +174,8 @@ class IntraProcess:
             self.busy = True
         self._drain()
 
-    def _drain(self) -> None:
-        queue, deadline = self.queue, time.perf_counter() + BUDGET_S
+    def _drain(self, budget: float = BUDGET_S) -> None:
+        queue, deadline = self.queue, time.perf_counter() + budget
         try:
             while True:
                 try:
@@ -199,21 +204,21 @@ class IntraProcess:
         executor events, so timers and services get their turn while a lockstep ring runs.
         (Handing over through a one-shot timer instead delays the EventsExecutor's other timers
         more and more: measured 0.16, 0.4, 0.7, 1.5, 3 s between ticks of a 10 Hz timer.)"""
-        self._on_wake()
+        self._on_wake(PUMP_SLICE_S)
 
     def wake(self) -> None:
         """Have the executor drain the queue soon (a one-shot timer: no guard conditions here)."""
         if self.wake_timer is not None:
             self.wake_timer.reset()
 
-    def _on_wake(self) -> None:
+    def _on_wake(self, budget: float = BUDGET_S) -> None:
         if self.wake_timer is not None:
             self.wake_timer.cancel()
         with self.lock:
             if self.busy or not self.queue:
                 return
             self.busy = True
-        self._drain()
+        self._drain(budget)
 
     # -- registration ------------------------------------------------------------------------
     def add_node(self, node: Node) -> None:
@@ -316,6 +321,18 @@ class IntraProcessPublisher(Publisher):
             super().publish(msg)    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
             self._ipc_registry.post(items)
+
+
+def has_subscribers(publisher) -> bool:
+    """Whether anything would receive what ``publisher`` publishes now (a subscription in this process
+    or over DDS): a node may skip building a message nobody takes."""
+    topic = getattr(publisher, "_ipc_topic", None)
+    if topic is not None:
+        if publisher._ipc_version != topic.version:
+            publisher._rematch(topic)
+        if publisher._ipc_matched or publisher.history is not None:
+            return True
+    return publisher.get_subscription_count() > 0
 
 
 class IntraProcessNode(Node):

@@ -34,7 +34,7 @@ def spin(executor, stop: threading.Event | None = None) -> None:
     try:
         while context.ok() and not (stop is not None and stop.is_set()):
             try:
-                executor.spin_once(timeout_sec=1e-4 if registry.queue else SPIN_PERIOD)
+                executor.spin_once(timeout_sec=0.0 if registry.queue else SPIN_PERIOD)
             except ExternalShutdownException:
                 return
             if registry.queue:

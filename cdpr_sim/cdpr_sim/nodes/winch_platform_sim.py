@@ -43,6 +43,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from cdpr_control.nodes.base import CdprNode, spin_node
+from cdpr_control.nodes.intraprocess import has_subscribers
 from cdpr_control.nodes.conversions import pose_to_msg, twist_to_msg, wrench_from_msg, wrench_to_msg
 from cdpr_control.nodes.parameters import ParameterSet, ParamSpec
 from cdpr_control.nodes.qos import CONTROL
@@ -317,11 +318,17 @@ class WinchPlatformSimNode(CdprNode):
             return
         c = self.robot.cable
         pubs = self.truth_pubs
-        pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(out.x)))
-        pubs["twist"].publish(TwistStamped(header=header, twist=twist_to_msg(out.xdot)))
-        pubs["forces"].publish(CableForces(header=header, f=out.f.tolist(), f_min=c.f_min.tolist(), f_max=c.f_max.tolist()))
-        pubs["external"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(out.w_ext)))
-        if "contact" in pubs:
+        # ground truth is for recording and watching: built only when someone takes it
+        if has_subscribers(pubs["pose"]):
+            pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(out.x)))
+        if has_subscribers(pubs["twist"]):
+            pubs["twist"].publish(TwistStamped(header=header, twist=twist_to_msg(out.xdot)))
+        if has_subscribers(pubs["forces"]):
+            pubs["forces"].publish(CableForces(header=header, f=out.f.tolist(), f_min=c.f_min.tolist(),
+                                               f_max=c.f_max.tolist()))
+        if has_subscribers(pubs["external"]):
+            pubs["external"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(out.w_ext)))
+        if "contact" in pubs and has_subscribers(pubs["contact"]):
             pubs["contact"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(out.w_contact)))
 
     def _report(self) -> None:
