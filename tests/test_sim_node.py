@@ -84,11 +84,20 @@ def test_missed_deadline_advances_after_the_timeout(graph):
     # no further command: after 0.2 s the simulator advances anyway, holding the last command
     assert _spin_until(executor, lambda: sim.missed_deadlines >= 2, timeout=5.0)
     assert sim.sim.steps == 1 + sim.missed_deadlines
-    # a command answering an old state is late: held, counted, no step
+    # a command answering an old state is late: counted, no step; it is held when newer than the
+    # command held, and ignored when older (a second answer to a repeated start-up state must not
+    # replace the newest command)
     steps = sim.sim.steps
-    command.publish(JointState(header=states[0].header, position=list(states[0].position)))
+    command.publish(JointState(header=states[0].header, position=[p + 0.01 for p in states[0].position]))
     assert _spin_until(executor, lambda: sim.late_commands == 1)
     assert sim.sim.steps - steps <= 1                               # at most a timeout step
+    np.testing.assert_allclose(sim.theta_d, np.asarray(states[0].position) + 0.01)  # as new as the held
+    current = states[-1]
+    command.publish(JointState(header=current.header, position=list(current.position)))
+    assert _spin_until(executor, lambda: sim.sim.steps * sim.period_ns > _ns(current))   # answered: a step
+    command.publish(JointState(header=states[0].header, position=[p + 0.02 for p in states[0].position]))
+    assert _spin_until(executor, lambda: sim.late_commands == 2)
+    np.testing.assert_array_equal(sim.theta_d, np.asarray(current.position))  # older than the held one
     # a command of wrong length is refused and does not advance time
     steps = sim.sim.steps
     command.publish(JointState(position=[1.0, 2.0]))

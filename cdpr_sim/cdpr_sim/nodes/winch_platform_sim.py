@@ -12,9 +12,9 @@ the platform), ``ground_truth/external_wrench`` and, with obstacles, ``ground_tr
 
 Time (``sync_mode``, shared with the control nodes): ``exact`` is lockstep, the node owns /clock
 and advances one control period when the command stamped with the current time has arrived (a
-controller copies the stamp of the winch/state it answers; an older stamp is late: held, counted,
-no step); after ``lockstep_timeout`` of wall time it advances with the last command and counts a
-missed deadline (0 waits forever). Until the first command the state of
+controller copies the stamp of the winch/state it answers; a stamp older than the current period is
+late: counted, no step, held unless older than the command held); after ``lockstep_timeout`` of
+wall time it advances with the last command and counts a missed deadline (0 waits forever). Until the first command the state of
 t = 0 is repeated every 0.5 s, so that late subscribers start the loop. ``latest`` runs free at
 ``realtime_factor`` times real time on a wall timer, holds the newest command and counts the
 periods without a fresh one; it reports on /diagnostics the lateness of each step against its
@@ -131,6 +131,7 @@ class WinchPlatformSimNode(CdprNode):
         self.got_command = False
         self.fresh_command = False
         self.theta_d = self.sim.output.theta.copy()     # hold the start until commanded
+        self._command_stamp = -1                          # stamp of the command held in theta_d
         self.step_lateness = DurationStats("step_lateness")       # free running: wall clock vs schedule
         self.command_latency = DurationStats("command_latency")   # winch/state -> its winch/command
         self._states_sent: dict[int, float] = {}        # stamp -> perf_counter of recent winch/states
@@ -217,9 +218,14 @@ class WinchPlatformSimNode(CdprNode):
             self.get_logger().warn(f"ignoring winch/command with {len(msg.position)} positions "
                                    f"(need {self.robot.m} finite values)", throttle_duration_sec=1.0)
             return
-        self.theta_d = theta_d
-        self.got_command = True
         stamp = stamp_ns(msg)
+        if stamp < self._command_stamp:
+            # older than the command held (e.g. a second answer to a repeated start-up state):
+            # it must not replace a newer one, or the run would depend on when the repeat came
+            self.late_commands += 1
+            return
+        self.theta_d, self._command_stamp = theta_d, stamp
+        self.got_command = True
         t_ns = self.sim.steps * self.period_ns
         if not self.lockstep:
             sent = self._states_sent.pop(stamp, None)   # the first command answering that state
