@@ -275,7 +275,7 @@ class Launcher:
         unrecorded. Nothing of the graph runs before its executor spins, so holding it costs nothing.
         """
         topics = {p.topic_name for node in self.nodes for p in node.publishers}
-        topics = {t for t in topics if self.recorder.wanted(t) and not _hidden_topic(t)}
+        topics = {t for t in topics if self.recorder.selection.wanted(t) and not _hidden_topic(t)}
         deadline = time.monotonic() + timeout
         while not topics <= set(self.recorder.recorded_topics):
             if time.monotonic() > deadline:

@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import threading
 import time
 from typing import Callable, Iterator
 
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 DISCOVERY_TIMEOUT = 5.0  # s to wait for a named node or topic to appear
@@ -154,3 +159,47 @@ def adapted_qos(node: Node, topic: str, depth: int = 10) -> QoSProfile:
     if offers and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offers):
         qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
     return qos
+
+
+class TopicSelection:
+    """Which topics a recorder or bridge node takes, and the discovery of new ones, as parameters:
+    ``topics`` (empty or unset: every topic), ``exclude`` (a regular expression),
+    ``include_hidden_topics``, ``discovery_period`` [s]. Every ``discovery_period`` (steady clock:
+    with use_sim_time the node's clock waits for /clock) it calls ``take(topic, type_name)`` for each
+    wanted topic that has a publisher (the offered QoS decides how to subscribe) and that ``take``
+    has not taken: ``take`` returns True (taken), False (it cannot take it: not offered again) or
+    None (not now: offered again at the next discovery)."""
+
+    def __init__(self, node: Node, what: str, discovery_period: float, take: Callable[[str, str], bool | None]):
+        node.declare_parameter("topics", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description=f"topics to {what}; empty or unset: every topic", read_only=True))
+        node.declare_parameter("exclude", "", ParameterDescriptor(
+            description=f"regular expression of topics not to {what}", read_only=True))
+        node.declare_parameter("include_hidden_topics", False, ParameterDescriptor(read_only=True))
+        node.declare_parameter("discovery_period", discovery_period, ParameterDescriptor(
+            description="how often to look for new topics [s]", read_only=True))
+        try:
+            topics = node.get_parameter("topics").value or []
+        except ParameterUninitializedException:  # declared without a value: every topic
+            topics = []
+        self.selected = {fully_qualified(t) for t in topics if t}
+        exclude = node.get_parameter("exclude").value
+        self.exclude = re.compile(exclude) if exclude else None
+        self.include_hidden = node.get_parameter("include_hidden_topics").value
+        self.node, self._take = node, take
+        self.seen: set[str] = set()
+        node.create_timer(node.get_parameter("discovery_period").value, self.discover,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def wanted(self, topic: str) -> bool:
+        if self.selected and topic not in self.selected:
+            return False
+        return not (self.exclude and self.exclude.fullmatch(topic))
+
+    def discover(self) -> None:
+        """Hand wanted topics that have publishers and were not handed yet to ``take``."""
+        for topic, types in topic_types(self.node, self.include_hidden).items():
+            if topic in self.seen or not self.wanted(topic) or self.node.count_publishers(topic) == 0:
+                continue
+            if self._take(topic, types[0]) is not None:
+                self.seen.add(topic)

@@ -16,15 +16,12 @@ Parameters: ``host``, ``port`` (0: any free port; the bound one is in :attr:`Fox
 """
 from __future__ import annotations
 
-import re
 import threading
 
 import foxglove
 from foxglove.websocket import Capability, ServerListener
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -33,10 +30,11 @@ from cdpr_control.nodes.runner import run_node
 from cdpr_tools.bag.cdr import trimmed
 from cdpr_tools.bag.schema import ENCODING, message_definition
 from cdpr_tools.message_convert import message_class
-from cdpr_tools.ros_graph import adapted_qos, fully_qualified, topic_types
+from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 
 DEFAULT_PORT = 8765  # Foxglove's default for a live connection
 SERVICE_TIMEOUT = 2.0  # s a node may take to answer a parameter request
+DISCOVERY_PERIOD = 0.5  # s between looks for new topics (default of ``discovery_period``)
 
 
 class FoxgloveBridge(Node):
@@ -46,24 +44,8 @@ class FoxgloveBridge(Node):
             description="address to listen on (0.0.0.0: every interface)", read_only=True))
         self.declare_parameter("port", DEFAULT_PORT, ParameterDescriptor(
             description="WebSocket port; 0: any free port", read_only=True))
-        self.declare_parameter("topics", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
-            description="topics to offer; empty or unset: every topic", read_only=True))
-        self.declare_parameter("exclude", "", ParameterDescriptor(
-            description="regular expression of topics not to offer", read_only=True))
-        self.declare_parameter("include_hidden_topics", False, ParameterDescriptor(read_only=True))
-        self.declare_parameter("discovery_period", 0.5, ParameterDescriptor(
-            description="how often to look for new topics [s]", read_only=True))
-        try:
-            topics = self.get_parameter("topics").value or []
-        except ParameterUninitializedException:
-            topics = []
-        self.selected = {fully_qualified(t) for t in topics if t}
-        exclude = self.get_parameter("exclude").value
-        self.exclude = re.compile(exclude) if exclude else None
-        self.include_hidden = self.get_parameter("include_hidden_topics").value
         self.channels: dict[str, foxglove.Channel] = {}
         self._raw_subscriptions: dict[str, object] = {}
-        self._skipped: set[str] = set()
         self._lock = threading.Lock()  # parameter requests come on the server's threads
         self._param_clients: dict[str, AsyncParameterClient] = {}
         self.fox = foxglove.Context()  # channels of this bridge only (several bridges in one process)
@@ -72,32 +54,16 @@ class FoxgloveBridge(Node):
             port=self.get_parameter("port").value, capabilities=[Capability.Parameters],
             server_listener=_Listener(self), context=self.fox)
         self.port = self.server.port
-        self.create_timer(self.get_parameter("discovery_period").value, self.discover,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.selection = TopicSelection(self, "offer", DISCOVERY_PERIOD, self._offer)
         self.get_logger().info(f"Foxglove WebSocket server on ws://{self.get_parameter('host').value}:{self.port}")
 
-    def wanted(self, topic: str) -> bool:
-        if self.selected and topic not in self.selected:
-            return False
-        return not (self.exclude and self.exclude.fullmatch(topic))
-
-    def discover(self) -> None:
-        """Offer wanted topics that have publishers and no channel yet."""
-        for topic, types in topic_types(self, self.include_hidden).items():
-            if topic in self.channels or topic in self._skipped or not self.wanted(topic):
-                continue
-            if self.count_publishers(topic) == 0:
-                continue  # the offered QoS decides how to subscribe: wait for a publisher
-            self._offer(topic, types[0])
-
-    def _offer(self, topic: str, type_name: str) -> None:
+    def _offer(self, topic: str, type_name: str) -> bool:
         try:
             msg_class = message_class(type_name)
             schema = foxglove.Schema(name=type_name, encoding=ENCODING, data=message_definition(type_name).encode())
         except (LookupError, ValueError) as exc:
-            self._skipped.add(topic)
             self.get_logger().warning(f"not offering {topic}: {exc}")
-            return
+            return False
         channel = foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=self.fox)
         clock = self.get_clock()
 
@@ -109,6 +75,7 @@ class FoxgloveBridge(Node):
         self._raw_subscriptions[topic] = self.create_subscription(msg_class, topic, forward,
                                                               adapted_qos(self, topic), raw=True)
         self.get_logger().debug(f"offering {topic} [{type_name}]")
+        return True
 
     # -- parameters of the graph's nodes ------------------------------------------------------------
     def _client(self, node: str) -> AsyncParameterClient:
