@@ -10,6 +10,9 @@ With ``force_controller`` naming the hybrid force controller (section 5.1.2), it
 ``<force_controller>/state`` and, through :class:`cdpr_control.hybrid_force_control.CFCCoupling`,
 holds Δq_CFC while that controller makes, holds or breaks contact (states A-D, R) and blends its
 set-point back through a moving average of ``T_MA`` afterwards.
+
+While ``joint_command`` runs IK-only (its mode on ``joint_command/mode``, :mod:`.mode`) Δq_CFC is
+not applied and the integrator is held (the filter and the calibration stay current).
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state
 
 from .base import CdprNode, spin_node
+from .mode import follow_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -56,6 +60,7 @@ class CableForceControllerNode(CdprNode):
         self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
+        follow_mode(self, self._on_mode)
         inputs = {
             "f_d": (ForceDistribution, "force_distribution"),
             "f": (CableForces, "cable_forces"),
@@ -84,6 +89,9 @@ class CableForceControllerNode(CdprNode):
             self.coupling = CFCCoupling(v["T_MA"], self.dt)
         else:
             self.coupling.set_time_constant(v["T_MA"])
+
+    def _on_mode(self, ik_only: bool) -> None:
+        self.stage.controller.pi.hold = ik_only      # bumpless: no wind-up while not applied
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         fd_msg = msgs["f_d"]
