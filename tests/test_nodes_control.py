@@ -177,3 +177,36 @@ def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
     assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
     assert _spin_until(executor, lambda: not (ospc.controller.pi.hold or cfc.stage.controller.pi.hold))
     assert integrating() == (True, True)
+
+
+def test_home_calibration_parameter_keeps_the_fk_unbiased_away_from_home(graph):
+    """home_forces (the forces recorded when the encoders were set at home, 2.3.2) give the FK and
+    CFC nodes their Δq_0: a start 1 m from home is then not biased by the start-up forces (issue 17
+    item 4; the library's test_bumpless_calibration.py without a node)."""
+    from cdpr_control.nodes.forward_kinematics import ForwardKinematicsNode
+    from cdpr_sim.startup import startup_forces
+    from test_bumpless_calibration import _encoder_lengths
+
+    robot = load_robot("ipanema3")
+    x0 = robot.home + np.r_[1.0, 0.5, -0.3, 0, 0, 0]
+    f_home, f_x = startup_forces(robot, robot.home, 0.3), startup_forces(robot, x0, 0.3)
+    theta = _encoder_lengths(robot, x0, f_x, f_home)
+    overrides = [Parameter("robot", value="ipanema3"), Parameter("home_forces", value=f_home.tolist())]
+    fk = ForwardKinematicsNode(namespace="calibration_test", parameter_overrides=overrides)
+    cfc = CableForceControllerNode(namespace="calibration_test", parameter_overrides=overrides)
+    try:
+        header = CdprNode.header(1_000_000)
+        msgs = {"theta": JointState(header=header, position=theta.tolist()),
+                "f": CableForces(header=header, f=f_x.tolist()),
+                "setpoint": OperationalSetpoint(header=header, pose=pose_to_msg(x0))}
+        for k in range(3):
+            fk._cycle(msgs, (k + 1) * 1_000_000)
+        assert np.linalg.norm(fk.estimator.x[:3] - x0[:3]) < 2e-5     # with the first sample: > 1 mm
+        assert cfc.stage.calibration.from_home and np.array_equal(cfc.stage.calibration.f_0, f_home)
+        assert fk.get_parameter("calibration_window").value == 100
+        with pytest.raises(ValueError, match="positive"):      # a slack cable in the home calibration
+            ForwardKinematicsNode(namespace="calibration_test", parameter_overrides=[
+                Parameter("robot", value="ipanema3"), Parameter("home_forces", value=[0.0] * 7 + [1.0])])
+    finally:
+        fk.destroy_node()
+        cfc.destroy_node()
