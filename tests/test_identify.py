@@ -45,10 +45,10 @@ def test_friction_fit_meets_tolerance_and_writes_parameter_file(friction_bag, tm
     assert set(p) == {"mu", "sigma", "F_pv"}
     assert all(len(p[k]) == robot.m and all(isinstance(v, float) for v in p[k]) for k in p)
     fr = _plant("ipanema3_mini").friction
-    assert np.max(np.abs(np.array(p["mu"]) / fr.mu - 1.0)) < 0.10
-    # not required by the issue, but the run excites them too
-    assert np.max(np.abs(np.array(p["F_pv"]) / fr.F_pv - 1.0)) < 0.25
-    assert np.max(np.abs(np.array(p["sigma"]) / fr.sigma - 1.0)) < 0.5
+    # the plant's values (measured 0.5 %, 1.6 %, 1.4 %), not the robot file's (off by up to 25 %, 24 %, 27 %)
+    assert np.max(np.abs(np.array(p["mu"]) / fr.mu - 1.0)) < 0.03
+    assert np.max(np.abs(np.array(p["F_pv"]) / fr.F_pv - 1.0)) < 0.05
+    assert np.max(np.abs(np.array(p["sigma"]) / fr.sigma - 1.0)) < 0.05
     assert _node_parameters(params) == p                 # the node loads exactly these values
 
 
