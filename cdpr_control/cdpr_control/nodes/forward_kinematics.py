@@ -5,9 +5,10 @@ warm start and the pose of the frozen pulley model of section 3.2); publishes ``
 (PoseStamped, x), ``platform/wrench`` (WrenchStamped, w about the platform origin, base frame) and
 ``forward_kinematics/diagnostics``. The elongation Δq_0 of the encoder calibration (3.7) comes from
 the home calibration (``home_forces``) or, without one, the mean of the first
-``calibration_window`` measured forces (:mod:`cdpr_control.calibration`). A solve that does not converge is published with ``converged = false``
-(and reported on /diagnostics); the pose message then carries the last converged estimate. The
-computation is :class:`cdpr_control.forward_kinematics.PoseEstimator`.
+``calibration_window`` measured forces (:mod:`cdpr_control.calibration`). A solve that does not
+converge is published with ``converged = false`` (and reported on /diagnostics); the pose message
+then carries the last converged estimate. The computation is
+:class:`cdpr_control.forward_kinematics.PoseEstimator`.
 """
 from __future__ import annotations
 
