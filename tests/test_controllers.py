@@ -26,6 +26,19 @@ def test_pi_anti_windup_leaves_saturation_at_once():
     assert u[0] < 1.0
 
 
+def test_pi_hold_keeps_the_integrator():
+    """hold (bumpless transfer in the node graph): the output is K_p e + I, the integrator unchanged."""
+    pi = PIController(1, K_p=2.0, T_i=0.1, u_neg=3.0, u_pos=3.0, dt=0.01)
+    pi.update(np.array([1.0]))
+    pi.hold = True
+    for _ in range(100):
+        u = pi.update(np.array([1.0]))
+    assert pi.integrator[0] == pytest.approx(0.2) and u[0] == pytest.approx(2.2)
+    assert pi.update(np.array([2.0]))[0] == 3.0 and pi.saturated[0]       # clipped, still held
+    pi.hold = False
+    assert pi.update(np.array([0.5]))[0] == pytest.approx(1.0 + 0.2 + 0.1)
+
+
 def test_pi_rejects_bad_gains():
     with pytest.raises(ValueError):
         PIController(1, K_p=-1.0, T_i=0.1, u_neg=1, u_pos=1, dt=0.001)

@@ -45,10 +45,10 @@ def test_friction_fit_meets_tolerance_and_writes_parameter_file(friction_bag, tm
     assert set(p) == {"mu", "sigma", "F_pv"}
     assert all(len(p[k]) == robot.m and all(isinstance(v, float) for v in p[k]) for k in p)
     fr = _plant("ipanema3_mini").friction
-    assert np.max(np.abs(np.array(p["mu"]) / fr.mu - 1.0)) < 0.10
-    # not required by the issue, but the run excites them too
-    assert np.max(np.abs(np.array(p["F_pv"]) / fr.F_pv - 1.0)) < 0.25
-    assert np.max(np.abs(np.array(p["sigma"]) / fr.sigma - 1.0)) < 0.5
+    # the plant's values (measured 0.5 %, 1.6 %, 1.4 %), not the robot file's (off by up to 25 %, 24 %, 27 %)
+    assert np.max(np.abs(np.array(p["mu"]) / fr.mu - 1.0)) < 0.03
+    assert np.max(np.abs(np.array(p["F_pv"]) / fr.F_pv - 1.0)) < 0.05
+    assert np.max(np.abs(np.array(p["sigma"]) / fr.sigma - 1.0)) < 0.05
     assert _node_parameters(params) == p                 # the node loads exactly these values
 
 
@@ -163,20 +163,17 @@ def test_circle_trajectory_has_constant_speed_after_the_ramp():
 
 
 def test_stiffness_from_tension_steps(tmp_path, capsys):
+    """(2.16) on the mismatched plant: its k0 (not the robot file's), with its geometry errors of
+    millimetres (as large as the Mini's elongations), l_0 errors, settlement and slack cables."""
     robot = load_robot("ipanema3_mini")
-    true = _plant("ipanema3_mini")
-    # the perfect-model plant: this checks the fit of (2.16). On the mismatched plant the
-    # geometry errors (mm) are as large as the Mini's elongations and the fit misses the plant's k0
-    # by a factor 3 (docs/identify.md): the method needs the geometry identified first
-    true = load_robot("ipanema3_mini")
-    bag = experiments.record_stiffness_run(tmp_path / "stiffness", "ipanema3_mini", levels=(0.05, 0.5, 0.9),
-                                           hold=0.35, ramp=0.2, seed=6, plant="nominal")
-    c = true.cable
-    ref = stiffness.identify(BagReader(bag), robot, use_reference=True)       # exact forces: the model itself
-    assert (ref.k0, ref.k1, ref.k2) == pytest.approx((c.k0, c.k1, c.k2), rel=0.01)
+    c = _plant("ipanema3_mini").cable
+    assert abs(robot.cable.k0 / c.k0 - 1.0) > 0.05        # the band below tells the plant from the file
+    bag = experiments.record_stiffness_run(tmp_path / "stiffness", "ipanema3_mini", seed=6)
+    ref = stiffness.identify(BagReader(bag), robot, use_reference=True)       # exact forces
+    assert ref.k0 == pytest.approx(c.k0, rel=0.005)
+    assert ref.k1 == pytest.approx(c.k1, rel=0.02) and ref.k2 == pytest.approx(c.k2, rel=0.05)
     fit = stiffness.identify(BagReader(bag), robot)                           # compensated sensor forces
-    assert fit.k0 == pytest.approx(c.k0, rel=0.01)
-    assert fit.k1 == pytest.approx(c.k1, rel=0.05) and fit.k2 == pytest.approx(c.k2, rel=0.10)
+    assert fit.k0 == pytest.approx(c.k0, rel=0.03)        # the sensors' gains are off by up to 1 %
     assert cli.main(["identify", "stiffness", str(bag)]) == 0
     assert "(2.16)" in capsys.readouterr().out
 

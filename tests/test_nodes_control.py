@@ -129,3 +129,84 @@ def test_parameters_apply_live(graph):
     assert not jc.offsets.configs["probe_offset"].enabled and jc.offsets.configs["ospc"].enabled
     assert ospc.set_parameters([Parameter("x_sat", value=[0.01] * 6)])[0].successful
     np.testing.assert_allclose(ospc.controller.pi.u_pos, 0.01)
+
+
+def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
+    """joint_command's mode reaches the OSPC and CFC nodes (joint_command/mode): in IK-only their
+    outputs are not applied and their integrators hold (no wind-up, bumpless back, issue 17 item 2)."""
+    nodes, probe, executor = graph
+    cfc, ospc, jc = nodes
+    robot = load_robot("ipanema3_mini")
+    m = robot.m
+    pubs = {name: probe.create_publisher(t, topic, CONTROL) for name, t, topic in (
+        ("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
+        ("fd", ForceDistribution, "force_distribution"), ("sp", OperationalSetpoint, "setpoint"),
+        ("pose", PoseStamped, "platform/pose"), ("offset", ControllerState, "probe_offset/state"))}
+    states = {"cfc": [], "ospc": []}
+    probe.create_subscription(ControllerState, "cable_force_controller/state", states["cfc"].append, CONTROL)
+    probe.create_subscription(ControllerState, "ospc/state", states["ospc"].append, CONTROL)
+    assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    x_d = np.zeros(6)
+    x = x_d - np.array([0.0, 0.0, 0.002, 0.0, 0.0, 0.0])         # a sag: both integrators run
+    q, f, f_d = inverse_kinematics(robot, x_d).q, np.full(m, 10.0), np.full(m, 12.0)
+    period = [100]
+
+    def step():
+        period[0] += 1
+        header = CdprNode.header(period[0] * 1_000_000)
+        n = len(states["cfc"]), len(states["ospc"])
+        lim = dict(f_min=robot.cable.f_min.tolist(), f_max=robot.cable.f_max.tolist())
+        pubs["theta"].publish(JointState(header=header, position=q.tolist(), velocity=[0.0] * m, effort=f.tolist()))
+        pubs["f"].publish(CableForces(header=header, f=f.tolist(), **lim))
+        pubs["fd"].publish(ForceDistribution(header=header, f_d=f_d.tolist(), **lim))
+        pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(x_d)))
+        pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
+        pubs["offset"].publish(ControllerState(header=header, controller="probe_offset", enabled=True, output=[0.0] * 6))
+        assert _spin_until(executor, lambda: len(states["cfc"]) > n[0] and len(states["ospc"]) > n[1])
+        return np.asarray(states["cfc"][-1].integrator), np.asarray(states["ospc"][-1].integrator)
+
+    def integrating():
+        before = step()
+        after = step()
+        return np.all(np.abs(after[0] - before[0]) > 0.0), abs(after[1][2] - before[1][2]) > 0.0
+
+    assert integrating() == (True, True)
+    assert jc.set_parameters([Parameter("mode", value="ik_only")])[0].successful
+    assert _spin_until(executor, lambda: ospc.controller.pi.hold and cfc.stage.controller.pi.hold)
+    assert integrating() == (False, False)                   # held: no wind-up while not applied
+    assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
+    assert _spin_until(executor, lambda: not (ospc.controller.pi.hold or cfc.stage.controller.pi.hold))
+    assert integrating() == (True, True)
+
+
+def test_home_calibration_parameter_keeps_the_fk_unbiased_away_from_home(graph):
+    """home_forces (the forces recorded when the encoders were set at home, 2.3.2) give the FK and
+    CFC nodes their Δq_0: a start 1 m from home is then not biased by the start-up forces (issue 17
+    item 4; the library's test_bumpless_calibration.py without a node)."""
+    from cdpr_control.nodes.forward_kinematics import ForwardKinematicsNode
+    from cdpr_sim.startup import startup_forces
+    from test_bumpless_calibration import _encoder_lengths
+
+    robot = load_robot("ipanema3")
+    x0 = robot.home + np.r_[1.0, 0.5, -0.3, 0, 0, 0]
+    f_home, f_x = startup_forces(robot, robot.home, 0.3), startup_forces(robot, x0, 0.3)
+    theta = _encoder_lengths(robot, x0, f_x, f_home)
+    overrides = [Parameter("robot", value="ipanema3"), Parameter("home_forces", value=f_home.tolist())]
+    fk = ForwardKinematicsNode(namespace="calibration_test", parameter_overrides=overrides)
+    cfc = CableForceControllerNode(namespace="calibration_test", parameter_overrides=overrides)
+    try:
+        header = CdprNode.header(1_000_000)
+        msgs = {"theta": JointState(header=header, position=theta.tolist()),
+                "f": CableForces(header=header, f=f_x.tolist()),
+                "setpoint": OperationalSetpoint(header=header, pose=pose_to_msg(x0))}
+        for k in range(3):
+            fk._cycle(msgs, (k + 1) * 1_000_000)
+        assert np.linalg.norm(fk.estimator.x[:3] - x0[:3]) < 2e-5     # with the first sample: > 1 mm
+        assert cfc.stage.calibration.from_home and np.array_equal(cfc.stage.calibration.f_0, f_home)
+        assert fk.get_parameter("calibration_window").value == 100
+        with pytest.raises(ValueError, match="positive"):      # a slack cable in the home calibration
+            ForwardKinematicsNode(namespace="calibration_test", parameter_overrides=[
+                Parameter("robot", value="ipanema3"), Parameter("home_forces", value=[0.0] * 7 + [1.0])])
+    finally:
+        fk.destroy_node()
+        cfc.destroy_node()

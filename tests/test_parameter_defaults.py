@@ -45,6 +45,7 @@ def test_control_loop_reads_the_robot_parameter_file(robot):
     np.testing.assert_array_equal(p.ospc.x_sat, file["ospc"]["x_sat"])
     np.testing.assert_array_equal(p.force.f_min, file["force_distribution"]["f_min"])
     assert p.safety.force_tolerance == file["joint_command"]["force_tolerance"]
+    assert p.calibration_window == file["/**"]["calibration_window"]     # FK and CFC nodes: the same value
     assert p.mode == file["joint_command"]["mode"] if "mode" in file["joint_command"] else p.mode == "force_control"
     assert control_loop_params(robot, mode="ik_only").mode == "ik_only"
 

@@ -33,7 +33,9 @@ STAGES = {
 }
 # node parameters that are loop switches rather than dataclass fields
 SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enabled"): "ospc_enabled",
-            ("joint_command", "mode"): "mode"}
+            ("joint_command", "mode"): "mode",
+            # the start-up calibration window of forward_kinematics and cable_force_controller
+            ("/**", "calibration_window"): "calibration_window"}
 
 DEFAULTS = {node: cls() for node, (_, cls) in STAGES.items()}
 
@@ -51,13 +53,12 @@ def params_file(robot_name: str):
 
 
 def load_params_file(robot_name: str) -> dict:
-    """node name -> {parameter: value} of the robot's parameter file ({} without one)."""
+    """node name -> {parameter: value} of the robot's parameter file ({} without one); "/**": every node's."""
     path = params_file(robot_name)
     if path is None:
         return {}
     doc = yaml.safe_load(path.read_text()) or {}
-    return {node: (entry or {}).get("ros__parameters", {}) or {} for node, entry in doc.items()
-            if node != "/**"}
+    return {node: (entry or {}).get("ros__parameters", {}) or {} for node, entry in doc.items()}
 
 
 def control_loop_params(robot, **switches) -> ControlLoopParams:

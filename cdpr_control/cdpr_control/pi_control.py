@@ -18,6 +18,8 @@ class PIController:
 
     All gains and limits are arrays of one value per channel (scalars broadcast). ``T_i = inf``
     disables the integral part. State: ``integrator`` (in output units) and ``saturated``.
+    ``hold``: the integrator keeps its value (the output is K_p e + I, clipped): for a controller
+    whose output is not applied (bumpless transfer, :mod:`cdpr_control.bumpless`).
     """
 
     def __init__(self, n: int, K_p, T_i, u_neg, u_pos, dt: float):
@@ -30,6 +32,7 @@ class PIController:
         self.integrator = np.zeros(n)
         self.saturated = np.zeros(n, dtype=bool)
         self.output = np.zeros(n)
+        self.hold = False
         kernels.warm_up()                    # the compiled PI loaded now, not in the first period
 
     def set_gains(self, K_p, T_i) -> None:
@@ -54,6 +57,13 @@ class PIController:
 
     def update(self, e: np.ndarray, u_neg=None, u_pos=None) -> np.ndarray:
         """One control period for the error ``e``; optional per-call limits (e.g. widened ones)."""
+        if self.hold:
+            lo = -(self.u_neg if u_neg is None else u_neg)
+            hi = self.u_pos if u_pos is None else u_pos
+            u = self.K_p * np.asarray(e, dtype=float) + self.integrator
+            self.saturated = (u > hi) | (u < lo)
+            self.output = np.clip(u, lo, hi)
+            return self.output
         if kernels.ENABLED:
             self.integrator, self.saturated, self.output = kernels.pi_update(
                 np.asarray(e, dtype=float), self.K_p, self.T_i, self.dt, self.integrator,

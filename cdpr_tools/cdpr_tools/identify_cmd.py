@@ -165,6 +165,7 @@ def run_stiffness(args) -> int:
     print(f"k0 = {fit.k0:.6g} N, k1 = {fit.k1:.6g}, k2 = {fit.k2:.6g} 1/N  (2.16), "
           f"{fit.n_samples} samples at rest, rms {fit.rms:.3g} m")
     print("encoder offsets delta [mm]: " + " ".join(f"{1e3 * d:.4f}" for d in fit.delta))
+    print("free-length corrections g [%]: " + " ".join(f"{1e2 * g:.3f}" for g in fit.g))
     return 0
 
 

@@ -4,12 +4,17 @@ Subscribes ``force_distribution`` (f_d, limits), ``cable_forces`` (f at the plat
 ``winch/state`` (θ, for the free length l_t (2.14)); publishes ``cable_force_controller/state``
 (cdpr_msgs/ControllerState, ``output`` = Δq_CFC [m] per cable). Disabled, it publishes Δq_CFC = 0:
 the IK-only reference control of section 2.3.2. The computation, including the stiffness model
-of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control.CableForceControl`.
+of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control.CableForceControl`;
+Δq_0 comes from the home calibration (``home_forces``) or the mean of the first
+``calibration_window`` samples (:mod:`cdpr_control.calibration`), as in the forward kinematics.
 
 With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
 ``<force_controller>/state`` and, through :class:`cdpr_control.hybrid_force_control.CFCCoupling`,
 holds Δq_CFC while that controller makes, holds or breaks contact (states A-D, R) and blends its
 set-point back through a moving average of ``T_MA`` afterwards.
+
+While ``joint_command`` runs IK-only (its mode on ``joint_command/mode``, :mod:`.mode`) Δq_CFC is
+not applied and the integrator is held (the filter and the calibration stay current).
 """
 from __future__ import annotations
 
@@ -22,7 +27,8 @@ from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state
 
 from .base import CdprNode, spin_node
-from .parameters import ParameterSet, ParamSpec
+from .mode import follow_mode
+from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
 from .qos import CONTROL
 from .sync import StampSync
 
@@ -54,8 +60,10 @@ class CableForceControllerNode(CdprNode):
         self.dq_held = np.zeros(self.robot.m)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m), self._validate, self._apply)
+        self.stage.calibration = startup_calibration(self.robot, self.params.values)   # Δq_0 of (3.23)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
+        follow_mode(self, self._on_mode)
         inputs = {
             "f_d": (ForceDistribution, "force_distribution"),
             "f": (CableForces, "cable_forces"),
@@ -74,6 +82,7 @@ class CableForceControllerNode(CdprNode):
 
     def _validate(self, v: dict) -> None:
         self._cfc_params(v).validate()
+        startup_calibration(self.robot, v)
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
@@ -84,6 +93,9 @@ class CableForceControllerNode(CdprNode):
             self.coupling = CFCCoupling(v["T_MA"], self.dt)
         else:
             self.coupling.set_time_constant(v["T_MA"])
+
+    def _on_mode(self, ik_only: bool) -> None:
+        self.stage.controller.pi.hold = ik_only      # bumpless: no wind-up while not applied
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         fd_msg = msgs["f_d"]

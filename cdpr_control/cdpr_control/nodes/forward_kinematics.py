@@ -3,10 +3,12 @@
 Subscribes ``winch/state`` (θ), ``cable_forces`` (f at the platform) and ``setpoint`` (x_d, the
 warm start and the pose of the frozen pulley model of section 3.2); publishes ``platform/pose``
 (PoseStamped, x), ``platform/wrench`` (WrenchStamped, w about the platform origin, base frame) and
-``forward_kinematics/diagnostics``. The elongation Δq_0 at start-up is taken from the first
-measured forces (3.7). A solve that does not converge is published with ``converged = false``
-(and reported on /diagnostics); the pose message then carries the last converged estimate. The
-computation is :class:`cdpr_control.forward_kinematics.PoseEstimator`.
+``forward_kinematics/diagnostics``. The elongation Δq_0 of the encoder calibration (3.7) comes from
+the home calibration (``home_forces``) or, without one, the mean of the first
+``calibration_window`` measured forces (:mod:`cdpr_control.calibration`). A solve that does not
+converge is published with ``converged = false`` (and reported on /diagnostics); the pose message
+then carries the last converged estimate. The computation is
+:class:`cdpr_control.forward_kinematics.PoseEstimator`.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from cdpr_control import forward_kinematics as fk
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg, pose_to_msg, wrench_to_msg
-from .parameters import ParameterSet, ParamSpec
+from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
 from .qos import CONTROL
 from .sync import StampSync
 
@@ -47,7 +49,9 @@ class ForwardKinematicsNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("forward_kinematics", **kwargs)
         self.estimator = fk.PoseEstimator(self.robot)
-        self.params = ParameterSet(self, PARAMS, lambda v: None, self._apply)
+        self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m),
+                                   lambda v: startup_calibration(self.robot, v), self._apply)
+        self.estimator.calibration = startup_calibration(self.robot, self.params.values)
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)

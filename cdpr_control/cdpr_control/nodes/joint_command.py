@@ -35,6 +35,7 @@ from cdpr_control.safety import SafetyConfig, SafetyMonitor
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
+from .mode import mode_publisher, publish_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync, stamp_ns
@@ -78,6 +79,7 @@ class JointCommandNode(CdprNode):
         names = list(self.get_parameter(OFFSET_INPUTS.name).value)
         self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
         specs = PARAMS + [spec for name in names for spec in offset_params(name)]
+        self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -112,6 +114,8 @@ class JointCommandNode(CdprNode):
             config.validate(name)
 
     def _apply(self, v: dict) -> None:
+        if v["mode"] != self.mode:
+            publish_mode(self.mode_pub, v["mode"])
         self.mode = v["mode"]
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
         self.blend_cfc.set_transfer_time(v["transfer_time"])

@@ -5,7 +5,8 @@ Subscribes ``setpoint`` (x_d) and ``platform/pose`` (x from the forward kinemati
 Disabled, the output is zero (IK-only reference control). With ``force_controller`` naming the
 hybrid force controller, it also subscribes ``<force_controller>/state`` and does not act along
 the force direction while that controller makes, holds or releases contact (states A-D, R;
-Raibert and Craig's selection, Fig. 5.2).
+Raibert and Craig's selection, Fig. 5.2). While ``joint_command`` runs IK-only (its mode on
+``joint_command/mode``, :mod:`.mode`) the output is not applied and the integrator is held.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from cdpr_control.stability import check_force_control, planned_home_forces
 
 from .base import CdprNode, spin_node
 from .conversions import from_vector3, pose_from_msg
+from .mode import follow_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -45,6 +47,7 @@ class OSPCNode(CdprNode):
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
+        follow_mode(self, self._on_mode)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "pose": (PoseStamped, "platform/pose")}
         if force_controller:
             inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
@@ -72,6 +75,9 @@ class OSPCNode(CdprNode):
         # for the minimal-tension distribution of the robot file (the node cannot see the others)
         self.precondition = None if self.enabled else check_force_control(
             self.robot, self.robot.home, planned_home_forces(self.robot), ospc_enabled=False)
+
+    def _on_mode(self, ik_only: bool) -> None:
+        self.controller.pi.hold = ik_only           # bumpless: no wind-up while not applied
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d = pose_from_msg(msgs["setpoint"].pose)

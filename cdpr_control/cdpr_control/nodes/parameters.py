@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from cdpr_control.calibration import DEFAULT_WINDOW, StartupCalibration
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 
 
@@ -79,3 +80,25 @@ class ParameterSet:
                 changed = True
         if changed:
             self._apply(dict(self.values))
+
+
+
+def calibration_params(m: int) -> list[ParamSpec]:
+    """The start-up calibration of Δq_0 (3.9), (3.23) (:mod:`cdpr_control.calibration`), read-only:
+    the forward kinematics and the cable force controller take the same values."""
+    return [
+        ParamSpec("calibration_window", DEFAULT_WINDOW, "samples averaged for the start-up Δq_0 (3.9), (3.23) "
+                  "when no home calibration is given (a start at home) [-]", range=(1, 100000), read_only=True),
+        ParamSpec("home_forces", [0.0] * m, "home calibration: the forces at the platform [N], one per cable, "
+                  "recorded when the encoders were set at home (2.3.2); Δq_0 from them wherever the controller "
+                  "starts. All zero: none, the start-up window", read_only=True),
+    ]
+
+
+def startup_calibration(robot, v: dict) -> StartupCalibration:
+    """The calibration the values of :func:`calibration_params` describe (ValueError if invalid)."""
+    calibration = StartupCalibration(int(v["calibration_window"]))
+    f_home = [float(f) for f in v["home_forces"]]
+    if any(f_home):
+        calibration.set_home(robot, f_home)
+    return calibration

@@ -239,12 +239,13 @@ def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10
     return _run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps)
 
 
-def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.05, 0.35, 0.65, 0.9), hold: float = 0.4,
-                         ramp: float = 0.3, seed: int = 1, level: float = 0.5, plant: str = "mismatched") -> Path:
+def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.35, 0.15), hold: float = 0.35,
+                         ramp: float = 0.2, seed: int = 1, level: float = 0.95, plant: str = "mismatched") -> Path:
     """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
     (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16).
-    plant: the simulator's plant (cdpr_sim.plant); on the mismatched one the geometry errors are
-    as large as the Mini's elongations and a fit of (2.16) at one pose misses k0 (docs/identify.md)."""
+    The run starts tensed at ``level`` (a pre-load: the cables settle there, section 4.1.3) and
+    steps down, so that no cable carries more than before and the steps see no settlement.
+    plant: the simulator's plant (cdpr_sim.plant)."""
     from cdpr_sim.simulator import pretension_lengths
     from cdpr_sim.startup import startup_forces, startup_state
 

@@ -3,9 +3,23 @@
 At rest the elongation of cable i is dq = IK{x} - theta (2.24) up to the encoder's calibration
 offset delta_i (section 2.3.2: the encoders read IK{home} under the start-up tension), and (2.17)
 gives dq = f l_t / (k0 + k1 f + k2 f^2) with l_t = q + l_0 (2.14). Least squares over k0, k1, k2
-(one cable type for the robot) and delta_i per cable on the samples where the command has stood
-still for ``settle`` s (the platform has come to rest). f: the sensor forces through the loop's
-friction compensation (3.44), or the reference forces.
+(one cable type for the robot), delta_i and a relative correction g_i of l_t per cable on the
+samples where the command has stood still for ``settle`` s (the platform has come to rest).
+f: the sensor forces through the loop's friction compensation (3.44), or the reference forces.
+
+What a real robot (and the simulator's mismatched plant) adds to the perfect model, and how the
+fit copes:
+
+* geometry errors of millimetres, as large as the Mini's elongations: at one pose they change
+  IK{x} by a constant per cable, which delta_i absorbs;
+* errors of l_0 (2.14) of ~2 %: they scale each cable's elongation; g_i absorbs them. Only
+  k_spec / l_t is observable, so a common scale of all l_t is k0's: the g_i are constrained to a
+  zero mean (the lengths are measured without a common bias);
+* slack cables: (2.17) holds for taut cables only (a slack cable reads f ~ 0 at any negative
+  elongation), so only samples with f >= ``f_taut`` enter;
+* cable settlement under load (section 4.1.3) adds lasting length while a cable carries more than
+  before: the run steps the tension down from a pre-load (the first hold), whose samples are left
+  out (``preload``), so the data see no settlement.
 """
 from __future__ import annotations
 
@@ -27,8 +41,9 @@ class StiffnessFit:
     k1: float                    # -
     k2: float                    # 1/N
     delta: np.ndarray            # (m,) m, encoder offsets
+    g: np.ndarray                # (m,) -, relative corrections of l_t (zero mean)
     rms: float                   # m, elongation residual
-    n_samples: int
+    n_samples: int               # resting samples (each with the taut cables of that sample)
 
 
 def resting_mask(t, t_c, theta_d, settle: float) -> np.ndarray:
@@ -40,13 +55,17 @@ def resting_mask(t, t_c, theta_d, settle: float) -> np.ndarray:
 
 
 def identify(bag, robot, friction_params: dict | None = None, use_reference: bool = False,
-             settle: float = 0.2, start=(20000.0, 0.0, 0.0)) -> StiffnessFit:
+             settle: float = 0.2, start=(20000.0, 0.0, 0.0), f_taut: float = 1.0,
+             preload: bool = True) -> StiffnessFit:
+    """Fit (2.16) to the resting samples of ``bag``; preload: leave out the first hold."""
     from .friction import load_data
     from .mass import compensated_forces
 
     data = load_data(bag, robot)
     t_c, theta_d = bag_data.commands(bag)
     mask = resting_mask(data.t, t_c, theta_d, settle)
+    if preload:                                       # the cables settle during the pre-load (4.1.3)
+        mask &= data.t > t_c[np.argmax(np.any(theta_d != theta_d[0], axis=1))]
     if mask.sum() < 10:
         raise ValueError("no samples at rest: hold the command still for longer than settle")
     dt = float(np.median(np.diff(data.t)))
@@ -55,19 +74,25 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
     q = np.array([inverse_kinematics(robot, xk).q for xk in x])
     dq_enc = q - data.theta[mask]                     # elongation without the encoder offset
     l_t = cable.total_free_length(robot, q)
+    taut = f >= f_taut                                # (2.17) holds for taut cables only
+    if np.any(taut.sum(axis=0) < 10):
+        raise ValueError(f"a cable has fewer than 10 samples at rest with f >= {f_taut} N")
     m = robot.m
     scale = np.array([start[0], 100.0, 1.0])
 
-    def model(p):
-        k0, k1, k2 = p[:3] * scale
-        r = dataclasses.replace(robot, cable=dataclasses.replace(robot.cable, k0=k0, k1=k1, k2=k2))
-        return cable.elongation_from_force(r, f, l_t)
+    def corrections(p):
+        g = p[3 + m:] * 1e-2
+        return p[3:3 + m] * 1e-3, np.r_[g, -np.sum(g)]          # delta [m]; g with zero mean
 
     def residual(p):
-        return (model(p) - dq_enc - p[3:] * 1e-3).ravel()
+        k0, k1, k2 = p[:3] * scale
+        r = dataclasses.replace(robot, cable=dataclasses.replace(robot.cable, k0=k0, k1=k1, k2=k2))
+        delta, g = corrections(p)
+        return (cable.elongation_from_force(r, f, l_t * (1.0 + g)) - dq_enc - delta)[taut]
 
-    p0 = np.concatenate([np.array(start) / scale, np.zeros(m)])
+    p0 = np.concatenate([np.array(start) / scale, np.zeros(2 * m - 1)])
     res = least_squares(residual, p0, method="lm", xtol=1e-12, ftol=1e-12)
     k0, k1, k2 = res.x[:3] * scale
-    return StiffnessFit(float(k0), float(k1), float(k2), res.x[3:] * 1e-3,
+    delta, g = corrections(res.x)
+    return StiffnessFit(float(k0), float(k1), float(k2), delta, g,
                         float(np.sqrt(np.mean(res.fun**2))), int(mask.sum()))
