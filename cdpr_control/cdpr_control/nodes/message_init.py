@@ -8,7 +8,8 @@ period, so :func:`install` gives the message classes of the packages the graph u
 ``__init__`` generated like the dataclasses' one: the given values go straight into the slots,
 converted as the generated constructor converts them (numeric sequences to ``array.array``, a
 copy), and a default is built only for a field not given. The messages are the same (equal,
-same bytes: tests/test_node_messages.py); 30 us a ControllerState becomes 4.
+same bytes: tests/test_node_messages.py); an OperationalSetpoint built from header and pose takes 1.8 us
+instead of 10.7.
 
 Classes with fields this does not cover (fixed-size arrays, which the generated code keeps as
 numpy arrays; characters, octets, wide strings) keep their constructor, and so does every class
