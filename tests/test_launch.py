@@ -234,10 +234,11 @@ def test_a_raising_callback_ends_a_composed_launch_with_the_error(capfd):
     assert "RuntimeError: boom" in capfd.readouterr().out  # the traceback, printed under [graph]
 
 
-@pytest.mark.parametrize("mode", ["composed", "processes"])
-def test_the_shipped_graph_runs_in_both_modes(listen, mode):
-    """closed_loop.yaml (IPAnema 3 Mini, nominal simulator plant) loops and draws markers: composed in
-    lockstep; one process per node free-running (sync_mode latest). In lockstep, a process graph can
+@pytest.mark.parametrize("mode,sync_mode", [("composed", "exact"), ("composed", "latest"), ("processes", "latest")])
+def test_the_shipped_graph_runs_in_both_modes(listen, mode, sync_mode):
+    """closed_loop.yaml (IPAnema 3 Mini, nominal simulator plant) loops and draws markers (a 10 Hz
+    timer of the visualization node): composed in lockstep (SingleThreadedExecutor) and
+    free-running (EventsExecutor); one process per node free-running. In lockstep, a process graph can
     stall at start-up: the interpreter sends the set-point of t = 0 once, and a node that subscribes
     to /setpoint after that waits for it forever while the simulator repeats only its state."""
     from sensor_msgs.msg import JointState
@@ -245,7 +246,7 @@ def test_the_shipped_graph_runs_in_both_modes(listen, mode):
 
     collector = listen.add(Collector, topics={"/winch/state": JointState, "/visualization/markers": MarkerArray})
     description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml",
-                                   {"sync_mode": "exact" if mode == "composed" else "latest"})
+                                   {"sync_mode": sync_mode})
     with Launcher(description, mode=mode) as launcher:
         wait_for(lambda: collector.count("/winch/state") > 200 and collector.count("/visualization/markers") > 2,
                  timeout=120, what=f"the {mode} graph to loop and draw")

@@ -214,9 +214,13 @@ class Launcher:
         context = self._new_context()
         IntraProcess.set_enabled(context, self.intra_process)
         # in-process, the loop's messages never reach the executor, which only runs timers, services
-        # and DDS input: the SingleThreadedExecutor runs timers on time between in-process chains,
-        # where the EventsExecutor of these wheels delays them more and more (10 Hz became 0.3 Hz)
-        executor = (SingleThreadedExecutor if self.intra_process else EventsExecutor)(context=context)
+        # and DDS input. Lockstep: the SingleThreadedExecutor runs timers on time between the slices
+        # of the endless in-process ring, where the EventsExecutor of these wheels delays them more
+        # and more (10 Hz became 0.3 Hz). Free-running, each period is one timer event whose chain
+        # ends within it, and a SingleThreadedExecutor turn (its wait set rebuilt over every entity,
+        # about 1.6 ms) would cost more than the period: the EventsExecutor takes events off a queue.
+        lockstep = self.description.parameters.get("sync_mode", "exact") == "exact"
+        executor = (SingleThreadedExecutor if self.intra_process and lockstep else EventsExecutor)(context=context)
         self._graph = context, executor
         for spec in self.description.nodes:
             module, _ = spec.target()
