@@ -66,8 +66,8 @@ def pose_to_msg(x, msg: Pose | None = None) -> Pose:
 
 
 def pose_from_msg(msg: Pose) -> np.ndarray:
-    q = msg.orientation
-    return np.array([msg.position.x, msg.position.y, msg.position.z, *quaternion_to_kardan(q.x, q.y, q.z, q.w)])
+    p, q = msg._position, msg._orientation          # the slots: several times a period in every node
+    return np.array([p._x, p._y, p._z, *quaternion_to_kardan(q._x, q._y, q._z, q._w)])
 
 
 def vector3(v, msg: Vector3 | None = None) -> Vector3:
@@ -87,15 +87,19 @@ def _pair(cls, first: str, second: str, a, b):
 
 
 def from_vector3(msg: Vector3) -> np.ndarray:
-    return np.array([msg.x, msg.y, msg.z])
+    return np.array([msg._x, msg._y, msg._z])
 
 
 def twist_to_msg(xdot) -> Twist:
     return _pair(Twist, "_linear", "_angular", vector3(xdot[:3]), vector3(xdot[3:6]))
 
 
+def _six(a: Vector3, b: Vector3) -> np.ndarray:
+    return np.array([a._x, a._y, a._z, b._x, b._y, b._z])
+
+
 def twist_from_msg(msg: Twist) -> np.ndarray:
-    return np.concatenate([from_vector3(msg.linear), from_vector3(msg.angular)])
+    return _six(msg._linear, msg._angular)
 
 
 def accel_to_msg(xddot) -> Accel:
@@ -103,7 +107,7 @@ def accel_to_msg(xddot) -> Accel:
 
 
 def accel_from_msg(msg: Accel) -> np.ndarray:
-    return np.concatenate([from_vector3(msg.linear), from_vector3(msg.angular)])
+    return _six(msg._linear, msg._angular)
 
 
 def wrench_to_msg(w) -> Wrench:
@@ -112,4 +116,4 @@ def wrench_to_msg(w) -> Wrench:
 
 
 def wrench_from_msg(msg: Wrench) -> np.ndarray:
-    return np.concatenate([from_vector3(msg.force), from_vector3(msg.torque)])
+    return _six(msg._force, msg._torque)

@@ -317,7 +317,8 @@ class IntraProcessPublisher(Publisher):
                     else:
                         items.append((s.callback, obj))
                 topic.recent.append(obj)
-        if self.get_subscription_count() > len(matched):
+        # rcl's count without rclpy's handle guard (this thread owns the publisher; 20 calls a period)
+        if self._Publisher__publisher.get_subscription_count() > len(matched):
             super().publish(msg)    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
             self._ipc_registry.post(items)
