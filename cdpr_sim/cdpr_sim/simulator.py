@@ -175,7 +175,8 @@ class Simulator:
         shape = platform_collision_shape(pb, cid, config.platform_shape, np.asarray(robot.b))
         x0 = robot.home if x0 is None else x0
         self._body = PlatformBody(pb, cid, shape, robot.platform, x0, None)
-        self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance)
+        self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance, config.dt)
+        self._gravity = np.array(robot.gravity, dtype=float)
         self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
         self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
         self.settlement = Settlement(self.plant.settlement_ratio, self.plant.settlement_time, robot.cable.k0,
@@ -293,15 +294,23 @@ class Simulator:
         t = self.t
         for i in range(cfg.substeps):
             if i == 0:                                   # the state of _measure: forces known
-                F, T, r, R = self._pending
+                f, A, d, r, R = self._pending
             else:
                 r, R, v, omega = body.state()
-                _, F, T, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
+                f, _, _, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
+                A, d = cables.linearisation()
+            w = self._external_wrench(t, R) if self._external else _ZERO6
+            # the contact wrench of the last period belongs to the platform's load: at rest in contact
+            # the implicit step then applies the cables' own forces (no predicted motion)
+            w_load = w + self._w_contact if self._obstacles else w
+            thetadot = drives.thetadot.copy()
+            drives.step(u)                               # the drives do not feel the cable forces
+            np.subtract(drives.thetadot, thetadot, out=thetadot)
+            F, T = cables.implicit_wrench(f, A, d, thetadot, body.mass, body.c, body.inertia, R, self._gravity,
+                                          w_load)
             if self._external:
-                w = self._external_wrench(t, R)
                 F, T = F + w[:3], T + w[3:]
             body.apply(F, T, r)
-            drives.step(u)
             pb.stepSimulation(physicsClientId=cid)
             t += dt
         self.steps += 1
@@ -330,7 +339,8 @@ class Simulator:
             f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         f = f.copy()
         self.settlement.update(f, cable.total_free_length(self.robot, theta_u))   # acts from the next step
-        self._pending = (F.copy(), T.copy(), r, R)
+        A, d = cables.linearisation()
+        self._pending = (f, A.copy(), d.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity
         thetadot = (theta - self._theta_prev) * (1.0 / period)
@@ -343,11 +353,12 @@ class Simulator:
         theta_enc = self.encoder.read(theta_true)
         thetadot_enc = (theta_enc - self._theta_enc_prev) * (1.0 / period)
         self._theta_enc_prev = theta_enc
+        self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
         return SimOutput(
             t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
             x=np.concatenate([r, phi]), xdot=np.concatenate([v, omega]), f=f,
             F_s_true=F_s_true, theta_true=theta_true, beta=cables.beta, w_ext=w_ext,
-            w_contact=self._contact_wrench(r) if self._obstacles else _ZERO6,
+            w_contact=self._w_contact,
         )
 
     def _contact_wrench(self, r) -> np.ndarray:
