@@ -1,15 +1,24 @@
-"""A push beyond the limits (issue 18, item 5): the simulator stays stable and the loop holds.
+"""A push and a payload beyond the limits (issue 18, item 5): the simulator stays stable, the loop
+holds, and an impossible payload is named.
 
 A 1000 N pulse of 0.5 s on the IPAnema 3 Mini (1 kg platform, 40 N cables) is 100 times its
 weight: the cables go slack on one side and far beyond their rated force on the other. The
 physics must stay physical (no energy from nowhere, bounded forces, no NaN) and the motion must
 decay once the push is over; slack cables that snap taut must not add energy. With the force
 controllers closed around it, the commands stay finite and within the drives' rate limit.
-Default (mismatched) plant throughout.
+A payload far beyond the robot (100 kg on the Mini) is refused by the program check and simulated
+with a warning. Default (mismatched) plant throughout.
 """
 import numpy as np
+import pytest
 
+from cdpr_control.force_distribution import wrench_feasible
+from cdpr_control.gcode import parse_gcode
+from cdpr_control.gcode_program import GCodeError
+from cdpr_control.program_check import check_program, payload_capacity
 from cdpr_control.robot import load_robot
+from cdpr_control.workspace import static_problem, with_platform_mass
+from cdpr_tools.cli import main as cdpr
 from cdpr_sim import closed_loop
 from cdpr_sim.simulator import SimConfig, Simulator
 from cdpr_sim.startup import startup_state
@@ -107,3 +116,39 @@ def test_force_control_holds_through_a_1000_N_push():
     assert np.all(run.f[late] > 0.5 * c.f_min) and np.all(run.f[late] < c.f_max)
     assert np.abs(run.x[late, :3] - robot.home[:3]).max() < 5e-3
     assert np.ptp(run.x[late, :3], axis=0).max() < 1e-3                 # settling, not swinging
+
+
+def test_a_payload_beyond_the_robot_is_simulated_with_a_warning():
+    """The simulator may overload itself (a fault to test against) but says why: 100 kg on the
+    Mini (40 N cables) is held by no cable forces within the limits; 0.5 kg is."""
+    robot, sim = _mini_at_rest()
+    with sim:
+        assert sim.set_payload(0.5) == 1.5 and sim.payload_warning is None
+        assert sim.set_payload(100.0) == pytest.approx(101.0)
+        assert "beyond what the robot can hold" in sim.payload_warning
+        assert "[5, 40] N" in sim.payload_warning and "simulating the overload" in sim.payload_warning
+        capacity = float(sim.payload_warning.split("capacity there ")[1].split(" kg")[0])
+        assert 0.5 < capacity < 100.0
+        sim.set_payload(0.0)
+        assert sim.payload_warning is None
+
+
+def test_program_check_refuses_a_payload_beyond_the_capacity(capsys):
+    """A controller-side payload that no cable forces hold at home is refused with the reason, in
+    check_program (the interpreter's goals) and in `cdpr program check --payload`."""
+    robot = load_robot("ipanema3_mini")
+    capacity = payload_capacity(robot)
+    # at the capacity the platform's weight needs some cable at f_max, just beyond it none suffices
+    AT, w = static_problem(with_platform_mass(robot, robot.platform.mass + capacity), robot.home[None])
+    assert wrench_feasible(AT, w, robot.cable.f_min, robot.cable.f_max)[0]
+    AT, w = static_problem(with_platform_mass(robot, robot.platform.mass + 1.01 * capacity), robot.home[None])
+    assert not wrench_feasible(AT, w, robot.cable.f_min, robot.cable.f_max)[0]
+    program = parse_gcode("G90 G1 X0 F6000\nG1 X10", start_pose=robot.home)
+    assert check_program(program, robot, payload=0.5 * capacity) > 0
+    with pytest.raises(GCodeError) as err:
+        check_program(program, robot, payload=100.0)
+    d = err.value.diagnostics[0]
+    assert d.line == 1 and "100 kg is beyond what IPAnema 3 Mini can hold" in d.message
+    assert f"capacity there is {capacity:.3g} kg" in d.message
+    assert cdpr(["program", "check", "--robot", "ipanema3_mini", "--payload", "100", "rectangle"]) == 1
+    assert "beyond what IPAnema 3 Mini can hold" in capsys.readouterr().out

@@ -184,6 +184,7 @@ class Simulator:
         self._w_cont = np.zeros(6)
         self._pulse: WrenchPulse | None = None
         self._external = False            # a held wrench or a pulse is acting
+        self.payload_warning: str | None = None     # why the payload is beyond the robot, see set_payload
         self.reset(x0, theta0, encoder_offset=encoder_offset)
 
     # --- set-up ----------------------------------------------------------------------------
@@ -229,11 +230,34 @@ class Simulator:
         center_of_gravity (3,) in the platform frame [m], inertia (3, 3) about it [kg m^2] (None:
         a point mass), see Robot.with_payload. The platform keeps its pose and twist. Returns the
         total mass [kg].
+
+        A payload the robot cannot hold is simulated all the same (an overload is a fault to test
+        against) but ``payload_warning`` then says why: no cable forces within [f_min, f_max] hold
+        the loaded platform at its current pose (2.39)-(2.40), with the capacity there.
         """
         robot = self.base_robot.with_payload(mass, center_of_gravity, inertia)
         self._body.set_mass_properties(robot.platform)      # same pose and twist: forces unchanged
         self.robot = robot
+        self.payload_warning = self._payload_warning(mass)
         return robot.platform.mass
+
+    def _payload_warning(self, mass: float) -> str | None:
+        if mass <= 0.0:
+            return None
+        from cdpr_control.force_distribution import wrench_feasible     # a service call: import on use
+        from cdpr_control.program_check import payload_capacity
+        from cdpr_control.workspace import static_problem
+        robot, base = self.robot, self.base_robot
+        x, _ = self._body.pose_and_twist()
+        AT, w = static_problem(robot, x[None])
+        c = robot.cable
+        if wrench_feasible(AT, w, c.f_min, c.f_max)[0]:
+            return None
+        capacity = payload_capacity(base, x)
+        return (f"payload {mass:g} kg is beyond what the robot can hold: no cable forces within [f_min, f_max] = "
+                f"[{np.min(c.f_min):g}, {np.max(c.f_max):g}] N hold {robot.platform.mass:g} kg at "
+                f"x = {np.round(x[:3], 3).tolist()} m (capacity there {capacity:.3g} kg of payload); "
+                "simulating the overload")
 
     def set_external_wrench(self, w) -> None:
         """A held external wrench (6,) [N, N m] on the platform, base frame, about the platform origin."""
