@@ -137,10 +137,10 @@ class CableModel:
         transposed structure matrix) and the implicit coefficients d_i of :meth:`implicit_wrench`."""
         return self._A, self._d
 
-    def implicit_wrench(self, f, A, d, dthetadot, mass, c_p, J_p, R, g, w_ext):
+    def implicit_wrench(self, f, A, d, thetadot_0, thetadot_1, mass, c_p, J_p, R, g, w_ext):
         """The cable wrench to apply over the next physics step (force (3,), torque (3,) about the
         platform origin, base frame): the forces f (m,) of :meth:`wrench` with its linearisation
-        (A, d) and the winches' velocity change dthetadot (m,) over the step, made implicit over
+        (A, d) and the winch velocities thetadot_0 -> thetadot_1 (m,) over the step, made implicit over
         the step for a platform of ``mass`` [kg] with its centre of
         gravity at c_p (3,) and inertia J_p (3, 3) about it (platform frame), at rotation R, under
         gravity g (3,) and the external wrench w_ext (6,) about its origin (base frame).
@@ -154,8 +154,8 @@ class CableModel:
         damping) and an implicit (backward Euler) damper, which cannot overshoot: stable for any
         stiffness, so energy cannot grow; a cable that would push is slack (unilateral, f >= 0).
         """
-        self.slackened += _implicit_wrench(A, f, d, dthetadot, self.step, mass, c_p, J_p, R, g, w_ext,
-                                           self._FT_step)
+        self.slackened += _implicit_wrench(A, f, d, thetadot_0, thetadot_1, self.step, mass, c_p, J_p, R, g,
+                                           w_ext, self._FT_step)
         FT = self._FT_step
         return FT[:3], FT[3:]
 
@@ -225,7 +225,7 @@ def _cable_wrench(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omeg
 
 
 @numba.njit(cache=True)
-def _implicit_wrench(A, f, d, dthetadot, h, mass, c_p, J_p, R, g, w_ext, FT):
+def _implicit_wrench(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w_ext, FT):
     """Cable wrench over one physics step of length h, linearly implicit in the cable forces.
 
     The platform twist xi = [v; omega] of its origin changes by dxi over the step; M is its spatial
@@ -233,15 +233,26 @@ def _implicit_wrench(A, f, d, dthetadot, h, mass, c_p, J_p, R, g, w_ext, FT):
     origin, inertia R J_p R^T about the centre of gravity; c_p, J_p in the platform frame); w_other
     is gravity g (3,) and the external wrench w_ext (6,) about the origin. Each taut cable's force
     over the step is taken at the end-of-step elongation rate and a quarter step further along the
-    elongation, f_i' = f_i + d_i ds_i with ds_i = -A_i dxi - dthetadot_i (2.12), (2.24) and
+    elongation, f_i' = f_i + d_i ds_i with ds_i = -A_i dxi - dthetadot_i (2.12), (2.24) (the winch
+    velocity changes from thetadot_0 to thetadot_1 over the step) and
     d_i = (h/4 + tau_c) k_t,i (a Newmark average-acceleration spring, a backward Euler damper); so
     (M + h A^T D A) dxi = h (A^T (f - D dthetadot) + w_other). A cable whose f_i' would be
     negative is slack over the step (f_i' = 0) and the system is solved again without it. Fills
     FT = A^T f' and returns the number of cables that went slack in the step.
     """
     m = A.shape[0]
-    rho = R @ c_p
-    J = R @ J_p @ R.T
+    rho = np.zeros(3)
+    RJ = np.zeros((3, 3))
+    J = np.zeros((3, 3))
+    for a in range(3):                                # rho = R c_p, J = R J_p R^T (loops: no BLAS call)
+        for k in range(3):
+            rho[a] += R[a, k] * c_p[k]
+            for b in range(3):
+                RJ[a, b] += R[a, k] * J_p[k, b]
+    for a in range(3):
+        for b in range(3):
+            for k in range(3):
+                J[a, b] += RJ[a, k] * R[b, k]
     w_other = np.empty(6)
     for k in range(3):
         w_other[k] = mass * g[k] + w_ext[k]
@@ -252,7 +263,8 @@ def _implicit_wrench(A, f, d, dthetadot, h, mass, c_p, J_p, R, g, w_ext, FT):
     for k in range(3):
         M[k, k] = mass
     # [rho]x blocks: M = [[m I, -m [rho]x], [m [rho]x, J - m [rho]x [rho]x]]
-    S = np.array([[0.0, -rho[2], rho[1]], [rho[2], 0.0, -rho[0]], [-rho[1], rho[0], 0.0]])
+    S = np.zeros((3, 3))
+    S[0, 1], S[0, 2], S[1, 0], S[1, 2], S[2, 0], S[2, 1] = -rho[2], rho[1], rho[2], -rho[0], -rho[1], rho[0]
     for a in range(3):
         for b in range(3):
             M[a, 3 + b] = -mass * S[a, b]
@@ -266,7 +278,7 @@ def _implicit_wrench(A, f, d, dthetadot, h, mass, c_p, J_p, R, g, w_ext, FT):
         active[i] = d[i] > 0.0
     fn = np.empty(m)
     for i in range(m):
-        fn[i] = f[i] - d[i] * dthetadot[i]           # the winch's own velocity change over the step
+        fn[i] = f[i] - d[i] * (thetadot_1[i] - thetadot_0[i])     # the winch's velocity change over the step
     K = np.empty((6, 6))
     rhs = np.empty(6)
     x = np.empty(6)

@@ -177,6 +177,7 @@ class Simulator:
         self._body = PlatformBody(pb, cid, shape, robot.platform, x0, None)
         self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance, config.dt)
         self._gravity = np.array(robot.gravity, dtype=float)
+        self._thetadot_0 = np.empty(self.m)          # the drives' velocity at the start of a physics step
         self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
         self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
         self.settlement = Settlement(self.plant.settlement_ratio, self.plant.settlement_time, robot.cable.k0,
@@ -327,11 +328,11 @@ class Simulator:
             # the contact wrench of the last period belongs to the platform's load: at rest in contact
             # the implicit step then applies the cables' own forces (no predicted motion)
             w_load = w + self._w_contact if self._obstacles else w
-            thetadot = drives.thetadot.copy()
+            thetadot_0 = self._thetadot_0
+            thetadot_0[:] = drives.thetadot
             drives.step(u)                               # the drives do not feel the cable forces
-            np.subtract(drives.thetadot, thetadot, out=thetadot)
-            F, T = cables.implicit_wrench(f, A, d, thetadot, body.mass, body.c, body.inertia, R, self._gravity,
-                                          w_load)
+            F, T = cables.implicit_wrench(f, A, d, thetadot_0, drives.thetadot, body.mass, body.c, body.inertia, R,
+                                          self._gravity, w_load)
             if self._external:
                 F, T = F + w[:3], T + w[3:]
             body.apply(F, T, r)
