@@ -134,6 +134,8 @@ def test_payload_beyond_the_robot_is_accepted_with_a_warning(graph):
     diagnostics = []
     probe.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10)
     assert payload.wait_for_service(timeout_sec=5.0)
+    # a lockstep node reports on change only: the probe must hear the first report
+    assert _spin_until(executor, lambda: sim.diagnostics_pub.get_subscription_count() > 0)
     request = SetPayload.Request()
     request.payload.m = 100.0
     future = payload.call_async(request)
