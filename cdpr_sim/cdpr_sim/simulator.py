@@ -25,8 +25,10 @@ unstretched length itself.
 
 Time: a control period of ``period`` seconds is ``substeps`` physics steps (period / substeps
 <= 1 ms). theta_d is held over the period (zero-order hold); the outputs hold for the end of the
-period. Forces come from the state at the start of each physics step (pybullet integrates
-semi-implicitly). Everything is deterministic for a given seed: the only random numbers are the
+period. Forces come from the state at the start of each physics step, made linearly implicit over
+the step (:meth:`cdpr_sim.cables.CableModel.implicit_wrench`: stable however stiff the loaded
+cables, so a hard push or slack cables snapping taut add no energy); pybullet integrates the
+platform semi-implicitly. Everything is deterministic for a given seed: the only random numbers are the
 sensor noise, drawn from numpy's PCG64 generator.
 """
 from __future__ import annotations
