@@ -8,6 +8,7 @@ from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
 rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces  # noqa: E402
 from cdpr_msgs.srv import ApplyWrench, SetPayload  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -132,6 +133,34 @@ def test_payload_and_wrench_services(graph):
     request.duration = 0.0                                           # a half sine needs a duration
     response = call(wrench, request)
     assert not response.success and "duration" in response.message
+
+
+def test_payload_beyond_the_robot_is_accepted_with_a_warning(graph):
+    """100 kg on the Mini: simulated (an overload to test faults against) but the response and
+    /diagnostics say that no cable forces within the limits hold it."""
+    sim, probe, executor = graph
+    payload = probe.create_client(SetPayload, "sim/set_payload")
+    diagnostics = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10)
+    assert payload.wait_for_service(timeout_sec=5.0)
+    # a lockstep node reports on change only: the probe must hear the first report
+    assert _spin_until(executor, lambda: sim.diagnostics_pub.get_subscription_count() > 0)
+    request = SetPayload.Request()
+    request.payload.m = 100.0
+    future = payload.call_async(request)
+    assert _spin_until(executor, future.done)
+    response = future.result()
+    assert response.success and response.total_mass == pytest.approx(101.0)
+    assert "beyond what the robot can hold" in response.message and "[5, 40] N" in response.message
+
+    def warned():
+        return any(s.level == DiagnosticStatus.WARN and "beyond what the robot can hold" in s.message
+                   for d in diagnostics for s in d.status if "winch_platform_sim" in s.name)
+    assert _spin_until(executor, warned, timeout=5.0)
+    request.payload.m = 0.5
+    future = payload.call_async(request)
+    assert _spin_until(executor, future.done)
+    assert future.result().success and future.result().message == ""
 
 
 def test_parameters_are_validated_on_set(graph):

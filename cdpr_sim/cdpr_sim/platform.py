@@ -53,6 +53,7 @@ class PlatformBody:
         self.c = np.array(platform.center_of_gravity, dtype=float)
         self.V = V
         self.mass = float(platform.mass)
+        self.inertia = np.ascontiguousarray(platform.inertia, dtype=float)   # about the c.o.g., platform frame
         self._offset = bool(np.any(self.c != 0.0) or np.any(V != np.eye(3)))
         pb, cid = self.pb, self.client
         self.body = pb.createMultiBody(

@@ -25,8 +25,10 @@ unstretched length itself.
 
 Time: a control period of ``period`` seconds is ``substeps`` physics steps (period / substeps
 <= 1 ms). theta_d is held over the period (zero-order hold); the outputs hold for the end of the
-period. Forces come from the state at the start of each physics step (pybullet integrates
-semi-implicitly). Everything is deterministic for a given seed: the only random numbers are the
+period. Forces come from the state at the start of each physics step, made linearly implicit over
+the step (:meth:`cdpr_sim.cables.CableModel.implicit_wrench`: stable however stiff the loaded
+cables, so a hard push or slack cables snapping taut add no energy); pybullet integrates the
+platform semi-implicitly. Everything is deterministic for a given seed: the only random numbers are the
 sensor noise, drawn from numpy's PCG64 generator.
 """
 from __future__ import annotations
@@ -175,7 +177,9 @@ class Simulator:
         shape = platform_collision_shape(pb, cid, config.platform_shape, np.asarray(robot.b))
         x0 = robot.home if x0 is None else x0
         self._body = PlatformBody(pb, cid, shape, robot.platform, x0, None)
-        self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance)
+        self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance, config.dt)
+        self._gravity = np.array(robot.gravity, dtype=float)
+        self._thetadot_0 = np.empty(self.m)          # the drives' velocity at the start of a physics step
         self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
         self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
         self.settlement = Settlement(self.plant.settlement_ratio, self.plant.settlement_time, robot.cable.k0,
@@ -183,6 +187,7 @@ class Simulator:
         self._w_cont = np.zeros(6)
         self._pulse: WrenchPulse | None = None
         self._external = False            # a held wrench or a pulse is acting
+        self.payload_warning: str | None = None     # why the payload is beyond the robot, see set_payload
         self.reset(x0, theta0, encoder_offset=encoder_offset)
 
     # --- set-up ----------------------------------------------------------------------------
@@ -228,11 +233,34 @@ class Simulator:
         center_of_gravity (3,) in the platform frame [m], inertia (3, 3) about it [kg m^2] (None:
         a point mass), see Robot.with_payload. The platform keeps its pose and twist. Returns the
         total mass [kg].
+
+        A payload the robot cannot hold is simulated all the same (an overload is a fault to test
+        against) but ``payload_warning`` then says why: no cable forces within [f_min, f_max] hold
+        the loaded platform at its current pose (2.39)-(2.40), with the capacity there.
         """
         robot = self.base_robot.with_payload(mass, center_of_gravity, inertia)
         self._body.set_mass_properties(robot.platform)      # same pose and twist: forces unchanged
         self.robot = robot
+        self.payload_warning = self._payload_warning(mass)
         return robot.platform.mass
+
+    def _payload_warning(self, mass: float) -> str | None:
+        if mass <= 0.0:
+            return None
+        from cdpr_control.force_distribution import wrench_feasible     # a service call: import on use
+        from cdpr_control.program_check import payload_capacity
+        from cdpr_control.workspace import static_problem
+        robot, base = self.robot, self.base_robot
+        x, _ = self._body.pose_and_twist()
+        AT, w = static_problem(robot, x[None])
+        c = robot.cable
+        if wrench_feasible(AT, w, c.f_min, c.f_max)[0]:
+            return None
+        capacity = payload_capacity(base, x)
+        return (f"payload {mass:g} kg is beyond what the robot can hold: no cable forces within [f_min, f_max] = "
+                f"[{np.min(c.f_min):g}, {np.max(c.f_max):g}] N hold {robot.platform.mass:g} kg at "
+                f"x = {np.round(x[:3], 3).tolist()} m (capacity there {capacity:.3g} kg of payload); "
+                "simulating the overload")
 
     def set_external_wrench(self, w) -> None:
         """A held external wrench (6,) [N, N m] on the platform, base frame, about the platform origin."""
@@ -293,15 +321,23 @@ class Simulator:
         t = self.t
         for i in range(cfg.substeps):
             if i == 0:                                   # the state of _measure: forces known
-                F, T, r, R = self._pending
+                f, A, d, r, R = self._pending
             else:
                 r, R, v, omega = body.state()
-                _, F, T, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
+                f, _, _, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
+                A, d = cables.linearisation()
+            w = self._external_wrench(t, R) if self._external else _ZERO6
+            # the contact wrench of the last period belongs to the platform's load: at rest in contact
+            # the implicit step then applies the cables' own forces (no predicted motion)
+            w_load = w + self._w_contact if self._obstacles else w
+            thetadot_0 = self._thetadot_0
+            thetadot_0[:] = drives.thetadot
+            drives.step(u)                               # the drives do not feel the cable forces
+            F, T = cables.implicit_wrench(f, A, d, thetadot_0, drives.thetadot, body.mass, body.c, body.inertia, R,
+                                          self._gravity, w_load)
             if self._external:
-                w = self._external_wrench(t, R)
                 F, T = F + w[:3], T + w[3:]
             body.apply(F, T, r)
-            drives.step(u)
             pb.stepSimulation(physicsClientId=cid)
             t += dt
         self.steps += 1
@@ -330,7 +366,8 @@ class Simulator:
             f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         f = f.copy()
         self.settlement.update(f, cable.total_free_length(self.robot, theta_u))   # acts from the next step
-        self._pending = (F.copy(), T.copy(), r, R)
+        A, d = cables.linearisation()
+        self._pending = (f, A.copy(), d.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity
         thetadot = (theta - self._theta_prev) * (1.0 / period)
@@ -343,11 +380,12 @@ class Simulator:
         theta_enc = self.encoder.read(theta_true)
         thetadot_enc = (theta_enc - self._theta_enc_prev) * (1.0 / period)
         self._theta_enc_prev = theta_enc
+        self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
         return SimOutput(
             t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
             x=np.concatenate([r, phi]), xdot=np.concatenate([v, omega]), f=f,
             F_s_true=F_s_true, theta_true=theta_true, beta=cables.beta, w_ext=w_ext,
-            w_contact=self._contact_wrench(r) if self._obstacles else _ZERO6,
+            w_contact=self._w_contact,
         )
 
     def _contact_wrench(self, r) -> np.ndarray:

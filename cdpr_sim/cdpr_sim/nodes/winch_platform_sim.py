@@ -257,7 +257,10 @@ class WinchPlatformSimNode(CdprNode):
             response.success, response.message = False, "payload inertia must be positive semi-definite"
         else:
             response.total_mass = self.sim.set_payload(p.m, com, J)
-            response.success, response.message = True, ""
+            response.success, response.message = True, self.sim.payload_warning or ""
+            if self.sim.payload_warning:
+                self.get_logger().warn(self.sim.payload_warning)
+            self._report()
         if not response.success:
             response.total_mass = self.sim.robot.platform.mass
         return response
@@ -347,10 +350,13 @@ class WinchPlatformSimNode(CdprNode):
         if not self.lockstep:
             values.update(self.step_lateness.report())
             values.update(self.command_latency.report())
-        level = DiagnosticStatus.WARN if self.missed_deadlines or self.overruns or sim.cables.overloads else DiagnosticStatus.OK
+        warn = self.missed_deadlines or self.overruns or sim.cables.overloads or sim.payload_warning
+        level = DiagnosticStatus.WARN if warn else DiagnosticStatus.OK
         mode = "lockstep" if self.lockstep else "free running"
-        self.report(level, f"{mode}: {self.missed_deadlines} missed deadlines, {sim.cables.overloads} cable overloads",
-                    values, stamp_ns=sim.steps * self.period_ns, always=not self.lockstep)
+        message = f"{mode}: {self.missed_deadlines} missed deadlines, {sim.cables.overloads} cable overloads"
+        if sim.payload_warning:
+            message += f"; {sim.payload_warning}"
+        self.report(level, message, values, stamp_ns=sim.steps * self.period_ns, always=not self.lockstep)
 
     def destroy_node(self):
         self.sim.close()
