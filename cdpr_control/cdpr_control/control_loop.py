@@ -29,7 +29,7 @@ from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
 from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
-                                   select_position_feedback)
+                                   expected_contact_wrench, select_position_feedback)
 from .joint_command import JointCommand
 from .offset_inputs import OffsetInputs, OffsetSample
 from .ospc import OperationalSpacePositionController, OSPCParams
@@ -156,7 +156,12 @@ class ControlLoop:
         inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w, ik_d)
         outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
-        dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT, w_model=sum(w_models) if w_models else None)
+        # section 5.1.2: the expected contact reaction, not the measured one, in the distribution's
+        # wrench; from the last period's state, so that the set-point the CFC holds from the
+        # period A begins (the one before the approach) has no contact in it
+        w_dist = w if self.state is None or self.state.hpfc is None else w + expected_contact_wrench(self.state.hpfc)
+        dist = self.force.update(x_d, xdot_d, xddot_d, w_dist, ik_d.AT,
+                                 w_model=sum(w_models) if w_models else None)
         p = self.params
         force_control = p.mode == "force_control"
         for blend in (self.blend_cfc, self.blend_ospc, self.blend_hpfc):

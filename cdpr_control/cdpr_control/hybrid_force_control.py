@@ -311,6 +311,23 @@ class HybridForceControl:
         self.x_t = x_new
 
 
+def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
+    """The correction (6,) that puts the expected contact reaction into the wrench of the force
+    distribution (3.26)-(3.28) in place of the measured one: w - (F_d - F) z_t (force part).
+
+    While the hybrid force controller acts (A-D, R) the environment is expected to push the platform
+    with -F_d z_t. The distribution then plans for the contact force being established, does not
+    step when the contact is made or lost (the sum w_F + (F - F_d) z_t does not contain the
+    contact's jump), and after the release (F_d < F_th) its wrench filter holds no memory of the
+    contact, so the CFC resuming in I does not press the platform down with the filtered remains
+    of the contact force. Idle (I): 0.
+    """
+    w = np.zeros(6)
+    if state is not None and state.state in FORCE_CONTROLLED:
+        w[:3] = -(state.F_d - state.F) * state.z_t
+    return w
+
+
 class CFCCoupling:
     """Section 5.1.2's changes of the cable force control under hybrid force control.
 
