@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cdpr_control.control_loop import ControlLoopParams
+from cdpr_control.controller_params import control_loop_params
 from cdpr_control.hybrid_force_control import (CFCCoupling, HPFCParams, HybridForceControl, MovingAverage,
                                                contact_force, expected_contact_wrench, format_state, parse_state,
                                                select_position_feedback, task_frame)
@@ -226,7 +227,7 @@ def floor_program_run(duration=None):
     interp = Interpolator(parse_gcode(programs.read("floor_contact_ipanema3"), start_pose=robot.home), dt=1e-3)
     radius, centre = default_tool(np.asarray(robot.b))
     floor = Plane.floor(robot.home[2] + centre[2] - radius - 0.01, ContactMaterial(stiffness=1e6, damping=1e4))
-    return run(robot, program(interp), duration or interp.duration, ControlLoopParams(hpfc=IPANEMA3_HPFC),
+    return run(robot, program(interp), duration or interp.duration, control_loop_params(robot, hpfc=IPANEMA3_HPFC),
                config=SimConfig(plant="nominal", obstacles=(floor,)))
 
 
@@ -242,6 +243,14 @@ def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release(
     _print_figures("IPAnema 3 floor program", 500.0, overshoot, settling, F)
     assert np.all(np.abs(F[-1000:] - 500.0) <= 0.02 * 500.0)       # the last second of the hold
     assert settling < 3.0
+    # the CFC runs in D (section 5.1.2) and keeps every cable tensed: the distribution's wrench
+    # carries the expected contact force. From 0.3 s after B (where the CFC is paused, as in the
+    # thesis, and the cables the floor unloads go slack) to the end of the run, release included
+    k_d = int(np.argmax(states == "D"))
+    f_min = IPANEMA3.cable.f_min
+    print(f"cables from 0.3 s into D to the end: min {r.f[k_d + 300:].min():.0f} N (f_min {f_min.min():.0f} N); "
+          f"in B: min {r.f[states == 'B'].min():.0f} N")
+    assert np.all(r.f[k_d + 300:] >= f_min)
     assert r.w_contact[-1, 2] == 0.0
     # released without a jump: the platform never moves faster than about v_max,HPFC
     k_r = int(np.argmax(states == "R"))

@@ -47,9 +47,9 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
                CONTACT: "force control", RELEASE: "release"}
 # The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
-# The CFC pauses during contact establishment (A-C, section 5.1.2) and, departing from the thesis,
-# also in D and R: see CFCCoupling.
-CFC_PAUSED = FORCE_CONTROLLED
+# The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
+# (CFCCoupling.contact_update; CFCCoupling.update, without the structure matrix, holds it there too).
+CFC_PAUSED = (APPROACH, BRAKE, LOST)
 
 
 @dataclass
@@ -204,6 +204,8 @@ class HybridForceControl:
         self.integrator = 0.0
         self.saturated = False
         self.F_prev: float | None = None
+        self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
+        self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.force_filter = LowPass(0.0, dt)
         self.set_params(params or HPFCParams())
 
@@ -268,6 +270,7 @@ class HybridForceControl:
         if self.state in (APPROACH, LOST):
             if F >= p.F_th:
                 self._enter(BRAKE)
+                self.contact = (self.x_t, F)             # where the contact was detected
             else:
                 self._move(p.v_max)
         if self.state == BRAKE:
@@ -277,6 +280,9 @@ class HybridForceControl:
             self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
             if self.v_t == 0.0:                                  # standstill: closed-loop force control
                 self._enter(CONTACT)
+                x_c, F_c = self.contact                          # the stiffness met from contact to here
+                if self.x_t - x_c > 0.0 and F - F_c > 0.0:
+                    self.k_contact = (F - F_c) / (self.x_t - x_c)
                 # bumpless: the integral part takes over what the P part does not give (the D part
                 # of the contact transient is left out: it would stay in the integrator)
                 self.integrator = self.x_t - e_F / p.K_p
@@ -296,6 +302,15 @@ class HybridForceControl:
                          np.array(F_vec, dtype=float), F_d, F, e_F, self.x_t, self.v_t, self.integrator,
                          self.saturated, x)
 
+    def absorb(self, dx: float) -> None:
+        """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
+        the cable force controller's integral part along the task axis, see ``ControlLoop``): x_t
+        and its integral part move by dx, so the sum of both outputs does not change."""
+        if self.state in (CONTACT, RELEASE) and math.isfinite(dx):
+            self.x_t = _clip(self.x_t + dx, self.params.x_max)
+            if self.state == CONTACT:
+                self.integrator = _clip(self.integrator + dx, self.params.x_max)
+
     def _pid(self, e_F: float, dF: float) -> None:
         """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
         p, dt = self.params, self.dt
@@ -309,6 +324,13 @@ class HybridForceControl:
         x_new = _clip(x_t, p.x_max)
         self.v_t = (x_new - self.x_t) / dt
         self.x_t = x_new
+
+
+def task_force_direction(AT, z_t) -> np.ndarray:
+    """a (m,): the cable forces' share in the force along the task z axis, a . f = z_t . (A^T f)_F
+    (A^T f is the cables' wrench on the platform, (2.10)); a force change orthogonal to a leaves
+    the contact force unchanged."""
+    return np.asarray(AT, dtype=float)[:3].T @ np.asarray(z_t, dtype=float)
 
 
 def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
@@ -359,7 +381,7 @@ class CFCCoupling:
     def update(self, state: str, f_d) -> tuple[np.ndarray, bool]:
         """-> (the set-point for the CFC, paused)."""
         f_d = np.asarray(f_d, dtype=float)
-        if state in CFC_PAUSED:
+        if state in FORCE_CONTROLLED:
             if self.average.y is None or self.weight == 0.0:
                 self.average.reset(f_d)             # the set-point at the pause, held
             self.weight = 1.0
@@ -371,6 +393,45 @@ class CFCCoupling:
             return f_d, False
         filtered = self.average.update(f_d)
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
+
+
+    def contact_update(self, state: str, f_d, F_c: float, a) -> tuple[np.ndarray, np.ndarray, bool, float]:
+        """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
+        wrench with the expected contact force, :func:`expected_contact_wrench`), F_c the expected
+        contact force as that wrench carries it, a of :func:`task_force_direction`
+        -> (set-point of the error (3.2), feed-forward (3.22), paused, F_ff).
+
+        - A-C: paused, the set-point of the pause held (thesis).
+        - D and R: the error acts on the live f_d. The feed-forward starts from the one held and
+          follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
+          control loop"), except along a, where it is the live f_d: its contact force F_ff = F_c
+          is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
+          the contact stiffness), so nothing of the contact force stays in Δq_CFC after the contact.
+        - I: the feed-forward returns to the live set-point through the average as in
+          :meth:`update`, again live along a.
+        """
+        f_d = np.asarray(f_d, dtype=float)
+        a = np.asarray(a, dtype=float)
+        aa = float(a @ a)
+
+        def live_along_a(f):
+            return f + a * (a @ (f_d - f)) / aa if aa > 0.0 else f
+
+        if state in CFC_PAUSED:
+            if self.average.y is None or self.weight == 0.0:
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+            self.weight = 1.0
+            return self.hold.copy(), self.hold.copy(), True, 0.0
+        if state in (CONTACT, RELEASE):
+            if self.average.y is None or self.weight == 0.0:  # enabled in contact: no pause before
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+            self.weight = 1.0
+            return f_d, live_along_a(self.average.update(f_d).copy()), False, float(F_c)
+        out, _ = self.update(state, f_d)
+        out = live_along_a(out)
+        return out, out, False, float(F_c)
 
 
 def format_state(controller: str, state: str) -> str:
