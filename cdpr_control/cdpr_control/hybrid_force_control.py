@@ -12,7 +12,10 @@ which the joint command adds like every other offset input (:mod:`cdpr_control.o
   contact force F is the same projection of the measured contact force vector.
 - Contact force: the measured wrench minus the weight of the platform and of a known payload,
   F_vec = -(w_F - (m_p + m_load) g) (w is the external wrench on the platform, A^T f = -w, (2.10);
-  the platform pushes the environment with the opposite of what the environment pushes it with).
+  the platform pushes the environment with the opposite of what the environment pushes it with),
+  tared when an approach starts (``tare``): what it reads then, if below F_th / 2, is taken for the
+  sensors' offsets and the weight model's error, not contact, and is subtracted until the next
+  approach (above F_th / 2 the platform is taken to touch already, and nothing is tared).
 - State machine of Fig. 5.4: A approach along the task z axis at v_max,HPFC until F >= F_th;
   B brake to standstill; D closed-loop force control with the PID (5.3); C contact lost
   (F < F_th in D): approach again. The output is x_t along the task z axis, x_d,HPFC = R_t [0 0 x_t].
@@ -67,6 +70,7 @@ class HPFCParams:
     x_max: float = 0.1           # m, saturation of x_t, also the farthest approach (ASSUMPTION)
     T_F: float = 0.05            # s, PT1 on the contact force (ASSUMPTION: sensor noise, D part)
     payload: float = 0.0         # kg, known payload whose weight is no contact force
+    tare: bool = True            # zero the contact force at the start of an approach (reading < F_th / 2)
 
     def validate(self) -> None:
         checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
@@ -204,6 +208,7 @@ class HybridForceControl:
         self.integrator = 0.0
         self.saturated = False
         self.F_prev: float | None = None
+        self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.force_filter = LowPass(0.0, dt)
@@ -254,6 +259,11 @@ class HybridForceControl:
             F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
+        if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
+            raw = float(self.z_t @ F_vec)
+            # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
+            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
+        F_vec = F_vec - self.F_tare
         F = float(self.z_t @ F_vec)
         e_F = F_d - F
         dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
