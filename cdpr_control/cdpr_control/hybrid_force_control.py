@@ -26,9 +26,9 @@ which the joint command adds like every other offset input (:mod:`cdpr_control.o
 - PID (5.3) on e_F = F_d - F with output saturation |x_t| <= x_max and anti-windup (conditional
   integration and clamping as :mod:`cdpr_control.pi_control`); the D part acts on the (low-pass
   filtered) measured force only, so a step of F_d does not kick the output.
-- Section 5.1.2's changes of the cable force control: paused in A-C (here also in D and R, a
-  departure explained at :class:`CFCCoupling`), its set-point through a moving average of
-  T_MA,HPFC.
+- Section 5.1.2's changes of the cable force control (:class:`CFCCoupling`): paused in A-C,
+  running in D and R with its feed-forward through a moving average of T_MA,HPFC; the force
+  distribution's wrench carries the expected contact force (:func:`expected_contact_wrench`).
 
 Units: (5.3) is printed as x_t / e_F = K_p (1 + 1/(s T_i) + s T_d) with K_p = 22,000 N/m "gain
 (stiffness)" (table 5.1); a position per force is m/N, so the gain applied is 1 / K_p: the
@@ -365,16 +365,14 @@ class CFCCoupling:
 
     - The CFC is paused during contact establishment (A-C): its output Δq_CFC is held and its state
       does not change, since the abruptly changing cable forces would destabilise it (thesis).
-    - Departure: it stays paused in D and R (the release). Its set-point f_d is the distribution of the measured wrench,
-      which contains the contact force; the CFC's integral action then holds whatever contact force
-      there is against the PID (5.3). In simulation (IPAnema 3, 500 N) the contact force stalled
-      10 % below F_d with the CFC active on the thesis's moving-average set-point, and the contact
-      oscillated with a higher tension level. The cable tension in contact comes from the tension
-      level of the distribution at the pause; it suffices for following the barrel of section 5.1.3
-      at 50 N (docs/hybrid_force_control.md).
-    - When the contact has ended (I) the CFC resumes; its set-point is blended from the one held at
-      the pause to the live one through the moving average of T_MA,HPFC, the thesis's filter
-      "to slow down the control loop", so the feed-forward f_d of (3.22) does not step.
+    - In D and R it runs (:meth:`contact_update`, used by ``ControlLoop``), its feed-forward through
+      the moving average of T_MA,HPFC, the thesis's filter "to slow down the control loop".
+    - :meth:`update` is the coupling without the structure matrix (the node
+      ``cable_force_controller``): it holds the CFC in D and R as well; when the contact has
+      ended (I) the set-point is blended from the one held at the pause to the live one through
+      the moving average, so the feed-forward f_d of (3.22) does not step.
+
+    docs/hybrid_force_control.md has the variants tried and their figures.
     """
 
     def __init__(self, T_MA: float, dt: float):
