@@ -360,6 +360,17 @@ def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
     return w
 
 
+def expected_contact_wrench_of(state: str | None, F_d0, F_vec, z_t) -> np.ndarray:
+    """:func:`expected_contact_wrench` from the published state (``hybrid_force_controller/state``:
+    the state letter, reference F_d,0, feedback F_vec) and the task z axis z_t (3,)."""
+    z = np.asarray(z_t, dtype=float)
+    F_d0, F_vec = np.asarray(F_d0, dtype=float), np.asarray(F_vec, dtype=float)
+    w = np.zeros(6)
+    if state in FORCE_CONTROLLED and np.all(np.isfinite(np.r_[F_d0, F_vec, z])):
+        w[:3] = -(float(z @ F_d0) - float(z @ F_vec)) * z
+    return w
+
+
 class CFCCoupling:
     """Section 5.1.2's changes of the cable force control under hybrid force control.
 
