@@ -25,8 +25,8 @@ from . import kernels
 from .bumpless import Blend
 from .cable_force_control import CableForceControl, CFCParams
 from .calibration import DEFAULT_WINDOW
-from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .filters import LowPass
+from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
 from .hybrid_force_control import (CONTACT, FORCE_CONTROLLED, RELEASE, CFCCoupling, HPFCParams, HybridForceControl,

@@ -50,6 +50,7 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
                CONTACT: "force control", RELEASE: "release"}
 # The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
+HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
 # The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
 # (CFCCoupling.contact_update; CFCCoupling.update, without the structure matrix, holds it there too).
 CFC_PAUSED = (APPROACH, BRAKE, LOST)
@@ -390,6 +391,7 @@ class CFCCoupling:
         self.dt = dt
         self.average = MovingAverage(T_MA, dt)
         self.weight = 0.0                       # share of the filtered set-point, 0..1
+        self.share = 1.0                        # share of the contact force handed over (contact_update)
 
     def set_time_constant(self, T_MA: float) -> None:
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
@@ -421,10 +423,11 @@ class CFCCoupling:
         -> (set-point of the error (3.2), feed-forward (3.22), paused, F_ff).
 
         - A-C: paused, the set-point of the pause held (thesis).
-        - D and R: the error acts on the live f_d. The feed-forward starts from the one held and
+        - D and R: the error acts on the live f_d (off a it goes there from the one held within
+          HAND_OVER_TIME, so the resumed CFC does not step). The feed-forward starts from the one held and
           follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
-          control loop"), except along a, where it is the live f_d: its contact force F_ff = F_c
-          is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
+          control loop"), except along a, where it goes to the live f_d within HAND_OVER_TIME: its
+          contact force F_ff (F_c times the share handed over) is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
           the contact stiffness), so nothing of the contact force stays in Δq_CFC after the contact.
         - I: the feed-forward returns to the live set-point through the average as in
           :meth:`update`, again live along a.
@@ -441,13 +444,23 @@ class CFCCoupling:
                 self.average.reset(f_d)
                 self.hold = f_d.copy()
             self.weight = 1.0
+            self.share = 0.0
             return self.hold.copy(), self.hold.copy(), True, 0.0
         if state in (CONTACT, RELEASE):
             if self.average.y is None or self.weight == 0.0:  # enabled in contact: no pause before
                 self.average.reset(f_d)
                 self.hold = f_d.copy()
+                self.share = 0.0
             self.weight = 1.0
-            return f_d, live_along_a(self.average.update(f_d).copy()), False, float(F_c)
+            # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
+            self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+            y = self.average.update(f_d).copy()
+            target = self.hold + self.share * (f_d - self.hold)
+            f_err = target
+            if aa > 0.0:
+                y += a * (a @ (target - y)) / aa
+                f_err = target + a * (a @ (f_d - target)) / aa      # live along a
+            return f_err, y, False, float(self.share * F_c)
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
         return out, out, False, float(F_c)
