@@ -1,17 +1,18 @@
 """Hybrid position and force control, thesis section 5.1: task frame (5.2), contact force, the
 state machine of Fig. 5.4 with the PID (5.3), the moving average, the CFC coupling, and contact
-runs against the simulator's surfaces (in-process closed loop, nominal plant = robot file: the 2 %
-criteria of section 5.1.3 are about the control law with a calibrated force sensor; the mismatched
-plant's sensor gain and offset errors alone move the true contact force by about 2 % on the Mini,
-docs/hybrid_force_control.md)."""
+runs against the simulator's surfaces (in-process closed loop). The plane contacts run on the
+mismatched plant (the tare at the start of an approach removes the sensor offsets, which moved the
+Mini's contact force by 2.2 %); the two programs on the nominal plant, each saying why."""
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.hybrid_force_control import (CFCCoupling, HPFCParams, HybridForceControl, MovingAverage,
-                                               contact_force, format_state, parse_state,
+from cdpr_control.controller_params import control_loop_params
+from cdpr_control.hybrid_force_control import (HAND_OVER_TIME, CFCCoupling, HPFCParams, HybridForceControl, MovingAverage,
+                                               contact_force, expected_contact_wrench, format_state, parse_state,
                                                select_position_feedback, task_frame)
 from cdpr_control.robot import load_robot
 from cdpr_sim.closed_loop import run
@@ -59,6 +60,72 @@ def test_contact_force_is_the_wrench_minus_the_weight():
     np.testing.assert_allclose(contact_force(np.r_[m * g + [0, 0, 10.0], 0, 0, 0], m, g), [0, 0, -10.0])
     # a known payload of 0.5 kg is no contact force
     np.testing.assert_allclose(contact_force(np.r_[(m + 0.5) * g, 0, 0, 0], m + 0.5, g), 0.0, atol=1e-12)
+
+
+def test_distribution_wrench_carries_the_expected_not_the_measured_contact_force():
+    hpfc = HybridForceControl(MINI, 1e-3, MINI_HPFC, enabled=True)
+    g, m = MINI.gravity, MINI.platform.mass
+    w = np.r_[m * g + [0, 0, 4.0], 0, 0, 0]                  # the floor pushes up with 4 N
+    s = hpfc.update([0, 0, -10.0], w)                        # F_d = 10 N down: A
+    dw = expected_contact_wrench(s)
+    np.testing.assert_allclose((w + dw)[:3], m * g + [0, 0, 10.0], atol=1e-9)   # as if F = F_d
+    np.testing.assert_allclose(dw[3:], 0.0)
+    idle = HybridForceControl(MINI, 1e-3, MINI_HPFC, enabled=False).update([0, 0, -10.0], w)
+    assert np.all(expected_contact_wrench(idle) == 0.0)     # I: the measured wrench unchanged
+
+
+def test_tare_at_the_approach_removes_a_sensor_offset():
+    """The contact force is zeroed when an approach starts in free space: a wrench offset of 0.3 N
+    (sensor offsets, weight model) is no contact force; above F_th / 2 it is taken for contact."""
+    g, m = MINI.gravity, MINI.platform.mass
+    offset = np.r_[m * g + [0, 0, 0.3], 0, 0, 0]             # reads 0.3 N pressing without contact
+    hpfc = HybridForceControl(MINI, 1e-3, replace(MINI_HPFC, T_F=0.0), enabled=True)
+    s = hpfc.update([0, 0, -10.0], offset)
+    assert s.state == "A" and s.F == pytest.approx(0.0, abs=1e-12)
+    s = hpfc.update([0, 0, -10.0], offset + [0, 0, 5.0, 0, 0, 0])   # 5 N of contact
+    assert s.F == pytest.approx(5.0)
+    untared = HybridForceControl(MINI, 1e-3, replace(MINI_HPFC, T_F=0.0, tare=False), enabled=True)
+    assert untared.update([0, 0, -10.0], offset).F == pytest.approx(0.3)
+    in_contact = HybridForceControl(MINI, 1e-3, replace(MINI_HPFC, T_F=0.0), enabled=True)   # F_th = 1 N
+    assert in_contact.update([0, 0, -10.0], offset + [0, 0, 0.5, 0, 0, 0]).F == pytest.approx(0.8)
+
+
+def test_cfc_runs_in_contact_with_the_average_feed_forward_and_the_live_contact_share():
+    """Section 5.1.2: paused in A-C; in D the error acts on the live set-point and the feed-forward
+    follows it through the moving average, but along a (the contact force's direction in cable
+    forces) it goes to the live one within HAND_OVER_TIME, its contact force F_ff handed to the
+    caller; back in I it blends back."""
+    c = CFCCoupling(0.01, 1e-3)                              # 10 samples
+    a = np.r_[-np.ones(4), np.ones(4)] / np.sqrt(8.0)
+    f0 = np.full(8, 100.0)
+    f1 = f0 + np.r_[np.full(4, 50.0), np.full(4, 250.0)]      # more tension and a contact share
+    for state in ("A", "B", "C"):
+        f_err, f_ff, paused, F_ff = c.contact_update(state, f0 if state == "A" else f1, 20.0, a)
+        assert paused and np.allclose(f_err, f0) and np.allclose(f_ff, f0) and F_ff == 0.0
+    f_err, f_ff, paused, F_ff = c.contact_update("D", f1, 500.0, a)
+    share = 1e-3 / HAND_OVER_TIME                             # the hand-over ramps in
+    assert not paused and F_ff == pytest.approx(share * 500.0)
+    P = np.eye(8) - np.outer(a, a)
+    assert a @ f_err == pytest.approx(a @ f1)                 # the error: live along a,
+    np.testing.assert_allclose(P @ f_err, P @ (f0 + share * (f1 - f0)))   # ramped across it
+    assert a @ f_ff == pytest.approx(a @ (f0 + share * (f1 - f0)))       # feed-forward: ramped along a,
+    np.testing.assert_allclose(P @ f_ff, P @ (0.9 * f0 + 0.1 * f1))      # averaged across it
+    for _ in range(int(HAND_OVER_TIME / 1e-3)):
+        f_err, f_ff, paused, F_ff = c.contact_update("D", f1, 500.0, a)
+    np.testing.assert_allclose(f_ff, f1)
+    np.testing.assert_allclose(f_err, f1)
+    assert F_ff == 500.0
+    outs = [c.contact_update("I", f0, 0.0, a) for _ in range(12)]
+    assert not outs[0][2] and np.allclose(outs[-1][1], f0) and outs[-1][3] == 0.0
+
+
+def test_absorb_moves_x_t_and_its_integral_part_in_contact_only():
+    hpfc = HybridForceControl(MINI, 1e-3, MINI_HPFC, enabled=True)
+    hpfc.absorb(1e-3)
+    assert hpfc.x_t == 0.0                                   # idle: nothing to take over
+    hpfc.state, hpfc.x_t, hpfc.integrator = "D", 2e-3, 1e-3
+    hpfc.absorb(5e-4)
+    assert hpfc.x_t == pytest.approx(2.5e-3) and hpfc.integrator == pytest.approx(1.5e-3)
 
 
 def test_selection_removes_the_pose_error_along_the_force_axis_only():
@@ -185,8 +252,8 @@ def _floor_run(robot, hpfc, F_d, gap, duration, before_step=None, stiffness=1e6,
                         ContactMaterial(stiffness=stiffness, damping=0.01 * stiffness))
     force = force or (lambda t: np.array([0.0, 0.0, -F_d]))
     source = lambda t: (robot.home, np.zeros(6), np.zeros(6), force(t))   # noqa: E731
-    return run(robot, source, duration, ControlLoopParams(hpfc=hpfc, hpfc_enabled=True),
-               config=SimConfig(plant="nominal", obstacles=(floor,)), before_step=before_step)
+    return run(robot, source, duration, control_loop_params(robot, hpfc=hpfc, hpfc_enabled=True),
+               config=SimConfig(obstacles=(floor,)), before_step=before_step)
 
 
 def contact_figures(r, F_d, dt=1e-3):
@@ -214,7 +281,11 @@ def floor_program_run(duration=None):
     interp = Interpolator(parse_gcode(programs.read("floor_contact_ipanema3"), start_pose=robot.home), dt=1e-3)
     radius, centre = default_tool(np.asarray(robot.b))
     floor = Plane.floor(robot.home[2] + centre[2] - radius - 0.01, ContactMaterial(stiffness=1e6, damping=1e4))
-    return run(robot, program(interp), duration or interp.duration, ControlLoopParams(hpfc=IPANEMA3_HPFC),
+    # nominal plant: the mismatched one's cables settle under the contact's loads (cdpr_sim.plant.Settlement,
+    # section 4.1.3), which leaves the platform 4.9 mm above the programmed pose after the release
+    # while the pose estimate (which cannot see the settlement) is back within 1.2 mm; the release
+    # criterion is about the controller. The 500 N contact on the mismatched plant: test below.
+    return run(robot, program(interp), duration or interp.duration, control_loop_params(robot, hpfc=IPANEMA3_HPFC),
                config=SimConfig(plant="nominal", obstacles=(floor,)))
 
 
@@ -230,6 +301,19 @@ def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release(
     _print_figures("IPAnema 3 floor program", 500.0, overshoot, settling, F)
     assert np.all(np.abs(F[-1000:] - 500.0) <= 0.02 * 500.0)       # the last second of the hold
     assert settling < 3.0
+    # the CFC runs in D (section 5.1.2) and keeps every cable tensed: the distribution's wrench
+    # carries the expected contact force. From 0.3 s after B (where the CFC is paused, as in the
+    # thesis, and the cables the floor unloads go slack) to the end of the run, release included
+    k_d = int(np.argmax(states == "D"))
+    f_min = IPANEMA3.cable.f_min
+    print(f"cables from 0.3 s into D to the end: min {r.f[k_d + 300:].min():.0f} N (f_min {f_min.min():.0f} N); "
+          f"in B: min {r.f[states == 'B'].min():.0f} N")
+    assert np.all(r.f[k_d + 300:] >= f_min)
+    # the CFC resuming in D and the contact force passing to its feed-forward do not step the drive
+    # command (a step of the hand-over gave 1.5 mm in one period; approaching at 50 mm/s: 0.025 mm)
+    step = np.abs(np.diff(r.theta_d, axis=0)).max()
+    print(f"largest drive command step: {1e3 * step:.3f} mm per period")
+    assert step < 2e-4
     assert r.w_contact[-1, 2] == 0.0
     # released without a jump: the platform never moves faster than about v_max,HPFC
     k_r = int(np.argmax(states == "R"))
@@ -238,7 +322,9 @@ def test_floor_contact_program_ipanema3_500N_a_b_d_within_2_percent_and_release(
     print(f"release: platform speed max {1e3 * v.max():.1f} mm/s; {offset:.1f} mm from the programmed pose "
           f"{r.t[-1] - r.t[k_r]:.1f} s after the release began")
     assert v.max() < 2.0 * IPANEMA3_HPFC.v_max
-    assert offset < 5.0
+    # the distribution's wrench carries the expected, not the measured, contact force: no filtered
+    # remains of the 500 N press the resuming CFC (was 4.1 mm below the programmed pose)
+    assert offset <= 0.5
 
 
 def _slice_run(r, k):
@@ -254,6 +340,23 @@ def test_contact_on_a_plane_mini_10N_a_b_d_within_2_percent():
     _print_figures("IPAnema 3 Mini plane", 10.0, overshoot, settling, F)
     assert np.all(np.abs(F[-200:] - 10.0) <= 0.02 * 10.0)
     assert settling < 2.0
+
+
+def test_contact_on_a_plane_ipanema3_500N_mismatched_plant_cables_tensed():
+    """Section 5.1.3's 500 N on the mismatched plant (sensor gain and offset errors, other cables):
+    A -> B -> D, within 2 % of F_d, and the cable force controller, running in D, keeps every cable
+    at or above f_min while the floor carries the platform (the expected contact force is in the
+    distribution's wrench)."""
+    r = _floor_run(IPANEMA3, IPANEMA3_HPFC, 500.0, 0.001, 4.5)
+    assert _sequence(r.hpfc) == ["A", "B", "D"]
+    overshoot, settling, F = contact_figures(r, 500.0)
+    _print_figures("IPAnema 3 plane, mismatched plant", 500.0, overshoot, settling, F)
+    states = np.array([s.state for s in r.hpfc])
+    k_d = int(np.argmax(states == "D"))
+    print(f"cables from 0.3 s into D: min {r.f[k_d + 300:].min():.0f} N; in B: min {r.f[states == 'B'].min():.0f} N")
+    assert np.all(np.abs(F[-500:] - 500.0) <= 0.02 * 500.0)
+    assert settling < 3.0
+    assert np.all(r.f[k_d + 300:] >= IPANEMA3.cable.f_min)
 
 
 def test_contact_lost_reapproach_and_release_to_the_programmed_pose():
@@ -322,6 +425,7 @@ def test_cylinder_program_presses_follows_and_releases():
           f"rms {np.sqrt(np.mean(error ** 2)):.1f} N, after the first 5 s max "
           f"{error[5000:].max():.1f} N; cable forces {r.f.min():.0f}..{r.f.max():.0f} N")
     assert moving.sum() > 40_000                                   # 40 s of following
-    assert error.max() < 30.0 and np.sqrt(np.mean(error ** 2)) < 8.0
+    # with the CFC running in D (max 9.3 N, rms 0.7 N; held in D it was 22 N and 5.5 N)
+    assert error.max() < 15.0 and np.sqrt(np.mean(error ** 2)) < 2.0
     assert np.all(r.f >= c.f_min) and np.all(r.f <= c.f_max)
     np.testing.assert_allclose(r.x[-1, :3], r.x_d[-1, :3], atol=1e-3)   # released and back home

@@ -18,6 +18,7 @@ from cdpr_control.hybrid_force_control import parse_state  # noqa: E402
 from cdpr_control.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.nodes.base import CdprNode  # noqa: E402
 from cdpr_control.nodes.cable_force_controller import CableForceControllerNode  # noqa: E402
+from cdpr_control.nodes.force_distribution import ForceDistributionNode  # noqa: E402
 from cdpr_control.nodes.conversions import pose_to_msg, vector3, wrench_to_msg  # noqa: E402
 from cdpr_control.nodes.hybrid_force_controller import HybridForceControllerNode  # noqa: E402
 from cdpr_control.nodes.ospc import OSPCNode  # noqa: E402
@@ -109,3 +110,41 @@ def test_rejected_parameter_keeps_the_old_value(graph):
     assert hpfc.get_parameter("K_p").value == 22000.0 and hpfc.stage.params.K_p == 22000.0
     assert hpfc.set_parameters([Parameter("T_i", value=1.5)])[0].successful
     assert hpfc.stage.params.T_i == 1.5
+
+
+def test_force_distribution_plans_for_the_expected_contact_force(graph):
+    """Section 5.1.2: with ``force_controller`` set, the force distribution node replaces the
+    measured contact force along the task axis by F_d while the hybrid force controller acts."""
+    _, probe, executor = graph
+    node = ForceDistributionNode(parameter_overrides=[
+        Parameter("robot", value="ipanema3_mini"), Parameter("force_controller", value="hybrid_force_controller"),
+        Parameter("T_wrench_filter", value=0.0)])               # w_d follows w without lag
+    executor.add_node(node)
+    try:
+        pubs = {name: probe.create_publisher(t, topic, CONTROL) for name, t, topic in (
+            ("sp", OperationalSetpoint, "setpoint"), ("w", WrenchStamped, "platform/wrench"),
+            ("hpfc", ControllerState, "hybrid_force_controller/state"))}
+        out = []
+        probe.create_subscription(ForceDistribution, "force_distribution", out.append, CONTROL)
+        assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+        weight = ROBOT.platform.mass * ROBOT.gravity
+        w = np.r_[weight + [0.0, 0.0, 3.0], 0, 0, 0]             # the floor pushes up with 3 N
+
+        def period(k, state):
+            header = CdprNode.header(k * 1_000_000)
+            pubs["hpfc"].publish(ControllerState(header=header, controller=f"hybrid_force_controller:{state}",
+                                                 reference=[0.0, 0.0, -10.0, 0.0, 0.0, 0.0],
+                                                 feedback=[0.0, 0.0, -3.0, 0.0, 0.0, 0.0]))   # F = 3 N
+            pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(ROBOT.home),
+                                                   force=vector3([0, 0, -10.0])))
+            pubs["w"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))
+            assert _spin_until(executor, lambda: len(out) >= k)
+            return out[-1].w_d.force.z
+
+        assert period(1, "I") == pytest.approx(w[2], abs=1e-6)    # idle: the measured wrench
+        for k in range(2, 5):
+            w_z = period(k, "D")
+        assert w_z == pytest.approx(weight[2] + 10.0, abs=1e-6)  # in contact: F_d = 10 N, not 3 N
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()

@@ -98,11 +98,12 @@ class CableForceController:
         """PT1 feedback filter (3.20)."""
         return self.feedback_filter.update(f)
 
-    def update(self, f_d, f, k_l, f_min, f_max) -> np.ndarray:
+    def update(self, f_d, f, k_l, f_min, f_max, f_ff=None) -> np.ndarray:
         """One period: desired and measured forces [N], cable stiffness K_l [N/m] -> Δq_CFC [m].
 
         k_l is the secant stiffness per cable, an array (the thesis' linear model) or a function of
         the output force f_c,out (a non-linear model (2.17): then K_l^-1 f_c,out is the elongation).
+        f_ff: a feed-forward (3.22) other than f_d (hybrid force control, section 5.1.2); None: f_d.
         """
         if self.dq_0 is None:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
@@ -111,7 +112,7 @@ class CableForceController:
         saturation = kernels.widened_saturation if kernels.ENABLED else widened_saturation
         sat_n, sat_p = saturation(self.params, f_fb, f_min, f_max)
         u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
-        self.f_out = f_d + u                                        # feed-forward (3.22)
+        self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
         self.dq_cfc = self.f_out / stiffness - self.dq_0            # (3.23)
         return self.dq_cfc
@@ -162,8 +163,9 @@ class CableForceControl:
         c = self.calibration
         return self._elongation(c.f_0, cable.total_free_length(self.robot, c.theta_0))
 
-    def update(self, f_d, f, theta, f_min, f_max) -> np.ndarray:
-        """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23)."""
+    def update(self, f_d, f, theta, f_min, f_max, f_ff=None) -> np.ndarray:
+        """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23); f_ff a
+        feed-forward other than f_d (see :meth:`CableForceController.update`)."""
         if not self.enabled:
             return np.zeros(self.robot.m)
         l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
@@ -173,4 +175,4 @@ class CableForceControl:
                 c.reset(self._calibrated_dq_0(), f=f)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
-        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max)
+        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff)

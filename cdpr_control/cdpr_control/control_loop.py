@@ -25,11 +25,12 @@ from . import kernels
 from .bumpless import Blend
 from .cable_force_control import CableForceControl, CFCParams
 from .calibration import DEFAULT_WINDOW
+from .filters import LowPass
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
-from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
-                                   select_position_feedback)
+from .hybrid_force_control import (CONTACT, FORCE_CONTROLLED, RELEASE, CFCCoupling, HPFCParams, HybridForceControl,
+                                   expected_contact_wrench, select_position_feedback, task_force_direction)
 from .joint_command import JointCommand
 from .offset_inputs import OffsetInputs, OffsetSample
 from .ospc import OperationalSpacePositionController, OSPCParams
@@ -122,10 +123,49 @@ class ControlLoop:
         self._checked = (force_control, p.ospc_enabled, p.cfc_enabled)
         self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
         self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
+        self.contact_filter = LowPass(p.force.T_wrench_filter, dt)   # as the distribution's wrench filter
+        self._cfc_paused = False
         self.dq_cfc = np.zeros(robot.m)
         self.offset_stages = dict(offset_stages or {})
         self.offsets = OffsetInputs(self.offset_stages, dt, p.transfer_time)
         self.state: LoopState | None = None      # the last period (a set-point source may close the loop on it)
+
+    def _hpfc_cfc(self, hpfc, f_d, f, ik_d, cfc_on: bool):
+        """Section 5.1.2, the cable force control under hybrid force control -> (the CFC's set-point,
+        its feed-forward, paused, x_comp (6,) the offset that hands the contact force over).
+
+        The CFC is paused in A-C and runs from D on (:meth:`CFCCoupling.contact_update`); it resumes
+        bumpless (feedback filter restarted at the measured forces, the integral part taking the
+        proportional part's step). Its feed-forward presses along the task axis with the expected
+        contact force F_ff (the distribution's wrench carries it, :func:`expected_contact_wrench`);
+        x_comp = -F_ff / k_t z_t lifts the position offset by what that press would push the
+        robot, k_t the contact stiffness measured in B (``HybridForceControl.k_contact``), so the
+        contact force passes from x_t to the cable forces without a step and x_t no longer presses
+        the robot tens of millimetres into the surface (which slackens the cables it unloads).
+        The integral part of the CFC along a = (A^T)_F^T z_t (the cable forces that change the
+        contact force) is handed over to x_t with the CFC's T_i (``HybridForceControl.absorb``):
+        the PID (5.3) owns the steady contact force, and nothing of it is left in Δq_CFC when the
+        contact ends.
+        """
+        state = self.state.hpfc if self.state is not None else None
+        F_c = self.contact_filter.update(state.F_d if state is not None and state.state in FORCE_CONTROLLED else 0.0)
+        a = task_force_direction(ik_d.AT, hpfc.z_t)
+        f_set, f_ff, paused, F_ff = self.coupling.contact_update(hpfc.state, f_d, F_c, a)
+        k_t = self.hpfc.k_contact or self.hpfc.params.K_p
+        x_comp = np.zeros(6)
+        if F_ff != 0.0 and cfc_on:
+            x_comp[:3] = -F_ff / k_t * hpfc.z_t
+        c = self.cfc.controller
+        if self._cfc_paused and not paused and c.dq_0 is not None:     # resume bumpless
+            c.feedback_filter.reset(f)
+            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
+        self._cfc_paused = paused
+        aa = float(a @ a)
+        if not paused and hpfc.state in (CONTACT, RELEASE) and aa > 0.0:
+            share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
+            c.pi.integrator = c.pi.integrator - share * a
+            self.hpfc.absorb(share * aa / k_t)          # the cables press with a . f along z_t
+        return f_set, f_ff, paused, x_comp
 
     def set_home_calibration(self, f_home) -> None:
         """Δq_0 from the forces f_home (m,) [N] recorded when the encoders were set at home (2.3.2),
@@ -156,7 +196,12 @@ class ControlLoop:
         inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w, ik_d)
         outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
-        dist = self.force.update(x_d, xdot_d, xddot_d, w, ik_d.AT, w_model=sum(w_models) if w_models else None)
+        # section 5.1.2: the expected contact reaction, not the measured one, in the distribution's
+        # wrench; from the last period's state, so that the set-point the CFC holds from the
+        # period A begins (the one before the approach) has no contact in it
+        w_dist = w if self.state is None or self.state.hpfc is None else w + expected_contact_wrench(self.state.hpfc)
+        dist = self.force.update(x_d, xdot_d, xddot_d, w_dist, ik_d.AT,
+                                 w_model=sum(w_models) if w_models else None)
         p = self.params
         force_control = p.mode == "force_control"
         for blend in (self.blend_cfc, self.blend_ospc, self.blend_hpfc):
@@ -169,9 +214,12 @@ class ControlLoop:
         s_ospc = self.blend_ospc.update(force_control and (p.ospc_enabled or self.refusal is not None))
         s_hpfc = self.blend_hpfc.update(force_control)
         hpfc = None if self.hpfc is None else self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w)
-        f_d, paused = (dist.f, False) if hpfc is None else self.coupling.update(hpfc.state, dist.f)
+        if hpfc is None:
+            f_d, f_ff, paused, x_comp = dist.f, None, False, None
+        else:
+            f_d, f_ff, paused, x_comp = self._hpfc_cfc(hpfc, dist.f, f, ik_d, s_cfc > 0.0)
         if not paused:                                 # section 5.1.2: held during contact establishment
-            self.dq_cfc = self.cfc.update(f_d, f, theta, dist.f_min, dist.f_max)
+            self.dq_cfc = self.cfc.update(f_d, f, theta, dist.f_min, dist.f_max, f_ff)
         dq_cfc = s_cfc * self.dq_cfc
         if s_cfc == 0.0:
             self.cfc.controller.pi.reset()           # track: no wind-up while the output is unused
@@ -180,7 +228,7 @@ class ControlLoop:
         x_ospc = s_ospc * self.ospc.update(x_d, x_fb)
         if s_ospc == 0.0:
             self.ospc.reset()
-        offsets = [x_ospc] if hpfc is None else [x_ospc, s_hpfc * hpfc.x]
+        offsets = [x_ospc] if hpfc is None else [x_ospc, s_hpfc * hpfc.x + s_cfc * x_comp]
         faults = self.monitor.check(t, f=f, f_min=robot.cable.f_min, f_max=robot.cable.f_max, x_d=x_d, x=x,
                                     fk_converged=self.estimator.result.converged)
         self.offsets.ramp_time = p.transfer_time

@@ -12,7 +12,10 @@ which the joint command adds like every other offset input (:mod:`cdpr_control.o
   contact force F is the same projection of the measured contact force vector.
 - Contact force: the measured wrench minus the weight of the platform and of a known payload,
   F_vec = -(w_F - (m_p + m_load) g) (w is the external wrench on the platform, A^T f = -w, (2.10);
-  the platform pushes the environment with the opposite of what the environment pushes it with).
+  the platform pushes the environment with the opposite of what the environment pushes it with),
+  tared when an approach starts (``tare``): what it reads then, if below F_th / 2, is taken for the
+  sensors' offsets and the weight model's error, not contact, and is subtracted until the next
+  approach (above F_th / 2 the platform is taken to touch already, and nothing is tared).
 - State machine of Fig. 5.4: A approach along the task z axis at v_max,HPFC until F >= F_th;
   B brake to standstill; D closed-loop force control with the PID (5.3); C contact lost
   (F < F_th in D): approach again. The output is x_t along the task z axis, x_d,HPFC = R_t [0 0 x_t].
@@ -23,9 +26,9 @@ which the joint command adds like every other offset input (:mod:`cdpr_control.o
 - PID (5.3) on e_F = F_d - F with output saturation |x_t| <= x_max and anti-windup (conditional
   integration and clamping as :mod:`cdpr_control.pi_control`); the D part acts on the (low-pass
   filtered) measured force only, so a step of F_d does not kick the output.
-- Section 5.1.2's changes of the cable force control: paused in A-C (here also in D and R, a
-  departure explained at :class:`CFCCoupling`), its set-point through a moving average of
-  T_MA,HPFC.
+- Section 5.1.2's changes of the cable force control (:class:`CFCCoupling`): paused in A-C,
+  running in D and R with its feed-forward through a moving average of T_MA,HPFC; the force
+  distribution's wrench carries the expected contact force (:func:`expected_contact_wrench`).
 
 Units: (5.3) is printed as x_t / e_F = K_p (1 + 1/(s T_i) + s T_d) with K_p = 22,000 N/m "gain
 (stiffness)" (table 5.1); a position per force is m/N, so the gain applied is 1 / K_p: the
@@ -47,9 +50,10 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
                CONTACT: "force control", RELEASE: "release"}
 # The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
-# The CFC pauses during contact establishment (A-C, section 5.1.2) and, departing from the thesis,
-# also in D and R: see CFCCoupling.
-CFC_PAUSED = FORCE_CONTROLLED
+HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
+# The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
+# (CFCCoupling.contact_update; CFCCoupling.update, without the structure matrix, holds it there too).
+CFC_PAUSED = (APPROACH, BRAKE, LOST)
 
 
 @dataclass
@@ -67,6 +71,7 @@ class HPFCParams:
     x_max: float = 0.1           # m, saturation of x_t, also the farthest approach (ASSUMPTION)
     T_F: float = 0.05            # s, PT1 on the contact force (ASSUMPTION: sensor noise, D part)
     payload: float = 0.0         # kg, known payload whose weight is no contact force
+    tare: bool = True            # zero the contact force at the start of an approach (reading < F_th / 2)
 
     def validate(self) -> None:
         checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
@@ -204,6 +209,9 @@ class HybridForceControl:
         self.integrator = 0.0
         self.saturated = False
         self.F_prev: float | None = None
+        self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
+        self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
+        self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.force_filter = LowPass(0.0, dt)
         self.set_params(params or HPFCParams())
 
@@ -252,6 +260,11 @@ class HybridForceControl:
             F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
+        if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
+            raw = float(self.z_t @ F_vec)
+            # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
+            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
+        F_vec = F_vec - self.F_tare
         F = float(self.z_t @ F_vec)
         e_F = F_d - F
         dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
@@ -268,6 +281,7 @@ class HybridForceControl:
         if self.state in (APPROACH, LOST):
             if F >= p.F_th:
                 self._enter(BRAKE)
+                self.contact = (self.x_t, F)             # where the contact was detected
             else:
                 self._move(p.v_max)
         if self.state == BRAKE:
@@ -277,6 +291,9 @@ class HybridForceControl:
             self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
             if self.v_t == 0.0:                                  # standstill: closed-loop force control
                 self._enter(CONTACT)
+                x_c, F_c = self.contact                          # the stiffness met from contact to here
+                if self.x_t - x_c > 0.0 and F - F_c > 0.0:
+                    self.k_contact = (F - F_c) / (self.x_t - x_c)
                 # bumpless: the integral part takes over what the P part does not give (the D part
                 # of the contact transient is left out: it would stay in the integrator)
                 self.integrator = self.x_t - e_F / p.K_p
@@ -296,6 +313,15 @@ class HybridForceControl:
                          np.array(F_vec, dtype=float), F_d, F, e_F, self.x_t, self.v_t, self.integrator,
                          self.saturated, x)
 
+    def absorb(self, dx: float) -> None:
+        """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
+        the cable force controller's integral part along the task axis, see ``ControlLoop``): x_t
+        and its integral part move by dx, so the sum of both outputs does not change."""
+        if self.state in (CONTACT, RELEASE) and math.isfinite(dx):
+            self.x_t = _clip(self.x_t + dx, self.params.x_max)
+            if self.state == CONTACT:
+                self.integrator = _clip(self.integrator + dx, self.params.x_max)
+
     def _pid(self, e_F: float, dF: float) -> None:
         """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
         p, dt = self.params, self.dt
@@ -311,27 +337,61 @@ class HybridForceControl:
         self.x_t = x_new
 
 
+def task_force_direction(AT, z_t) -> np.ndarray:
+    """a (m,): the cable forces' share in the force along the task z axis, a . f = z_t . (A^T f)_F
+    (A^T f is the cables' wrench on the platform, (2.10)); a force change orthogonal to a leaves
+    the contact force unchanged."""
+    return np.asarray(AT, dtype=float)[:3].T @ np.asarray(z_t, dtype=float)
+
+
+def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
+    """The correction (6,) that puts the expected contact reaction into the wrench of the force
+    distribution (3.26)-(3.28) in place of the measured one: w - (F_d - F) z_t (force part).
+
+    While the hybrid force controller acts (A-D, R) the environment is expected to push the platform
+    with -F_d z_t. The distribution then plans for the contact force being established, does not
+    step when the contact is made or lost (the sum w_F + (F - F_d) z_t does not contain the
+    contact's jump), and after the release (F_d < F_th) its wrench filter holds no memory of the
+    contact, so the CFC resuming in I does not press the platform down with the filtered remains
+    of the contact force. Idle (I): 0.
+    """
+    w = np.zeros(6)
+    if state is not None and state.state in FORCE_CONTROLLED:
+        w[:3] = -(state.F_d - state.F) * state.z_t
+    return w
+
+
+def expected_contact_wrench_of(state: str | None, F_d0, F_vec, z_t) -> np.ndarray:
+    """:func:`expected_contact_wrench` from the published state (``hybrid_force_controller/state``:
+    the state letter, reference F_d,0, feedback F_vec) and the task z axis z_t (3,)."""
+    z = np.asarray(z_t, dtype=float)
+    F_d0, F_vec = np.asarray(F_d0, dtype=float), np.asarray(F_vec, dtype=float)
+    w = np.zeros(6)
+    if state in FORCE_CONTROLLED and np.all(np.isfinite(np.r_[F_d0, F_vec, z])):
+        w[:3] = -(float(z @ F_d0) - float(z @ F_vec)) * z
+    return w
+
+
 class CFCCoupling:
     """Section 5.1.2's changes of the cable force control under hybrid force control.
 
     - The CFC is paused during contact establishment (A-C): its output Δq_CFC is held and its state
       does not change, since the abruptly changing cable forces would destabilise it (thesis).
-    - Departure: it stays paused in D and R (the release). Its set-point f_d is the distribution of the measured wrench,
-      which contains the contact force; the CFC's integral action then holds whatever contact force
-      there is against the PID (5.3). In simulation (IPAnema 3, 500 N) the contact force stalled
-      10 % below F_d with the CFC active on the thesis's moving-average set-point, and the contact
-      oscillated with a higher tension level. The cable tension in contact comes from the tension
-      level of the distribution at the pause; it suffices for following the barrel of section 5.1.3
-      at 50 N (docs/hybrid_force_control.md).
-    - When the contact has ended (I) the CFC resumes; its set-point is blended from the one held at
-      the pause to the live one through the moving average of T_MA,HPFC, the thesis's filter
-      "to slow down the control loop", so the feed-forward f_d of (3.22) does not step.
+    - In D and R it runs (:meth:`contact_update`, used by ``ControlLoop``), its feed-forward through
+      the moving average of T_MA,HPFC, the thesis's filter "to slow down the control loop".
+    - :meth:`update` is the coupling without the structure matrix (the node
+      ``cable_force_controller``): it holds the CFC in D and R as well; when the contact has
+      ended (I) the set-point is blended from the one held at the pause to the live one through
+      the moving average, so the feed-forward f_d of (3.22) does not step.
+
+    docs/hybrid_force_control.md has the variants tried and their figures.
     """
 
     def __init__(self, T_MA: float, dt: float):
         self.dt = dt
         self.average = MovingAverage(T_MA, dt)
         self.weight = 0.0                       # share of the filtered set-point, 0..1
+        self.share = 1.0                        # share of the contact force handed over (contact_update)
 
     def set_time_constant(self, T_MA: float) -> None:
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
@@ -342,7 +402,7 @@ class CFCCoupling:
     def update(self, state: str, f_d) -> tuple[np.ndarray, bool]:
         """-> (the set-point for the CFC, paused)."""
         f_d = np.asarray(f_d, dtype=float)
-        if state in CFC_PAUSED:
+        if state in FORCE_CONTROLLED:
             if self.average.y is None or self.weight == 0.0:
                 self.average.reset(f_d)             # the set-point at the pause, held
             self.weight = 1.0
@@ -354,6 +414,56 @@ class CFCCoupling:
             return f_d, False
         filtered = self.average.update(f_d)
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
+
+
+    def contact_update(self, state: str, f_d, F_c: float, a) -> tuple[np.ndarray, np.ndarray, bool, float]:
+        """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
+        wrench with the expected contact force, :func:`expected_contact_wrench`), F_c the expected
+        contact force as that wrench carries it, a of :func:`task_force_direction`
+        -> (set-point of the error (3.2), feed-forward (3.22), paused, F_ff).
+
+        - A-C: paused, the set-point of the pause held (thesis).
+        - D and R: the error acts on the live f_d (off a it goes there from the one held within
+          HAND_OVER_TIME, so the resumed CFC does not step). The feed-forward starts from the one held and
+          follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
+          control loop"), except along a, where it goes to the live f_d within HAND_OVER_TIME: its
+          contact force F_ff (F_c times the share handed over) is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
+          the contact stiffness), so nothing of the contact force stays in Δq_CFC after the contact.
+        - I: the feed-forward returns to the live set-point through the average as in
+          :meth:`update`, again live along a.
+        """
+        f_d = np.asarray(f_d, dtype=float)
+        a = np.asarray(a, dtype=float)
+        aa = float(a @ a)
+
+        def live_along_a(f):
+            return f + a * (a @ (f_d - f)) / aa if aa > 0.0 else f
+
+        if state in CFC_PAUSED:
+            if self.average.y is None or self.weight == 0.0:
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+            self.weight = 1.0
+            self.share = 0.0
+            return self.hold.copy(), self.hold.copy(), True, 0.0
+        if state in (CONTACT, RELEASE):
+            if self.average.y is None or self.weight == 0.0:  # enabled in contact: no pause before
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+                self.share = 0.0
+            self.weight = 1.0
+            # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
+            self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+            y = self.average.update(f_d).copy()
+            target = self.hold + self.share * (f_d - self.hold)
+            f_err = target
+            if aa > 0.0:
+                y += a * (a @ (target - y)) / aa
+                f_err = target + a * (a @ (f_d - target)) / aa      # live along a
+            return f_err, y, False, float(self.share * F_c)
+        out, _ = self.update(state, f_d)
+        out = live_along_a(out)
+        return out, out, False, float(F_c)
 
 
 def format_state(controller: str, state: str) -> str:

@@ -15,11 +15,18 @@ With ``payload_input`` (read-only) it also subscribes ``load_compensation/payloa
 (geometry_msgs/InertiaStamped) and adds the identified payload's wrench (a point mass at its cog,
 :func:`cdpr_control.load_compensation.payload_wrench`) to the model wrench w_dyn, so that a heavy
 payload is not clipped by the disturbance saturation and enters f_d also with ``wrench_source: model``.
+
+With ``force_controller`` (read-only) naming the hybrid force controller it also subscribes
+``<force_controller>/state`` and, while that controller acts (states A-D, R), replaces the
+measured contact force along the task axis by the desired one in the wrench it distributes
+(section 5.1.2, :func:`cdpr_control.hybrid_force_control.expected_contact_wrench`), so the cables
+are planned for the contact being made and nothing of the contact stays in the wrench filter
+after the release.
 """
 from __future__ import annotations
 
 import numpy as np
-from cdpr_msgs.msg import ForceDistribution, OperationalSetpoint
+from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import InertiaStamped, WrenchStamped
@@ -27,6 +34,7 @@ from rclpy.parameter import Parameter
 
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
+from cdpr_control.hybrid_force_control import expected_contact_wrench_of, parse_state, task_axis
 from cdpr_control.load_compensation import payload_wrench
 
 from .base import CdprNode, spin_node
@@ -34,6 +42,11 @@ from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, wrench_f
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
+
+
+FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
+                             "replaces the measured one in the distributed wrench (5.1.2); empty: none",
+                             read_only=True)
 
 
 class ForceDistributionNode(CdprNode):
@@ -66,11 +79,16 @@ class ForceDistributionNode(CdprNode):
         self.payload_input = bool(self.get_parameter(payload.name).value)
         self.publisher = self.create_publisher(ForceDistribution, "force_distribution", CONTROL)
         self.create_service(SetTensionLevel, "force_distribution/set_tension_level", self._on_set_tension_level)
+        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
+        force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
+        if force_controller:
+            inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
-                              optional=("payload",) if self.payload_input else ())
+                              optional=tuple(n for n in ("payload", "hpfc") if n in inputs))
 
     @staticmethod
     def _stage_params(v: dict) -> ForceSetpointParams:
@@ -112,7 +130,13 @@ class ForceDistributionNode(CdprNode):
         if "payload" in msgs:
             p = msgs["payload"].inertia
             w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (p.com.x, p.com.y, p.com.z))
-        res = self.stage.update(x_d, xdot_d, xddot_d, wrench_from_msg(msgs["wrench"].wrench), w_model=w_model)
+        w = wrench_from_msg(msgs["wrench"].wrench)
+        hpfc = msgs.get("hpfc")
+        if hpfc is not None:                 # section 5.1.2: the expected contact force, not the measured
+            F_d0 = np.asarray(hpfc.reference[:3], dtype=float)
+            self.z_t = task_axis(F_d0, self.z_t)
+            w = w + expected_contact_wrench_of(parse_state(hpfc.controller), F_d0, hpfc.feedback[:3], self.z_t)
+        res = self.stage.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
         self.publisher.publish(ForceDistribution(
             header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),
             f_max=res.f_max.tolist(), w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),

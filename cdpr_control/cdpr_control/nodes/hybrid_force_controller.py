@@ -52,6 +52,7 @@ PARAMS = [
     ParamSpec("x_max", _D.x_max, "saturation of x_t, farthest approach [m]", range=(1e-5, 1.0)),
     ParamSpec("T_F", _D.T_F, "PT1 time constant on the contact force [s]", range=(0.0, 1.0)),
     ParamSpec("payload", _D.payload, "known payload whose weight is no contact force [kg]", range=(0.0, 1e4)),
+    ParamSpec("tare", _D.tare, "zero the contact force when an approach starts in free space (sensor offsets)"),
 ]
 
 
@@ -70,7 +71,8 @@ class HybridForceControllerNode(CdprNode):
     @staticmethod
     def _hpfc_params(v: dict) -> HPFCParams:
         # T_MA filters the CFC's input: a parameter of cable_force_controller
-        return HPFCParams(**{name: float(v[name]) for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
+        return HPFCParams(**{name: (bool(v[name]) if name == "tare" else float(v[name]))
+                             for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
 
     def _validate(self, v: dict) -> None:
         self._hpfc_params(v).validate()

@@ -8,7 +8,7 @@
 N10 G21 G90 G17
 N20 G1 W-500 F60000  (desired force 500 N downwards, at 200 N/s; nothing moves yet)
 N30 M103  (hybrid position/force control on: approach, brake, force control)
-N40 G4 P3  (hold the contact force for 3 s)
+N40 G4 P5  (hold the contact force for 5 s)
 N50 G1 W0 F60000  (desired force back to zero: the controller releases the contact, state R)
 N60 G4 P2  (back at the programmed pose)
 N70 M104  (hybrid position/force control off)
