@@ -65,7 +65,8 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
     from cdpr_sim.simulator import SimConfig
 
     lc_enabled = CONFIGS[config][2]
-    params = lc_params or LoadCompensationParams()
+    # the platform starts at rest and empty: the estimate is tared there (the force sensors' offsets)
+    params = lc_params or LoadCompensationParams(tare_at_start=True, tare_payload=payload0)
     params = LoadCompensationParams(**{**params.__dict__, "enabled": lc_enabled})
     # with cable force control the identified payload also feeds the force distribution's model
     # wrench, as the parameter files set it (force_distribution.payload_input)
@@ -164,9 +165,10 @@ def sag_per_kg(summary: dict) -> float:
 
 def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40.0,
                     program: str = "payload_moves_ipanema3", lc_params: LoadCompensationParams | None = None,
-                    tail: float = 0.5, ramp: float = 0.3, plant: str = "mismatched") -> PayloadRun:
-    """A program run with ``payload`` kg put on the platform (cosine over ``ramp`` s) at its start
-    (Fig. 4.7); ``program`` a shipped program name or a .gcode file."""
+                    tail: float = 0.5, ramp: float = 0.3, plant: str = "mismatched", rest: float = 0.5) -> PayloadRun:
+    """A program run with ``payload`` kg put on the platform (cosine over ``ramp`` s) ``rest`` s after
+    its start (Fig. 4.7; the estimate is tared empty before); ``program`` a shipped program name or
+    a .gcode file."""
     from cdpr_control import programs
     from cdpr_control.gcode import parse_gcode
     from cdpr_control.interpolation import Interpolator
@@ -175,10 +177,11 @@ def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40
     robot = load_robot(robot) if isinstance(robot, str) else robot
     text = Path(program).read_text() if program.endswith(".gcode") else programs.read(program)
     interp = Interpolator(parse_gcode(text, start_pose=robot.home), dt=1e-3)
-    n_ramp = max(int(round(ramp / 1e-3)), 1)
+    n_ramp, n_rest = max(int(round(ramp / 1e-3)), 1), int(round(rest / 1e-3))
 
     def payload_at(k):
-        return payload * (1.0 if k >= n_ramp else 0.5 * (1.0 - np.cos(np.pi * (k + 1) / n_ramp)))
+        k -= n_rest
+        return payload * (0.0 if k < 0 else 1.0 if k >= n_ramp else 0.5 * (1.0 - np.cos(np.pi * (k + 1) / n_ramp)))
 
     return _run(robot, program_source(interp), interp.duration + tail, config, robot.home, payload_at, lc_params,
                 plant=plant)
