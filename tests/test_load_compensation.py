@@ -228,39 +228,50 @@ def test_rate_limit_bounds_the_output_step():
 
 # --- closed loop (in process, simulator) ------------------------------------------------------
 
-def _steps(robot, config, position, step_mass, steps=1, dwell=5.0):
+def _steps(robot, config, position, step_mass, steps=1, dwell=5.0, plant=PLANT, **kwargs):
     from cdpr_tools.identify import load_steps
 
     run = load_steps.payload_steps(robot, config, position=position, step_mass=step_mass, steps=steps, dwell=dwell,
-                                   plant=PLANT)
+                                   plant=plant, **kwargs)
     return run, load_steps.step_summary(run, dwell, 0.5)
 
 
-@pytest.mark.parametrize("robot, position, step_mass, tolerance", [(IPANEMA3, (-1.0, -1.0, 0.5), 32.0, 0.05),
-                                                                   (MINI, (0.0, 0.0, 0.0), 1.0, 0.03)])
-def test_payload_steps_at_standstill_sag_cut_by_90_percent_and_estimate_within_tolerance_after_1s(
-        robot, position, step_mass, tolerance):
-    """Section 4.1.3 (Fig. 4.6), shortened to one step on and off: IK-only sags (mm/kg reported in
-    docs/load_compensation.md), IK-only + LC cuts the static sag by >= 90 %; the estimate is within
-    ``tolerance`` of the payload 0.7 .. 1.0 s after the start of each step and at its end (mean over
-    the last 0.3 s of each 5 s step): 3 % (the issue's figure) on the Mini, 5 % on the IPAnema 3, whose simulated
-    platform still swings under the 32 kg (3.7-4.4 % measured)."""
+def test_payload_steps_at_standstill_sag_cut_by_90_percent_up_to_128_kg():
+    """Section 4.1.3 (Fig. 4.6) on the IPAnema 3 at r = [-1, -1, 0.5] m, shortened to two steps of
+    64 kg (each put on over 1.5 s) up to the thesis' 128 kg: IK-only sags (mm/kg in
+    docs/load_compensation.md), IK-only + LC cuts the static sag by >= 90 % at 64 and at 128 kg.
+    Nominal plant: the cut is the cable model's (see PLANT)."""
     from cdpr_tools.identify.load_steps import sag_per_kg
 
-    ik, s_ik = _steps(robot, "ik", position, step_mass)
-    lc, s_lc = _steps(robot, "ik_lc", position, step_mass)
-    assert sag_per_kg(s_ik) > 0.0
+    kwargs = dict(step_mass=64.0, steps=2, dwell=4.0, ramp=1.5, down=False, plant="nominal")
+    ik, s_ik = _steps(IPANEMA3, "ik", POSE[:3], **kwargs)
+    lc, s_lc = _steps(IPANEMA3, "ik_lc", POSE[:3], **kwargs)
+    assert sag_per_kg(s_ik) > 0.3
     for a, b in zip(s_ik["steps"], s_lc["steps"]):
-        if a["payload_kg"] > 0.0:
-            sag_lc = b["z_error_mm"] - s_lc["unloaded_z_error_mm"]
-            assert abs(sag_lc) <= 0.1 * abs(a["z_error_mm"] - s_ik["unloaded_z_error_mm"])
-    n_rest, n_dwell = 500, 5000
+        sag_ik = a["z_error_mm"] - s_ik["unloaded_z_error_mm"]
+        sag_lc = b["z_error_mm"] - s_lc["unloaded_z_error_mm"]
+        assert abs(sag_lc) <= 0.1 * abs(sag_ik), (a["payload_kg"], sag_ik, sag_lc)
+    assert s_lc["steps"][-1]["payload_kg"] == 128.0
+    assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
+
+
+@pytest.mark.parametrize("robot, position, step_mass", [(IPANEMA3, (-1.0, -1.0, 0.5), 32.0),
+                                                        (MINI, (0.0, 0.0, 0.0), 1.0)])
+def test_estimate_within_3_percent_1s_after_each_step_on_the_mismatched_plant(robot, position, step_mass):
+    """One step on and off at standstill, IK-only + LC, on the mismatched plant with the estimate
+    tared at the start (empty): 0.7 .. 1.0 s after the start of each step (mean) and at its end
+    (mean over the last 0.3 s) the estimate is within 3 % of the payload (of the step for the
+    step back to zero). Without the tare the sensors' offsets would read as kilograms."""
+    dwell = 3.0
+    lc, s_lc = _steps(robot, "ik_lc", position, step_mass, dwell=dwell)
+    n_rest, n_dwell = 500, int(round(dwell / 1e-3))
     for j, row in enumerate(s_lc["steps"]):
         start = n_rest + j * n_dwell
         payload = row["payload_kg"]
         scale = max(payload, step_mass)
-        assert abs(row["estimate_kg"] - payload) <= tolerance * scale
-        assert abs(lc.m_c[start + 700:start + 1000].mean() - payload) <= tolerance * scale
+        assert abs(row["estimate_kg"] - payload) <= 0.03 * scale, (payload, row["estimate_kg"])
+        early = lc.m_c[start + 700:start + 1000].mean()
+        assert abs(early - payload) <= 0.03 * scale, (payload, early)
     assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
 
 

@@ -158,7 +158,7 @@ def compensating_wrench(m_c: float, gravity, cog=None, R=None) -> np.ndarray:
     return w_c
 
 
-def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float = 20.0, iterations: int = 6) -> np.ndarray:
+def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, iterations: int = 6) -> np.ndarray:
     """The set-point offset c (6,) [m, rad] (twist coordinates) that carries the compensating wrench
     w_c (6,) [N, N m] at the pose of ``ik``, from the loaded state with the measured forces f (m,):
     the non-linear (secant) form of (4.5)-(4.6) at a fixed platform pose.
@@ -174,14 +174,15 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float = 20.0, iteratio
 
     by Newton's method with the Jacobian K_c at f_U. A cable measured below ``f_slack`` [N] is
     slack: its elongation is not observable from its force, so its unloaded force is taken from
-    ``f_ref`` (m,) (the forces of a known unloaded state, e.g. at the tare; None: zero).
+    ``f_ref`` (m,) (the forces of a known unloaded state, e.g. at the tare; None: zero);
+    f_slack None: 20 % of the robot's f_min.
 
     Raises numpy.linalg.LinAlgError where the tensed cables do not hold the platform (fewer than
     n of them, or K_c ill-conditioned) or Newton's method does not converge: the offset is then
     not determined by the measurement (a platform swinging with slack cables).
     """
     f = np.asarray(f, dtype=float)
-    slack = f < f_slack
+    slack = f < (0.2 * float(np.min(robot.cable.f_min)) if f_slack is None else f_slack)
     l_t = cable.total_free_length(robot, ik.q)
     AT = ik.AT
     e_L = cable.elongation_from_force(robot, np.maximum(f, 0.0), l_t)
@@ -237,7 +238,7 @@ class LoadCompensationParams:
     acceleration_source: str = "estimated"   # ẍ_z of (4.4): commanded (time-shifted, thesis) or estimated (FK pose)
     offset_model: str = "secant"    # x_d,LC: secant (the elastic equilibrium at x_d, secant_offset) or tangent (C_x w_c (4.6))
     stiffness_model: str = "nonlinear"   # tangent model: K_l in K_x (2.22): linear (2.15) or nonlinear (2.16)-(2.17)
-    f_slack: float = 20.0           # N, measured (window-mean) cable forces below this count as (partly) slack in K_l
+    slack_fraction: float = 0.2     # measured (window-mean) cable forces below this share of f_min count as (partly) slack
     platform_mass: float = 0.0      # kg, the platform's own mass m_p; 0 = the robot file's
     torque: bool = False            # also compensate the payload's moment (needs the identified cog)
     cog_min_mass: float = 5.0       # kg, the payload's cog is identified (and published) above this m_c
@@ -256,7 +257,7 @@ class LoadCompensationParams:
         if self.stiffness_model not in STIFFNESS_MODELS:
             raise ValueError(f"stiffness_model must be one of {STIFFNESS_MODELS}, got {self.stiffness_model!r}")
         for name in ("T_filter", "time_shift", "accel_guard", "platform_mass", "cog_min_mass", "T_output", "v_max",
-                     "omega_max", "f_slack", "tare_payload"):
+                     "omega_max", "slack_fraction", "tare_payload"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -313,6 +314,11 @@ class LoadCompensation:
         if not p.enabled:
             self.x_lc = np.zeros(6)          # re-enabling starts from zero
             self.output_filter.reset(np.zeros(6))
+
+    @property
+    def f_slack(self) -> float:
+        """N, measured forces below this count as (partly) slack: slack_fraction of the robot's f_min."""
+        return self.params.slack_fraction * float(np.min(self.robot.cable.f_min))
 
     def _reference_forces(self) -> np.ndarray:
         """The unloaded forces for the slack cables of :func:`secant_offset`: those of the last window
@@ -434,9 +440,9 @@ class LoadCompensation:
                 cog = self.cog if p.torque else None
                 w_c = compensating_wrench(self.m_c, self.robot.gravity, cog, rotation_matrix(x_d[3:]))
                 if p.offset_model == "secant":
-                    dx = secant_offset(self.robot, ik, f, w_c, self._reference_forces(), p.f_slack)
+                    dx = secant_offset(self.robot, ik, f, w_c, self._reference_forces(), self.f_slack)
                 else:
-                    k_l = cable_stiffness_model(self.robot, ik, f, p.stiffness_model, p.f_slack)
+                    k_l = cable_stiffness_model(self.robot, ik, f, p.stiffness_model, self.f_slack)
                     dx = compliance(ik, f, k_l) @ w_c                                      # (4.5)-(4.6)
                 target = twist_to_pose_offset(dx, x_d[3:])
                 if np.all(np.isfinite(target)):

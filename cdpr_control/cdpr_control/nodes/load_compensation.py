@@ -50,7 +50,8 @@ PARAMS = [
               "model) or tangent (C_x w_c of (4.5)-(4.6))", choices=OFFSET_MODELS),
     ParamSpec("stiffness_model", D.stiffness_model, "tangent model: K_l in K_x (2.22): linear k_spec/l_t (2.15) or "
               "the tangent of the non-linear cable (2.16)-(2.17)", choices=STIFFNESS_MODELS),
-    ParamSpec("f_slack", D.f_slack, "measured cable forces below this count as (partly) slack [N]", range=(0.0, 1e4)),
+    ParamSpec("slack_fraction", D.slack_fraction, "measured cable forces below this share of f_min count as "
+              "(partly) slack", range=(0.0, 1.0)),
     ParamSpec("tare_at_start", D.tare_at_start, "tare the estimate once its first window is full (start at a "
               "known payload, tare_payload)"),
     ParamSpec("tare_payload", D.tare_payload, "the payload on the platform at a tare (~/tare, tare_at_start) [kg]",
