@@ -75,7 +75,7 @@ def add_parser(sub) -> None:
                     help="platform position [m] (default: the thesis' -1 -1 0.5)")
     ls.add_argument("--step-mass", type=float, default=8.0, help="payload step [kg] (default 8)")
     ls.add_argument("--steps", type=int, default=16, help="steps up, then the same down (default 16)")
-    ls.add_argument("--dwell", type=float, default=1.5, help="time per step [s] (default 1.5)")
+    ls.add_argument("--dwell", type=float, default=3.0, help="time per step [s] (default 3)")
     ls.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
                     help="the simulated robot: cdpr_sim.plant (default mismatched)")
     ls.set_defaults(run=run_load_steps)
