@@ -261,7 +261,8 @@ def test_estimate_within_3_percent_1s_after_each_step_on_the_mismatched_plant(ro
     """One step on and off at standstill, IK-only + LC, on the mismatched plant with the estimate
     tared at the start (empty): 0.7 .. 1.0 s after the start of each step (mean) and at its end
     (mean over the last 0.3 s) the estimate is within 3 % of the payload (of the step for the
-    step back to zero). Without the tare the sensors' offsets would read as kilograms."""
+    step back to zero). Without the tare the sensors' offsets read as payload (a few tenths of a
+    kilogram on this plant seed)."""
     dwell = 3.0
     lc, s_lc = _steps(robot, "ik_lc", position, step_mass, dwell=dwell)
     n_rest, n_dwell = 500, int(round(dwell / 1e-3))

@@ -333,8 +333,7 @@ class LoadCompensation:
     def tare(self, payload: float | None = None) -> float | None:
         """Tare the estimate at a known state: from now on the current estimate reads m_p + payload
         (default ``tare_payload``). The offset it removes is that of the force sensors (3.29) and of
-        the model (anchor points, m_p) in (4.4): on a robot it reads as kilograms of payload (0.25 %
-        of the sensor range per cable is tens of kg on the IPAnema 3). Take it at rest, with the
+        the model (anchor points, m_p) in (4.4), which read as payload. Take it at rest, with the
         payload known (e.g. at home after power-on, empty). Returns the offset [kg] (None, and no
         change, while the estimate is held or not yet available)."""
         payload = self.params.tare_payload if payload is None else float(payload)
