@@ -1,6 +1,6 @@
 """Cost of one period of the load identification and compensation (4.4)-(4.6), per robot.
 
-LoadCompensation.update (moving averages, K_x (2.22), its inverse (4.5), (4.6), output filter) on a
+LoadCompensation.update (moving averages, the secant offset of (4.5)-(4.6), output filter) on a
 circle set-point with the forces that carry it, beside two baselines of the same run: the OSPC
 update (one PI per DOF, the other offset input of the joint command) and the IK of x_d (which the
 control loop shares with this stage). Figures in microseconds (median), plus the machine's

@@ -15,16 +15,18 @@ from cdpr_control.dynamics import gravity_wrench, platform_wrench
 from cdpr_control.forward_kinematics import ForwardKinematics
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.load_compensation import (LoadCompensation, LoadCompensationParams, MovingAverage,
-                                            cable_stiffness_model, compliance, load_offset, mass_estimate,
-                                            payload_wrench)
+                                            cable_stiffness_model, compensating_wrench, compliance, load_offset,
+                                            mass_estimate, payload_wrench, secant_offset)
 from cdpr_control.robot import load_robot
 from cdpr_control.stiffness import operational_stiffness
 
 IPANEMA3 = load_robot("ipanema3")
-# The closed-loop tests run on the nominal plant: the mass estimate (4.4) takes the force sensors as
-# calibrated, and the mismatched plant's sensor offsets (0.25 % of range per cable) read as tens of
-# kilograms of payload on the IPAnema 3; docs/load_compensation.md gives the figures on both plants.
-PLANT = "nominal"
+# The closed-loop tests run on the mismatched plant (the estimate tared at the start, empty), except
+# the sag cut: x_d,LC is a feed-forward of the cable model, so the plant's cable stiffness (8-15 %
+# off) and its cable settlement under load (a lasting elongation of tens of mm after 128 kg, section
+# 4.1.3) stay in the error; the >= 90 % of the sag it removes is a property of the model, measured
+# on the nominal plant (docs/load_compensation.md gives the figures on both plants).
+PLANT = "mismatched"
 MINI = load_robot("ipanema3_mini")
 POSE = np.r_[-1.0, -1.0, 0.5, 0.0, 0.0, 0.0]            # section 4.1.3
 G = 9.81
@@ -76,6 +78,76 @@ def test_load_offset_4_6_equals_the_sag_of_the_elastic_equilibrium(robot, m_c):
     x_lc = load_offset(C_x, m_c, robot.gravity)
     assert x_lc[2] > 0.0 > sag[2]
     np.testing.assert_allclose(x_lc[:3], -sag[:3], atol=0.03 * abs(sag[2]))
+
+
+def _ik_only_state(robot, x, m, command=None):
+    """Static equilibrium of IK-only control (θ = IK(command) - Δq_0 of the home calibration)
+    carrying a payload m: (pose, forces at the platform)."""
+    from cdpr_sim.simulator import home_calibration_offset
+    from cdpr_sim.startup import startup_forces
+
+    dq_0 = home_calibration_offset(robot, startup_forces(robot, robot.home, 0.0))
+    theta = inverse_kinematics(robot, x if command is None else command).q - dq_0
+    result = ForwardKinematics(robot).operational_space(theta, x, w=gravity_wrench(robot.with_payload(m), x))
+    assert result.converged
+    ik = inverse_kinematics(robot, result.x)
+    return result.x, cable.force_from_elongation(robot, ik.q - theta, cable.total_free_length(robot, ik.q))
+
+
+def test_secant_offset_is_the_command_that_holds_128_kg_at_the_set_point():
+    """IK-only control at r = [-1, -1, 0.5] m (section 4.1.3) with 128 kg: the command x_d + c that
+    puts the loaded platform back where it stood unloaded, found by iterating the elastic
+    equilibrium (FK (2.36)), against secant_offset from the compensated state's forces. The tangent
+    C_x w_c (4.6) at the same forces misses it by about 10 % (progressive cables, two of them slack,
+    and K_g, which does not act while the platform stays put)."""
+    x = POSE
+    x_0, f_0 = _ik_only_state(IPANEMA3, x, 0.0)
+    command = x.copy()
+    for _ in range(30):
+        command -= _ik_only_state(IPANEMA3, x, 128.0, command)[0] - x_0
+    _, f = _ik_only_state(IPANEMA3, x, 128.0, command)
+    c_exact = command - x                                     # small rotations: Kardan = twist here
+    assert np.sum(f < 1.0) >= 2                               # lower cables slack under the payload
+    ik = inverse_kinematics(IPANEMA3, x)
+    w_c = compensating_wrench(128.0, IPANEMA3.gravity)
+    c = secant_offset(IPANEMA3, ik, f, w_c, f_ref=f_0)
+    np.testing.assert_allclose(c[:3], c_exact[:3], atol=0.03 * c_exact[2])
+    np.testing.assert_allclose(c[3:], c_exact[3:], atol=0.1 * np.abs(c_exact[3:]).max())
+    tangent = compliance(ik, f, cable_stiffness_model(IPANEMA3, ik, f, "nonlinear", 20.0)) @ w_c
+    assert abs(tangent[2] - c_exact[2]) > 0.07 * c_exact[2]
+    # no payload, no offset; an ill-posed state (fewer than 6 tensed cables) raises
+    np.testing.assert_allclose(secant_offset(IPANEMA3, ik, f_0, np.zeros(6), f_ref=f_0), 0.0, atol=1e-12)
+    with pytest.raises(np.linalg.LinAlgError):
+        secant_offset(IPANEMA3, ik, np.r_[f[:4], np.zeros(4)], w_c)
+
+
+def test_slack_cables_have_no_stiffness_whatever_the_noise_on_their_force():
+    """A slack cable read at a few newtons (sensor noise) must not count as fully stiff in K_l."""
+    ik = inverse_kinematics(IPANEMA3, POSE)
+    f = np.r_[np.full(6, 800.0), 3.0, -2.0]
+    k = cable_stiffness_model(IPANEMA3, ik, f, "nonlinear", f_slack=20.0)
+    k_full = cable_stiffness_model(IPANEMA3, ik, f, "nonlinear")
+    np.testing.assert_allclose(k[:6], k_full[:6])
+    assert k[6] == pytest.approx(0.15 * k_full[6]) and k[7] == 0.0
+
+
+def test_tare_removes_the_sensor_offset_from_the_estimate():
+    """A force offset reads as payload; the tare at a known state (empty) removes it, and a later
+    payload is then identified on top; no tare while the estimate is held."""
+    lc = LoadCompensation(IPANEMA3, 1e-3, LoadCompensationParams(tare_at_start=True))
+    empty, _ = _forces(IPANEMA3, POSE, np.zeros(6), np.zeros(6), 0.0, np.zeros(3))
+    loaded, _ = _forces(IPANEMA3, POSE, np.zeros(6), np.zeros(6), 30.0, np.zeros(3))
+    offset = np.r_[np.full(4, 10.0), np.full(4, -10.0)]      # 10 N per sensor (0.25 % of 4000 N)
+    lc.update(POSE, np.zeros(6), np.zeros(6), empty + offset)
+    assert abs(lc.m_c) > 1.5                                  # the offset reads as kilograms
+    for _ in range(300):
+        lc.update(POSE, np.zeros(6), np.zeros(6), empty + offset)
+    assert lc.tared and lc.m_c == pytest.approx(0.0, abs=1e-9)
+    for _ in range(300):
+        lc.update(POSE, np.zeros(6), np.zeros(6), loaded + offset)
+    assert lc.m_c == pytest.approx(30.0, rel=0.02)
+    lc.guarded = True
+    assert lc.tare(0.0) is None and lc.m_c == pytest.approx(30.0, rel=0.02)
 
 
 def test_compliance_is_the_inverse_of_the_operational_stiffness_and_linear_model_differs():
@@ -156,39 +228,51 @@ def test_rate_limit_bounds_the_output_step():
 
 # --- closed loop (in process, simulator) ------------------------------------------------------
 
-def _steps(robot, config, position, step_mass, steps=1, dwell=5.0):
+def _steps(robot, config, position, step_mass, steps=1, dwell=5.0, plant=PLANT, **kwargs):
     from cdpr_tools.identify import load_steps
 
     run = load_steps.payload_steps(robot, config, position=position, step_mass=step_mass, steps=steps, dwell=dwell,
-                                   plant=PLANT)
+                                   plant=plant, **kwargs)
     return run, load_steps.step_summary(run, dwell, 0.5)
 
 
-@pytest.mark.parametrize("robot, position, step_mass, tolerance", [(IPANEMA3, (-1.0, -1.0, 0.5), 32.0, 0.05),
-                                                                   (MINI, (0.0, 0.0, 0.0), 1.0, 0.03)])
-def test_payload_steps_at_standstill_sag_cut_by_90_percent_and_estimate_within_tolerance_after_1s(
-        robot, position, step_mass, tolerance):
-    """Section 4.1.3 (Fig. 4.6), shortened to one step on and off: IK-only sags (mm/kg reported in
-    docs/load_compensation.md), IK-only + LC cuts the static sag by >= 90 %; the estimate is within
-    ``tolerance`` of the payload 0.7 .. 1.0 s after the start of each step and at its end (mean over
-    the last 0.3 s of each 5 s step): 3 % (the issue's figure) on the Mini, 5 % on the IPAnema 3, whose simulated
-    platform still swings under the 32 kg (3.7-4.4 % measured)."""
+def test_payload_steps_at_standstill_sag_cut_by_90_percent_up_to_128_kg():
+    """Section 4.1.3 (Fig. 4.6) on the IPAnema 3 at r = [-1, -1, 0.5] m, shortened to two steps of
+    64 kg (each put on over 1.5 s) up to the thesis' 128 kg: IK-only sags (mm/kg in
+    docs/load_compensation.md), IK-only + LC cuts the static sag by >= 90 % at 64 and at 128 kg.
+    Nominal plant: the cut is the cable model's (see PLANT)."""
     from cdpr_tools.identify.load_steps import sag_per_kg
 
-    ik, s_ik = _steps(robot, "ik", position, step_mass)
-    lc, s_lc = _steps(robot, "ik_lc", position, step_mass)
-    assert sag_per_kg(s_ik) > 0.0
+    kwargs = dict(step_mass=64.0, steps=2, dwell=4.0, ramp=1.5, down=False, plant="nominal")
+    ik, s_ik = _steps(IPANEMA3, "ik", POSE[:3], **kwargs)
+    lc, s_lc = _steps(IPANEMA3, "ik_lc", POSE[:3], **kwargs)
+    assert sag_per_kg(s_ik) > 0.3
     for a, b in zip(s_ik["steps"], s_lc["steps"]):
-        if a["payload_kg"] > 0.0:
-            sag_lc = b["z_error_mm"] - s_lc["unloaded_z_error_mm"]
-            assert abs(sag_lc) <= 0.1 * abs(a["z_error_mm"] - s_ik["unloaded_z_error_mm"])
-    n_rest, n_dwell = 500, 5000
+        sag_ik = a["z_error_mm"] - s_ik["unloaded_z_error_mm"]
+        sag_lc = b["z_error_mm"] - s_lc["unloaded_z_error_mm"]
+        assert abs(sag_lc) <= 0.1 * abs(sag_ik), (a["payload_kg"], sag_ik, sag_lc)
+    assert s_lc["steps"][-1]["payload_kg"] == 128.0
+    assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
+
+
+@pytest.mark.parametrize("robot, position, step_mass", [(IPANEMA3, (-1.0, -1.0, 0.5), 32.0),
+                                                        (MINI, (0.0, 0.0, 0.0), 1.0)])
+def test_estimate_within_3_percent_1s_after_each_step_on_the_mismatched_plant(robot, position, step_mass):
+    """One step on and off at standstill, IK-only + LC, on the mismatched plant with the estimate
+    tared at the start (empty): 0.7 .. 1.0 s after the start of each step (mean) and at its end
+    (mean over the last 0.3 s) the estimate is within 3 % of the payload (of the step for the
+    step back to zero). Without the tare the sensors' offsets read as payload (a few tenths of a
+    kilogram on this plant seed)."""
+    dwell = 3.0
+    lc, s_lc = _steps(robot, "ik_lc", position, step_mass, dwell=dwell)
+    n_rest, n_dwell = 500, int(round(dwell / 1e-3))
     for j, row in enumerate(s_lc["steps"]):
         start = n_rest + j * n_dwell
         payload = row["payload_kg"]
         scale = max(payload, step_mass)
-        assert abs(row["estimate_kg"] - payload) <= tolerance * scale
-        assert abs(lc.m_c[start + 700:start + 1000].mean() - payload) <= tolerance * scale
+        assert abs(row["estimate_kg"] - payload) <= 0.03 * scale, (payload, row["estimate_kg"])
+        early = lc.m_c[start + 700:start + 1000].mean()
+        assert abs(early - payload) <= 0.03 * scale, (payload, early)
     assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
 
 

@@ -1,6 +1,7 @@
 """Node ``load_compensation`` on typed topics: lockstep periods publish the state (x_d,LC) and the
 payload (geometry_msgs/InertiaStamped) every period, enabled or not; a live disable zeroes the output;
-a rejected parameter keeps the old value; the force distribution takes the payload as the known part of its disturbance."""
+a rejected parameter keeps the old value; the force distribution takes the payload as the known part of its disturbance;
+the ~/tare service makes the estimate read the known payload."""
 import time
 
 import numpy as np
@@ -12,6 +13,7 @@ from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, Opera
 from geometry_msgs.msg import InertiaStamped, PoseStamped, WrenchStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 from cdpr_control.dynamics import platform_wrench  # noqa: E402
 from cdpr_control.force_distribution import ForceDistributor  # noqa: E402
@@ -95,3 +97,12 @@ def test_state_and_payload_every_period_and_live_disable(graph):
     state = got["state"][-1]
     assert not state.enabled and list(state.output) == [0.0] * 6
     assert got["payload"][-1].inertia.m == pytest.approx(m_c, rel=1e-6)   # identification goes on
+
+    # the tare at a known state: the estimate reads tare_payload from then on
+    assert lc.set_parameters([Parameter("tare_payload", value=0.1)])[0].successful
+    client = probe.create_client(Trigger, "/load_compensation/tare")
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(Trigger.Request())
+    assert _spin_until(executor, future.done) and future.result().success
+    period(301)
+    assert got["payload"][-1].inertia.m == pytest.approx(0.1, abs=1e-6)

@@ -6,7 +6,7 @@
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
-    cdpr identify load-steps OUTDIR [--robot NAME] [--configs ik,ik_lc,...] [--step-mass KG] [--steps N]
+    cdpr identify load-steps OUTDIR [--robot NAME] [--configs ik,ik_lc,...] [--step-mass KG] [--steps N] [--plant P]
     cdpr identify load-program OUTDIR [--robot NAME] [--payloads 40,80] [--program NAME]
 """
 from __future__ import annotations
@@ -75,7 +75,9 @@ def add_parser(sub) -> None:
                     help="platform position [m] (default: the thesis' -1 -1 0.5)")
     ls.add_argument("--step-mass", type=float, default=8.0, help="payload step [kg] (default 8)")
     ls.add_argument("--steps", type=int, default=16, help="steps up, then the same down (default 16)")
-    ls.add_argument("--dwell", type=float, default=1.5, help="time per step [s] (default 1.5)")
+    ls.add_argument("--dwell", type=float, default=3.0, help="time per step [s] (default 3)")
+    ls.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
+                    help="the simulated robot: cdpr_sim.plant (default mismatched)")
     ls.set_defaults(run=run_load_steps)
 
     lp = what.add_parser("load-program", help="a program run with payloads, with and without load "
@@ -85,6 +87,8 @@ def add_parser(sub) -> None:
     lp.add_argument("--payloads", default="40,80", help="payloads [kg], comma-separated (default 40,80)")
     lp.add_argument("--program", default="payload_moves_ipanema3", help="shipped program or .gcode file")
     lp.add_argument("--configs", default="ik,ik_lc", help="controller configurations, comma-separated")
+    lp.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
+                    help="the simulated robot: cdpr_sim.plant (default mismatched)")
     lp.set_defaults(run=run_load_program)
 
 
@@ -195,7 +199,7 @@ def run_load_steps(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     summary = run_experiment(args.outdir, args.robot, configs, position=tuple(args.position),
                              step_mass=args.step_mass, steps=args.steps, dwell=args.dwell,
-                             progress=lambda line: print(line, flush=True))
+                             progress=lambda line: print(line, flush=True), plant=args.plant)
     for name, s in summary.items():
         print(f"{name:18s} sag {s['sag_mm_per_kg']:6.3f} mm/kg  worst static z error {s['max_abs_z_error_mm']:6.1f} mm")
     return 0
@@ -210,7 +214,7 @@ def run_load_program(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     payloads = [float(m) for m in args.payloads.split(",") if m]
     summary = run_program_experiment(args.outdir, args.robot, configs, payloads, args.program,
-                                     progress=lambda line: print(line, flush=True))
+                                     progress=lambda line: print(line, flush=True), plant=args.plant)
     for key, s in summary.items():
         print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
               f"estimate error {s['max_estimate_error_percent']:5.1f} %")

@@ -14,6 +14,9 @@ enabled or not:
   are zero (not identified). The force distribution takes it into its model wrench with its
   ``payload_input`` parameter.
 
+Service ``~/tare`` (std_srvs/Trigger): tare the estimate at a known state (at rest with the payload
+``tare_payload`` on, e.g. empty at home after power-on); ``tare_at_start`` does it once by itself.
+
 The computation is :class:`cdpr_control.load_compensation.LoadCompensation`.
 """
 from __future__ import annotations
@@ -22,8 +25,9 @@ import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseStamped, Vector3
+from std_srvs.srv import Trigger
 
-from cdpr_control.load_compensation import (ACCELERATION_SOURCES, STIFFNESS_MODELS, LoadCompensation,
+from cdpr_control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
                                             LoadCompensationParams)
 from cdpr_control.ospc import AXES
 
@@ -42,8 +46,16 @@ PARAMS = [
     ParamSpec("accel_guard", D.accel_guard, "|ẍ_z - g| below this holds the estimate [m/s^2]", range=(1e-3, 9.81)),
     ParamSpec("acceleration_source", D.acceleration_source, "ẍ_z of (4.4): commanded (time-shifted ẍ_d, thesis) "
               "or estimated (from the forward kinematics' pose)", choices=ACCELERATION_SOURCES),
-    ParamSpec("stiffness_model", D.stiffness_model, "K_l in K_x (2.22): linear k_spec/l_t (2.15) or the tangent of "
-              "the non-linear cable (2.16)-(2.17)", choices=STIFFNESS_MODELS),
+    ParamSpec("offset_model", D.offset_model, "x_d,LC: secant (the elastic equilibrium at x_d, exact for the cable "
+              "model) or tangent (C_x w_c of (4.5)-(4.6))", choices=OFFSET_MODELS),
+    ParamSpec("stiffness_model", D.stiffness_model, "tangent model: K_l in K_x (2.22): linear k_spec/l_t (2.15) or "
+              "the tangent of the non-linear cable (2.16)-(2.17)", choices=STIFFNESS_MODELS),
+    ParamSpec("slack_fraction", D.slack_fraction, "measured cable forces below this share of f_min count as "
+              "(partly) slack", range=(0.0, 1.0)),
+    ParamSpec("tare_at_start", D.tare_at_start, "tare the estimate once its first window is full (start at a "
+              "known payload, tare_payload)"),
+    ParamSpec("tare_payload", D.tare_payload, "the payload on the platform at a tare (~/tare, tare_at_start) [kg]",
+              range=(0.0, 1e4)),
     ParamSpec("platform_mass", D.platform_mass, "the platform's own mass m_p [kg]; 0 = the robot file's",
               range=(0.0, 1e4)),
     ParamSpec("torque", D.torque, "also compensate the moment of the payload at its identified cog"),
@@ -67,6 +79,15 @@ class LoadCompensationNode(CdprNode):
             "f": (CableForces, "cable_forces"),
             "pose": (PoseStamped, "platform/pose"),
         }, primary="f", callback=self._cycle, mode=self.sync_mode)
+        self.create_service(Trigger, "~/tare", self._on_tare)
+
+    def _on_tare(self, request, response):
+        """Tare the estimate now: it reads the platform plus ``tare_payload`` (at rest, payload known)."""
+        offset = self.stage.tare()
+        response.success = offset is not None
+        response.message = (f"tared: {offset:+.2f} kg removed from the estimate" if response.success
+                             else "estimate held or not yet available: not tared")
+        return response
 
     @staticmethod
     def _stage_params(v: dict) -> LoadCompensationParams:
