@@ -26,7 +26,7 @@ from cdpr_test_nodes.graph import wait_for  # noqa: E402
 
 @pytest.fixture(scope="module")
 def graph():
-    g = FaultGraph("composed")
+    g = FaultGraph("composed", lockstep_timeout=0.02, state_timeout=1.0)
     yield g
     g.close()
 

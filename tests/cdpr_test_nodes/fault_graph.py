@@ -23,19 +23,21 @@ from .graph import Collector, Spinner, wait_for
 
 ROBOT = "ipanema3_mini"
 PERIOD_NS = 1_000_000
-LOCKSTEP_TIMEOUT = 0.02    # s: a dead node costs the lockstep loop this much wall time per period
-STATE_TIMEOUT = 1.0        # s: the interpreter fails its program after this long without a winch state
 TOPICS = {"/winch/command": JointState, "/diagnostics": DiagnosticArray, "/program_status": ProgramStatus}
 
 
 class FaultGraph:
     """The closed loop without its visualisation, started in ``mode``, and a probe beside it."""
 
-    def __init__(self, mode: str):
+    def __init__(self, mode: str, lockstep_timeout: float, state_timeout: float, input_deadline: int = 50):
+        """``lockstep_timeout`` [s]: wall time a dead node costs the lockstep loop per period (the
+        simulator then advances without a command); ``state_timeout`` [s]: the interpreter fails its
+        program after this long without a winch state; ``input_deadline`` [periods]: every node's."""
         description = select_nodes(load_launch_file(GRAPH, {"robot": ROBOT, "sync_mode": "exact"}),
                                    exclude=["visualization"])
-        extra = {"winch_platform_sim": {"lockstep_timeout": LOCKSTEP_TIMEOUT},
-                 "gcode_interpreter": {"state_timeout": STATE_TIMEOUT}}
+        description.parameters["input_deadline"] = input_deadline
+        extra = {"winch_platform_sim": {"lockstep_timeout": lockstep_timeout},
+                 "gcode_interpreter": {"state_timeout": state_timeout}}
         for spec in description.nodes:
             if spec.label in extra:
                 spec.parameters = list(spec.parameters) + [extra[spec.label]]

@@ -8,6 +8,7 @@ arguments of ``rclpy.node.Node`` (``parameter_overrides``, ``cli_args``, ``names
 from __future__ import annotations
 
 import inspect
+import re
 import time
 import traceback
 
@@ -33,6 +34,7 @@ COMMON_PARAMS = (
               "which it is stale: reported on /diagnostics (the joint command holds); also the largest stamp "
               "jump an input may make", range=(1, 1_000_000), read_only=True),
 )
+_DIGITS = re.compile(r"[-+]?[0-9][0-9.e+-]*")
 FAULT_REPORT_PERIOD = 1.0   # s: a repeating input fault or callback error is reported at most this often
 
 
@@ -126,7 +128,7 @@ class CdprNode(IntraProcessNode):
 
     def input_fault(self, topic: str, reason: str) -> None:
         """A message on ``topic`` was dropped for ``reason``: counted, warned and reported on /diagnostics."""
-        key = (topic, reason.split(":")[0][:40])
+        key = (topic, _DIGITS.sub("#", reason))      # one key per kind of fault, whatever its numbers
         count = self.input_faults[key] = self.input_faults.get(key, 0) + 1
         if count == 1:
             self.get_logger().warn(f"dropped a message on {topic}: {reason}")

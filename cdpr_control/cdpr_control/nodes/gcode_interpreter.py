@@ -21,16 +21,17 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
   ``<source>/state`` says ``enabled`` and no program runs, its ``<source>/setpoint`` is published
   as the set-point instead of the held one (hand guiding, docs/admittance.md); when it ends, its
   last pose is held, so a following program starts there. Programs are refused meanwhile. In
-  lockstep the period t_k waits for the source's messages of t_k-1 (its set-point for t_k).
+  lockstep the period t_k waits for the source's messages of t_k-1 (its set-point for t_k), at most
+  ``input_deadline`` periods (then the source counts as stopped and the period runs without it).
 
 Limit parameters apply to the next program, not to one that is running.
 
-Faults fail the running program with the reason (result and ``program_status`` message), braking
-jerk-limited on the path: a report of the ``fault_source`` node on /diagnostics with ``abort: True``
+Faults fail the running program with the reason (result and ``program_status`` message), at once
+(the set-point stops where it is; the joint command brakes the robot on the path): a report of the ``fault_source`` node on /diagnostics with ``abort: True``
 (the joint command holds for a stale input or a set-point outside the wrench-feasible workspace);
-``winch/command`` more than ``input_deadline`` periods older than the winch state (the command
-path stopped; failed at once, the loop no longer runs); in lockstep, no ``winch/state`` for
-``state_timeout`` of wall time (failed at once). A ``winch/state`` stamp that jumps more than
+``winch/command`` more than twice ``input_deadline`` periods older than the winch state (the
+command path stopped, the joint command too); in lockstep, no ``winch/state`` for
+``state_timeout`` of wall time. A ``winch/state`` stamp that jumps more than
 ``input_deadline`` periods ahead (or back) is refused and reported unless the next one continues from it.
 """
 from __future__ import annotations
@@ -342,7 +343,8 @@ class GCodeInterpreterNode(CdprNode):
         for status in msg.status:
             if status.level == DiagnosticStatus.ERROR and status.name.rsplit("/", 1)[-1] == self.fault_source \
                     and any(kv.key == "abort" and kv.value == "True" for kv in status.values):
-                self._abort(f"{self.fault_source} holds: {status.message}")
+                # at once: the joint command holds (braking on its own), the set-point is not followed
+                self._abort(f"{self.fault_source} holds: {status.message}", brake=False)
 
     def _on_command(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)
@@ -351,9 +353,10 @@ class GCodeInterpreterNode(CdprNode):
 
     def _check_command_age(self, stamp: int) -> None:
         last = self._last_command_ns
-        if last is not None and stamp - last > self.input_deadline * self.dt * 1e9:
-            self._abort(f"winch/command is older than input_deadline {self.input_deadline} periods "
-                        "(the command path stopped)", brake=False)
+        # twice the deadline: a stale input of the joint command is its to report (it then holds)
+        if last is not None and stamp - last > 2 * self.input_deadline * self.dt * 1e9:
+            self._abort(f"winch/command is older than twice input_deadline ({2 * self.input_deadline} periods): "
+                        "the command path stopped", brake=False)
 
     def _state_watchdog(self) -> None:
         if self.active is None:
@@ -364,15 +367,20 @@ class GCodeInterpreterNode(CdprNode):
 
     def _on_state(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)                           # (only the stamp is used here)
-        problem = self.state_jumps.check("winch/state", stamp)
+        problem = self.state_jumps.check("winch/state", stamp, lambda: self.get_clock().now().nanoseconds)
         if problem is not None:
             self.input_fault("winch/state", problem)
             return
         self._last_state_wall = time.monotonic()
         if stamp > self._last_tick_ns:
             if self.source and self._last_tick_ns >= 0 and len(self.source_msgs.get(self._last_tick_ns, ())) < 2:
-                self._waiting_ns = stamp                 # the source's set-point for this period is not there yet
-                return
+                if stamp - self._last_tick_ns <= self.input_deadline * self.dt * 1e9:
+                    self._waiting_ns = stamp             # the source's set-point for this period is not there yet
+                    return
+                # the source stopped (e.g. behind a dead node): go on without it, else the loop never resumes
+                self._waiting_ns = None
+                self.report(DiagnosticStatus.WARN, f"stale input: {self.source}/setpoint older than input_deadline "
+                            f"{self.input_deadline} periods: running without it", stamp_ns=stamp)
             self._tick_exact(stamp)
         elif stamp == self._last_tick_ns and self._last_setpoint is not None:
             # the simulator repeats a state until the period's command comes (its start-up handshake):

@@ -20,8 +20,8 @@ the drives' v_max. Faults of the safety monitor (non-finite input, position lag,
 input, and optionally force limits) hold θ_d (braking on the path at ``a_brake``, see
 :mod:`cdpr_control.joint_command`); the command is never NaN. Also holding: a required input
 (``setpoint``, ``cable_force_controller/state``) more than ``input_deadline`` periods behind the
-winch state (its producer stopped: the command then comes on each winch state, braking, instead of
-waiting for the dead input), and a set-point outside the wrench-feasible workspace: the
+winch state (its producer stopped: the command then comes on each winch state while braking,
+instead of waiting for the dead input), and a set-point outside the wrench-feasible workspace: the
 ``force_distribution`` status INFEASIBLE for ``infeasible_periods`` periods in a row. A holding
 report of a stale input or of the workspace on /diagnostics (ERROR, ``abort: True``) makes the
 G-code interpreter fail its program; the other holds (lag, FK not converged) last while their fault does.
@@ -98,6 +98,7 @@ class JointCommandNode(CdprNode):
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
         self.infeasible = 0                          # periods in a row without a feasible f_d
+        self._standing = False                       # a hold for a stale input has braked to a stand
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -119,7 +120,7 @@ class JointCommandNode(CdprNode):
         m = self.robot.m
 
         def keep(msg):
-            problem = input_problem(msg, m) or self.watched_stamps.check(name, stamp_ns(msg))
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, stamp_ns(msg), self.sync._reference)
             if problem is not None:
                 self.input_fault(topic, problem)
                 return
@@ -170,19 +171,27 @@ class JointCommandNode(CdprNode):
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
+        self._standing = False
         self._publish(t_ns, theta_d, faults, hold)
 
     def _hold_cycle(self, t_ns: int) -> None:
         """A period whose required input is stale (its producer stopped): brake on the path, so that
-        the drives get a command every period instead of the last one forever."""
+        the drives do not keep the last moving command. In lockstep the command comes on each winch
+        state while braking and once standing; after that the simulator advances on its
+        lockstep_timeout with the held command (answering every state would run the rest of the
+        graph faster than it can follow); free-running it comes every period."""
         if self.command.theta_d is None:
             return
+        moving = bool(self.command.velocity.any())
         faults = self._faults(t_ns, None)
         theta_d = self.command.update(None, hold=True)
-        self._publish(t_ns, theta_d, faults, True)
+        self._publish(t_ns, theta_d, faults, True,
+                      send=moving or self.sync_mode == "latest" or not self._standing)
+        self._standing = not moving
 
-    def _publish(self, t_ns: int, theta_d, faults: list, hold: bool) -> None:
-        self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+    def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
+        if send:
+            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),

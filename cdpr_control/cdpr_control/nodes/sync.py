@@ -11,11 +11,12 @@ Faults at the input (issue "faults, bad input and crashes"), in both modes:
 - a message that is not valid for the robot (:func:`input_problem`: array lengths against the m
   cables or the 6 pose dimensions, non-finite values, a pose or wrench not in the base frame) is
   dropped, counted and reported on /diagnostics naming the topic and the reason;
-- a stamp that jumps, more than ``input_deadline`` periods ahead of that input's newest stamp or
-  back behind it, is dropped and reported unless the next message of the input continues from it
-  (a restarted publisher; one spoofed far stamp cannot discard every real period);
+- a stamp that jumps, more than ``input_deadline`` periods ahead of that input's newest stamp and
+  of the node's time (its newest input, its simulated clock), or back behind the input's newest, is
+  dropped and reported unless the next message of the input continues from it (a restarted
+  publisher; one spoofed far stamp cannot discard every real period);
 - a required input whose newest stamp falls more than ``input_deadline`` periods behind the newest
-  stamp of the node's other inputs (or the node's clock, :meth:`StampSync.advance`) is *stale*: its
+  stamp of the node's other inputs (or the node's clock: simulated time, or :meth:`StampSync.advance`) is *stale*: its
   producer stopped. It is reported once, naming the topic, and listed in :attr:`StampSync.stale`
   (the joint command then holds); reported again when it is fresh.
 """
@@ -131,18 +132,21 @@ def input_problem(msg, m: int, size: int | None = None) -> str | None:
 
 
 class StampJumps:
-    """Stamps of input streams: a stamp more than ``limit_ns`` ahead of the stream's newest, or behind
-    it, is a jump, refused unless the stream's next stamp continues from it (a restarted publisher)."""
+    """Stamps of input streams: a stamp more than ``limit_ns`` ahead of the stream's newest (and of
+    ``reference``, the receiver's clock), or behind it, is a jump, refused unless the stream's next
+    stamp continues from it (a restarted publisher)."""
 
     def __init__(self, periods: int, limit_ns: int):
         self.periods, self.limit_ns = periods, limit_ns
         self.newest: dict[str, int] = {}
         self.jumped: dict[str, int] = {}
 
-    def check(self, name: str, t: int) -> str | None:
-        """None if ``t`` is accepted (and now the newest of ``name``), else the reason it is refused."""
+    def check(self, name: str, t: int, reference: Callable[[], int] | None = None) -> str | None:
+        """None if ``t`` is accepted (and now the newest of ``name``), else the reason it is refused.
+        ``reference()``: the receiver's time now [ns] (asked only when ``t`` is ahead of its stream)."""
         last = self.newest.get(name)
-        if last is None or last <= t <= last + self.limit_ns:
+        if last is None or last <= t <= last + self.limit_ns \
+                or (last < t and reference is not None and t <= reference() + self.limit_ns):
             self.newest[name] = t
             return None
         jumped = self.jumped.pop(name, None)
@@ -182,18 +186,30 @@ class StampSync:
         self.now = -1                        # the newest stamp of any input (or advance())
         self.stale: tuple[str, ...] = ()     # required inputs older than the deadline
         self.on_stale = on_stale             # called with t for each new period while an input is stale
+        self.sim_time = node.has_parameter("use_sim_time") and bool(node.get_parameter("use_sim_time").value)
         self.subscriptions = [
             node.create_subscription(msg_type, topic, self._receiver(name), qos)
             for name, (msg_type, topic) in inputs.items()
         ]
+        # on simulated time the clock (/clock of the simulator) advances also when every input of
+        # this node stopped: look at it twice per deadline (on wall time there is nothing to compare)
+        if self.sim_time:
+            self.timer = node.create_timer(0.5 * self.deadline_ns * 1e-9, self._watch)
+
+    def _watch(self) -> None:
+        self.advance(self.node.get_clock().now().nanoseconds)
 
     def _reject(self, name: str, reason: str) -> None:
         input_fault = getattr(self.node, "input_fault", None)
         if input_fault is not None:
             input_fault(self.topics[name], reason)
 
+    def _reference(self) -> int:
+        """The node's time now: its newest input, or its (simulated) clock."""
+        return max(self.now, self.node.get_clock().now().nanoseconds) if self.sim_time else self.now
+
     def _accept_stamp(self, name: str, t: int) -> bool:
-        reason = self.jumps.check(name, t)
+        reason = self.jumps.check(name, t, self._reference)
         if reason is not None:
             self._reject(name, reason)
         return reason is None
