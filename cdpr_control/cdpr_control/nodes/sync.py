@@ -41,16 +41,18 @@ def stamp_ns(msg) -> int:
 
 
 def _finite(values) -> bool:
-    return all(map(isfinite, values))
+    """All finite (one sum, no allocation: a NaN or inf, or inf - inf, makes it non-finite; so would
+    values near 1e308, which no input of a cable robot has)."""
+    return isfinite(sum(values))
 
 
-def _vector3(v) -> tuple:
-    return v.x, v.y, v.z
+def _vector3_sum(v) -> float:
+    return v.x + v.y + v.z
 
 
-def _pose(p) -> tuple:
-    return (p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y, p.orientation.z,
-            p.orientation.w)
+def _pose_sum(p) -> float:
+    o = p.orientation
+    return p.position.x + p.position.y + p.position.z + o.x + o.y + o.z + o.w
 
 
 def _cables(name: str, values, m: int, required: bool = True) -> str | None:
@@ -67,10 +69,10 @@ def _frame(msg) -> str | None:
 
 
 def _pose_problem(name: str, pose) -> str | None:
-    p = _pose(pose)
-    if not _finite(p):
+    if not isfinite(_pose_sum(pose)):
         return f"{name} has non-finite values"
-    if p[3] * p[3] + p[4] * p[4] + p[5] * p[5] + p[6] * p[6] < 1e-12:
+    o = pose.orientation
+    if o.x * o.x + o.y * o.y + o.z * o.z + o.w * o.w < 1e-12:
         return f"{name} has a zero quaternion"
     return None
 
@@ -101,19 +103,21 @@ def _pose_stamped(msg, m):
 
 def _wrench_stamped(msg, m):
     w = msg.wrench
-    return _frame(msg) or (None if _finite(_vector3(w.force) + _vector3(w.torque)) else "wrench has non-finite values")
+    return _frame(msg) or (None if isfinite(_vector3_sum(w.force) + _vector3_sum(w.torque))
+                           else "wrench has non-finite values")
 
 
 def _setpoint(msg, m):
     v, a = msg.velocity, msg.acceleration
-    rates = _vector3(v.linear) + _vector3(v.angular) + _vector3(a.linear) + _vector3(a.angular) + _vector3(msg.force)
+    rates = (_vector3_sum(v.linear) + _vector3_sum(v.angular) + _vector3_sum(a.linear) + _vector3_sum(a.angular)
+             + _vector3_sum(msg.force))
     return (_frame(msg) or _pose_problem("pose", msg.pose)
-            or (None if _finite(rates) else "velocity, acceleration or force has non-finite values"))
+            or (None if isfinite(rates) else "velocity, acceleration or force has non-finite values"))
 
 
 def _inertia(msg, m):
     i = msg.inertia
-    return None if _finite((i.m, i.com.x, i.com.y, i.com.z)) else "mass or com has non-finite values"
+    return None if isfinite(i.m + _vector3_sum(i.com)) else "mass or com has non-finite values"
 
 
 CHECKS = {JointState: _joint_state, CableForces: _cable_forces, ForceDistribution: _force_distribution,
