@@ -21,9 +21,11 @@ import numpy as np
 
 from . import kernels
 
+A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
+
 
 class JointCommand:
-    def __init__(self, robot, dt: float, v_max: float | None = None, a_brake: float = 5.0):
+    def __init__(self, robot, dt: float, v_max: float | None = None, a_brake: float = A_BRAKE):
         self.robot = robot
         self.dt = dt
         self.v_max = robot.drive.v_max if v_max is None else v_max

@@ -27,8 +27,9 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
 Limit parameters apply to the next program, not to one that is running.
 
 Faults fail the running program with the reason (result and ``program_status`` message), at once
-(the set-point stops where it is; the joint command brakes the robot on the path): a report of the ``fault_source`` node on /diagnostics with ``abort: True``
-(the joint command holds for a stale input or a set-point outside the wrench-feasible workspace);
+(the set-point stops where it is; the joint command brakes the robot on the path): a report of the
+``fault_source`` node on /diagnostics with ``abort: True`` (the joint command holds for a stale
+input or a set-point outside the wrench-feasible workspace);
 ``winch/command`` more than twice ``input_deadline`` periods older than the winch state (the
 command path stopped, the joint command too); in lockstep, no ``winch/state`` for
 ``state_timeout`` of wall time. A ``winch/state`` stamp that jumps more than
@@ -36,11 +37,11 @@ command path stopped, the joint command too); in lockstep, no ``winch/state`` fo
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from cdpr_msgs.action import RunProgram
 from cdpr_msgs.msg import ControllerState, OperationalSetpoint, ProgramStatus
-import time
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameterTypes, SetParameters

@@ -38,7 +38,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control.bumpless import Blend
 from cdpr_control.force_distribution import Status
 from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.joint_command import JointCommand
+from cdpr_control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
 
@@ -75,7 +75,7 @@ PARAMS = [
     ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
     ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
     ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
-    ParamSpec("a_brake", 5.0, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
+    ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
     ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
               "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
     ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
