@@ -15,6 +15,7 @@ rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import ProgramStatus  # noqa: E402
 
 from cdpr_test_nodes.fault_graph import FaultGraph  # noqa: E402
+from cdpr_test_nodes.graph import wait_for  # noqa: E402
 
 PROGRAM = "G21 G90\nG1 X30 F600\nM30"      # 30 mm at 10 mm/s: still running when the fault comes
 
@@ -60,8 +61,11 @@ def test_a_stalled_node_holds_fails_the_program_and_the_graph_recovers(graph):
     try:
         check_hold(graph, result, start, mark)
     finally:
+        resumed = graph.mark()
         os.kill(fk_pid(graph), signal.SIGCONT)
-    graph.wait_diagnosed("inputs fresh again", since=mark)
+    graph.wait_diagnosed("inputs fresh again", since=resumed)
+    wait_for(lambda: any(s.name.endswith("joint_command") for s in graph.diagnosed("ok (force_control)", since=resumed)),
+             what="the joint command's hold to end")
     again = graph.start_program("G21 G90\nG1 X0 F3000\nM30", "after_stall")
     again["thread"].join(60)
     assert again["result"].success, again["result"].message

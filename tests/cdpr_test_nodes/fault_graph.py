@@ -112,7 +112,8 @@ class FaultGraph:
     def check_commands(self, since_stamp: int = 0) -> None:
         """No NaN and no step: every command finite, consecutive ones (by stamp) at most v_max per
         period apart per cable (the joint command's rate limit, which a hold keeps too)."""
-        commands = sorted((t, q) for t, q in self.commands() if t >= since_stamp)
+        # by stamp, in arrival order within one (a hold and then the period's own command may share it)
+        commands = sorted(((t, q) for t, q in self.commands() if t >= since_stamp), key=lambda c: c[0])
         assert commands, "no winch/command"
         stamps = np.array([t for t, _ in commands])
         q = np.vstack([q for _, q in commands])
