@@ -99,6 +99,7 @@ class JointCommandNode(CdprNode):
         self.latest: dict[str, object] = {}
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
+        self._last_cycle_ns = -1                     # stamp of the newest period commanded
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -172,6 +173,7 @@ class JointCommandNode(CdprNode):
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
         self._standing = False
+        self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
         self._publish(t_ns, theta_d, faults, hold)
 
     def _hold_cycle(self, t_ns: int) -> None:
@@ -180,8 +182,9 @@ class JointCommandNode(CdprNode):
         state while braking and once standing; after that the simulator advances on its
         lockstep_timeout with the held command (answering every state would run the rest of the
         graph faster than it can follow); free-running it comes every period."""
-        if self.command.theta_d is None:
-            return
+        if self.command.theta_d is None or t_ns <= self._last_cycle_ns:
+            return                                   # (this period has its command already)
+        self._last_cycle_ns = t_ns
         moving = bool(self.command.velocity.any())
         faults = self._faults(t_ns, None)
         theta_d = self.command.update(None, hold=True)
