@@ -29,11 +29,12 @@ TOPICS = {"/winch/command": JointState, "/diagnostics": DiagnosticArray, "/progr
 class FaultGraph:
     """The closed loop without its visualisation, started in ``mode``, and a probe beside it."""
 
-    def __init__(self, mode: str, lockstep_timeout: float, state_timeout: float, input_deadline: int = 50):
+    def __init__(self, mode: str, lockstep_timeout: float, state_timeout: float, input_deadline: int = 50,
+                 sync_mode: str = "exact"):
         """``lockstep_timeout`` [s]: wall time a dead node costs the lockstep loop per period (the
         simulator then advances without a command); ``state_timeout`` [s]: the interpreter fails its
         program after this long without a winch state; ``input_deadline`` [periods]: every node's."""
-        description = select_nodes(load_launch_file(GRAPH, {"robot": ROBOT, "sync_mode": "exact"}),
+        description = select_nodes(load_launch_file(GRAPH, {"robot": ROBOT, "sync_mode": sync_mode}),
                                    exclude=["visualization"])
         description.parameters["input_deadline"] = input_deadline
         extra = {"winch_platform_sim": {"lockstep_timeout": lockstep_timeout},
