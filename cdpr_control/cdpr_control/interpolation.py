@@ -65,7 +65,7 @@ class ProgramState(enum.Enum):
     CANCELLING = "cancelling"  # jerk-limited braking after cancel()
     CANCELLED = "cancelled"
     DONE = "done"
-    FAILED = "failed"          # a parameter command failed (see Interpolator.error)
+    FAILED = "failed"          # a parameter command failed or the program was aborted (Interpolator.error)
 
 
 TERMINAL_STATES = frozenset({ProgramState.CANCELLED, ProgramState.DONE, ProgramState.FAILED})
@@ -260,6 +260,7 @@ class Interpolator:
         self._k = 0
         self._cur = _Cursor(q=program.start.copy())
         self._state = ProgramState.RUNNING
+        self._aborting = False
 
     def _plan(self, program: Program) -> list:
         items: list = []
@@ -320,6 +321,23 @@ class Interpolator:
             self._brake(ProgramState.CANCELLING, ProgramState.CANCELLED)
         return True
 
+    def abort(self, reason: str, brake: bool = True) -> bool:
+        """Fail the program with ``reason`` (a fault of the robot, not the operator's cancel): a
+        jerk-limited stop on the path, then FAILED; at once without ``brake`` (time does not advance).
+        True unless the program already ended or is being aborted."""
+        if self._state in TERMINAL_STATES or (self._aborting and brake):
+            return False
+        if not self._aborting:
+            self.error = f"line {self.line}: {reason}"
+        self._aborting = True
+        if not brake:
+            self._state = ProgramState.FAILED
+            return True
+        if self._state is ProgramState.WAITING:
+            self._state = ProgramState.FAILED
+            return True
+        return self.cancel()
+
     def resume(self) -> bool:
         """Continue after pause() or M0/M1 (also while still braking); True if accepted."""
         if self._state not in (ProgramState.PAUSED, ProgramState.PAUSING):
@@ -343,12 +361,16 @@ class Interpolator:
             self._state = ProgramState.FAILED
             self.error = f"line {command.line}: setting {command.node}.{command.parameter} failed: {message}"
 
+    def _cancelled(self) -> ProgramState:
+        return ProgramState.FAILED if self._aborting else ProgramState.CANCELLED
+
     def _brake(self, braking: ProgramState, stopped: ProgramState) -> None:
         """Switch the active profile to a standstill stop, unless that would run past the chain end:
         then the running profile, which ends at rest exactly at the chain end, is the stop."""
         run = self._cur.run
         if run is None or run.braking:
-            self._state = stopped  # standing still already (between items, dwell, waiting)
+            # standing still already (between items, dwell, waiting)
+            self._state = self._cancelled() if stopped is ProgramState.CANCELLED else stopped
             return
         trajectory = self._planner.to_standstill(run.state, run.plan.limits_u)
         if trajectory.position_extrema[0].max <= 1.0:
@@ -390,7 +412,7 @@ class Interpolator:
         if not ended:
             return
         if run.braking:
-            self._state = ProgramState.CANCELLED if self._state is ProgramState.CANCELLING else ProgramState.PAUSED
+            self._state = self._cancelled() if self._state is ProgramState.CANCELLING else ProgramState.PAUSED
             return
         cur.q = chain.end.copy()  # exactly the programmed end point
         cur.run = None
@@ -398,7 +420,7 @@ class Interpolator:
         if self._state is ProgramState.PAUSING:
             self._state = ProgramState.PAUSED
         elif self._state is ProgramState.CANCELLING:
-            self._state = ProgramState.CANCELLED
+            self._state = self._cancelled()
 
     def _finish_item(self, duration: float) -> None:
         self._cur.index += 1

@@ -8,9 +8,12 @@ with "+ Δq_d,CFC"; with its own Δq = q - θ > 0 under tension (2.24) only the 
 (more force needs a shorter cable), so the code departs from the printed sign (docs/control.md). The IK-only reference control of
 section 2.3.2 is the same with every offset and Δq_CFC zero.
 
-The command is never NaN: a non-finite result, or a holding fault from the safety monitor, keeps
-the last safe θ_d; and θ_d moves at most v_max per second per cable (the drives' rated cable
-velocity), so switching controllers or a jump in an input never commands a step.
+The command is never NaN: a non-finite result, or a holding fault from the safety monitor, holds
+θ_d; and θ_d moves at most v_max per second per cable (the drives' rated cable velocity), so
+switching controllers or a jump in an input never commands a step. A hold brakes on the path, as a
+CNC does: the cable velocities of the last period are scaled down together (their ratio, the
+direction of the path in joint space, is kept) at ``a_brake`` [m/s^2] until θ_d stands, so a hold
+while moving is no velocity step either; the cables keep the tension of the last command.
 """
 from __future__ import annotations
 
@@ -18,13 +21,17 @@ import numpy as np
 
 from . import kernels
 
+A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
+
 
 class JointCommand:
-    def __init__(self, robot, dt: float, v_max: float | None = None):
+    def __init__(self, robot, dt: float, v_max: float | None = None, a_brake: float = A_BRAKE):
         self.robot = robot
         self.dt = dt
         self.v_max = robot.drive.v_max if v_max is None else v_max
+        self.a_brake = a_brake
         self.theta_d: np.ndarray | None = None
+        self.velocity = np.zeros(robot.m)      # θ̇_d of the last period [m/s]
         self.held = False
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
 
@@ -34,6 +41,7 @@ class JointCommand:
         if theta.shape != (self.robot.m,) or not np.all(np.isfinite(theta)):
             raise ValueError(f"reset needs {self.robot.m} finite cable lengths, got {theta}")
         self.theta_d = theta.copy()
+        self.velocity = np.zeros(self.robot.m)
 
     def target(self, x_d, offsets=(), dq_cfc=None) -> np.ndarray:
         """θ_d before rate limiting: IK of the offset set-point minus Δq_CFC (5.10)."""
@@ -44,7 +52,7 @@ class JointCommand:
         return q if dq_cfc is None else q - dq_cfc
 
     def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False) -> np.ndarray:
-        """One period: the rate-limited θ_d, or the last one when holding or the target is invalid."""
+        """One period: the rate-limited θ_d, or braking to a stand when holding or the target is invalid."""
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
         target = None if hold else self.target(x_d, offsets, dq_cfc)
@@ -52,5 +60,16 @@ class JointCommand:
         if not self.held:
             step = self.v_max * self.dt
             # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
-            self.theta_d = self.theta_d + np.minimum(np.maximum(target - self.theta_d, -step), step)
+            delta = np.minimum(np.maximum(target - self.theta_d, -step), step)
+        else:
+            delta = self.brake() * self.dt
+        self.velocity = delta / self.dt
+        self.theta_d = self.theta_d + delta
         return self.theta_d.copy()
+
+    def brake(self) -> np.ndarray:
+        """θ̇_d of a braking period: the last one scaled so its largest entry drops by a_brake dt."""
+        speed = float(np.abs(self.velocity).max())
+        if speed == 0.0:
+            return self.velocity
+        return self.velocity * (max(speed - self.a_brake * self.dt, 0.0) / speed)

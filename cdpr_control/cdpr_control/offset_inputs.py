@@ -88,8 +88,8 @@ class OffsetInputs:
                 age = now - sample.t
                 x = np.asarray(sample.x, dtype=float)
                 if age > self.configs[name].deadline:
-                    faults.append(Fault(STALE_INPUT, f"offset {name} is {1e3 * age:.0f} ms old "
-                                        f"(deadline {1e3 * self.configs[name].deadline:.0f} ms)", True))
+                    faults.append(Fault(STALE_INPUT, f"stale input offset {name}: older than its deadline "
+                                        f"{1e3 * self.configs[name].deadline:.0f} ms", True))
                     active = False
                 elif x.shape != (6,) or not np.all(np.isfinite(x)):
                     faults.append(Fault(NON_FINITE, f"offset {name} is not 6 finite values: {x}", True))

@@ -17,6 +17,7 @@ POSITION_LAG = "position_lag"
 FK_NOT_CONVERGED = "fk_not_converged"
 STALE_INPUT = "stale_input"
 NON_FINITE = "non_finite"
+WORKSPACE = "workspace"          # the set-point left the wrench-feasible workspace (joint command)
 
 
 @dataclass
@@ -73,5 +74,6 @@ class SafetyMonitor:
             faults.append(Fault(FK_NOT_CONVERGED, "forward kinematics did not converge", True))
         for name, t in (input_times or {}).items():
             if now - t > c.stale_timeout:
-                faults.append(Fault(STALE_INPUT, f"{name} is {1e3 * (now - t):.0f} ms old", True))
+                # (a fixed text: the report on /diagnostics changes with the message, not every period)
+                faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
         return faults

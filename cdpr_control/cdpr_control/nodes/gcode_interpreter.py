@@ -21,19 +21,32 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
   ``<source>/state`` says ``enabled`` and no program runs, its ``<source>/setpoint`` is published
   as the set-point instead of the held one (hand guiding, docs/admittance.md); when it ends, its
   last pose is held, so a following program starts there. Programs are refused meanwhile. In
-  lockstep the period t_k waits for the source's messages of t_k-1 (its set-point for t_k).
+  lockstep the period t_k waits for the source's messages of t_k-1 (its set-point for t_k), at most
+  ``input_deadline`` periods (then the source counts as stopped and the period runs without it).
 
 Limit parameters apply to the next program, not to one that is running.
+
+Faults fail the running program with the reason (result and ``program_status`` message), at once
+(the set-point stops where it is; the joint command brakes the robot on the path): a report of the
+``fault_source`` node on /diagnostics with ``abort: True`` (the joint command holds for a stale
+input or a set-point outside the wrench-feasible workspace);
+``winch/command`` more than twice ``input_deadline`` periods older than the winch state (the
+command path stopped, the joint command too); in lockstep, no ``winch/state`` for
+``state_timeout`` of wall time. A ``winch/state`` stamp that jumps more than
+``input_deadline`` periods ahead (or back) is refused and reported unless the next one continues from it.
 """
 from __future__ import annotations
+
+import time
 
 import numpy as np
 from cdpr_msgs.action import RunProgram
 from cdpr_msgs.msg import ControllerState, OperationalSetpoint, ProgramStatus
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameterTypes, SetParameters
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.clock import Clock as RclpyClock, ClockType
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
@@ -48,8 +61,8 @@ from cdpr_control.program_check import check_program
 from .base import CdprNode, spin_node
 from .conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
 from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL, STATUS
-from .sync import stamp_ns
+from .qos import CONTROL, DIAGNOSTICS, STATUS
+from .sync import StampJumps, stamp_ns
 
 PARAMS = [
     ParamSpec("v_max", 0.5, "translational path velocity limit |xdot[0:3]| [m/s]", range=(1e-4, 10.0)),
@@ -72,6 +85,10 @@ PARAMS = [
               "<name>/state is enabled (hand guiding); '' = none", read_only=True),
     ParamSpec("source_timeout", 0.5, "free-running: age of the source's messages that ends forwarding [s]",
               range=(1e-3, 10.0)),
+    ParamSpec("fault_source", "joint_command", "node whose report on /diagnostics with abort: True fails the running "
+              "program; '' = none", read_only=True),
+    ParamSpec("state_timeout", 5.0, "lockstep: wall time without a winch/state that fails the running program [s]",
+              range=(1e-2, 600.0)),
 ]
 
 SOURCE_START_TOLERANCE = 1e-3   # m, rad: a source must take over at the held set-point (no jump)
@@ -202,11 +219,19 @@ class GCodeInterpreterNode(CdprNode):
         if self.source:
             for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
                 self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
+        self.state_jumps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
+        self._last_command_ns: int | None = None       # newest winch/command stamp
+        self._last_state_wall = time.monotonic()
+        self.fault_source = self.params.values["fault_source"]
+        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL)
+        if self.fault_source:
+            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, DIAGNOSTICS)
         if self.sync_mode == "exact":
             # lockstep: one period per new winch state, stamped like it (a deterministic data flow;
             # a timer on /clock could not produce the period of t = 0 before the loop has run)
             self._last_tick_ns = -1
             self.create_subscription(JointState, "winch/state", self._on_state, CONTROL)
+            self.create_timer(0.1, self._state_watchdog, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         else:
             self.timer = self.create_timer(self.dt, self._tick)  # node clock: sim time when use_sim_time
         self._publish_status(self._stamp_ns(), force=True)
@@ -297,12 +322,66 @@ class GCodeInterpreterNode(CdprNode):
         dt_ns = int(round(self.dt * 1e9))
         return int(round(self.get_clock().now().nanoseconds / dt_ns)) * dt_ns
 
-    def _on_state(self, msg: JointState) -> None:
+    # ---- faults ------------------------------------------------------------------------------
+
+    def _abort(self, reason: str, brake: bool = True) -> None:
+        """Fail the running program with ``reason`` (braking on the path, or at once)."""
+        active = self.active
+        if active is None or not active.interp.abort(reason, brake):
+            return
+        self.get_logger().error(f"program {active.name!r} failed: {reason}")
+        if not brake:                                   # no period will come to end it
+            self._publish_status(self._last_stamp_ns(), force=True)
+            self.active = None
+            active.finished.set_result(active.interp.state)
+
+    def _last_stamp_ns(self) -> int:
+        return self._last_tick_ns if self.sync_mode == "exact" and self._last_tick_ns >= 0 else self._stamp_ns()
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        if self.active is None:
+            return
+        for status in msg.status:
+            if status.level == DiagnosticStatus.ERROR and status.name.rsplit("/", 1)[-1] == self.fault_source \
+                    and any(kv.key == "abort" and kv.value == "True" for kv in status.values):
+                # at once: the joint command holds (braking on its own), the set-point is not followed
+                self._abort(f"{self.fault_source} holds: {status.message}", brake=False)
+
+    def _on_command(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)
+        if self._last_command_ns is None or stamp > self._last_command_ns:
+            self._last_command_ns = stamp
+
+    def _check_command_age(self, stamp: int) -> None:
+        last = self._last_command_ns
+        # twice the deadline: a stale input of the joint command is its to report (it then holds)
+        if last is not None and stamp - last > 2 * self.input_deadline * self.dt * 1e9:
+            self._abort(f"winch/command is older than twice input_deadline ({2 * self.input_deadline} periods): "
+                        "the command path stopped", brake=False)
+
+    def _state_watchdog(self) -> None:
+        if self.active is None:
+            self._last_state_wall = time.monotonic()
+        elif time.monotonic() - self._last_state_wall > self.values["state_timeout"]:
+            self._abort(f"no winch/state for {self.values['state_timeout']:g} s (the simulator or the drives stopped)",
+                        brake=False)
+
+    def _on_state(self, msg: JointState) -> None:
+        stamp = stamp_ns(msg)                           # (only the stamp is used here)
+        problem = self.state_jumps.check("winch/state", stamp, lambda: self.get_clock().now().nanoseconds)
+        if problem is not None:
+            self.input_fault("winch/state", problem)
+            return
+        self._last_state_wall = time.monotonic()
         if stamp > self._last_tick_ns:
             if self.source and self._last_tick_ns >= 0 and len(self.source_msgs.get(self._last_tick_ns, ())) < 2:
-                self._waiting_ns = stamp                 # the source's set-point for this period is not there yet
-                return
+                if stamp - self._last_tick_ns <= self.input_deadline * self.dt * 1e9:
+                    self._waiting_ns = stamp             # the source's set-point for this period is not there yet
+                    return
+                # the source stopped (e.g. behind a dead node): go on without it, else the loop never resumes
+                self._waiting_ns = None
+                self.report(DiagnosticStatus.WARN, f"stale input: {self.source}/setpoint older than input_deadline "
+                            f"{self.input_deadline} periods: running without it", stamp_ns=stamp)
             self._tick_exact(stamp)
         elif stamp == self._last_tick_ns and self._last_setpoint is not None:
             # the simulator repeats a state until the period's command comes (its start-up handshake):
@@ -354,6 +433,9 @@ class GCodeInterpreterNode(CdprNode):
     def _tick(self, stamp: int | None = None, source_msgs: dict | None = None) -> None:
         stamp = self._stamp_ns() if stamp is None else stamp
         active = self.active
+        if active is not None:
+            self._check_command_age(stamp)
+            active = self.active
         if active is not None:
             self._step(active)
         if self.source:

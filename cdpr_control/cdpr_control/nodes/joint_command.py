@@ -17,28 +17,42 @@ Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets
 (section 2.3.2) at run time; the offsets and Δq_CFC are blended in and out over ``transfer_time``
 (also when a controller reports itself enabled or disabled), and the command is rate-limited to
 the drives' v_max. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
-input, and optionally force limits) hold the last safe θ_d; the command is never NaN.
+input, and optionally force limits) hold θ_d (braking on the path at ``a_brake``, see
+:mod:`cdpr_control.joint_command`); the command is never NaN. Also holding: a required input
+(``setpoint``, ``cable_force_controller/state``) more than ``input_deadline`` periods behind the
+winch state (its producer stopped: the command then comes on each winch state while braking,
+instead of waiting for the dead input), and a set-point outside the wrench-feasible workspace: the
+``force_distribution`` status INFEASIBLE for ``infeasible_periods`` periods in a row. A holding
+report of a stale input or of the workspace on /diagnostics (ERROR, ``abort: True``) makes the
+G-code interpreter fail its program; the other holds (lag, FK not converged) last while their fault does.
+Invalid messages (lengths, non-finite values, frame) are dropped and reported (nodes/sync.py).
 """
 from __future__ import annotations
 
 import numpy as np
-from cdpr_msgs.msg import CableForces, ControllerState, ForwardKinematicsDiagnostics, OperationalSetpoint
+from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, ForwardKinematicsDiagnostics, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
 from cdpr_control.bumpless import Blend
+from cdpr_control.force_distribution import Status
 from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.joint_command import JointCommand
+from cdpr_control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
-from cdpr_control.safety import SafetyConfig, SafetyMonitor
+from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
+
+# holding faults after which a program cannot go on (its input is gone, or its path left the
+# workspace): reported with ``abort: True``, the G-code interpreter then fails the program; the
+# others (lag, FK not converged, non-finite values) hold while they last
+ABORTING = frozenset({STALE_INPUT, WORKSPACE})
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
 from .mode import mode_publisher, publish_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
-from .sync import StampSync, stamp_ns
+from .sync import StampJumps, StampSync, input_problem, stamp_ns
 
 OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/state output (6 values) is added "
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
@@ -62,6 +76,9 @@ PARAMS = [
     ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
     ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
     ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
+    ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
+              "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
     ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
               "input are blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
               range=(0.0, 10.0)),
@@ -82,20 +99,39 @@ class JointCommandNode(CdprNode):
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
+        self.infeasible = 0                          # periods in a row without a feasible f_d
+        self._standing = False                       # a hold for a stale input has braked to a stand
+        self._last_cycle_ns = -1                     # stamp of the newest period commanded
+        self.watched_topics: dict[str, str] = {}
+        self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
                                       ("x", PoseStamped, "platform/pose"),
-                                      ("fk", ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics")):
-            self.create_subscription(msg_type, topic, self._keep(name), CONTROL)
+                                      ("fk", ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics"),
+                                      ("fd", ForceDistribution, "force_distribution")):
+            self.watched_topics[name] = topic
+            self.create_subscription(msg_type, topic, self._keep(name, topic), CONTROL)
         self.publisher = self.create_publisher(JointState, "winch/command", CONTROL)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"),
                   "cfc": (ControllerState, "cable_force_controller/state")}
         inputs.update({f"offset:{name}": (ControllerState, f"{name}/state") for name in names})
         self.sync = StampSync(self, inputs, primary="cfc", callback=self._cycle, mode=self.sync_mode,
-                              optional=tuple(f"offset:{name}" for name in names))
+                              optional=tuple(f"offset:{name}" for name in names),
+                              sizes={"cfc": self.robot.m, **{f"offset:{name}": 6 for name in names}},
+                              on_stale=self._hold_cycle)
 
-    def _keep(self, name):
+    def _keep(self, name: str, topic: str):
+        m = self.robot.m
+
         def keep(msg):
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, stamp_ns(msg), self.sync._reference)
+            if problem is not None:
+                self.input_fault(topic, problem)
+                return
             self.latest[name] = msg
+            if name == "fd":
+                self.infeasible = self.infeasible + 1 if msg.status == Status.INFEASIBLE else 0
+            elif name == "theta":
+                self.sync.advance(stamp_ns(msg))     # the clock of the deadlines: a dead input holds
         return keep
 
     @staticmethod
@@ -118,6 +154,8 @@ class JointCommandNode(CdprNode):
             publish_mode(self.mode_pub, v["mode"])
         self.mode = v["mode"]
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
+        self.command.a_brake = v["a_brake"]
+        self.infeasible_periods = int(v["infeasible_periods"])
         self.blend_cfc.set_transfer_time(v["transfer_time"])
         self.monitor = SafetyMonitor(self._safety(v))
         self.offsets.configure(self._offset_configs(v), v["transfer_time"])
@@ -138,13 +176,37 @@ class JointCommandNode(CdprNode):
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
-        self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+        self._standing = False
+        self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
+        self._publish(t_ns, theta_d, faults, hold)
+
+    def _hold_cycle(self, t_ns: int) -> None:
+        """A period whose required input is stale (its producer stopped): brake on the path, so that
+        the drives do not keep the last moving command. In lockstep the command comes on each winch
+        state while braking and once standing; after that the simulator advances on its
+        lockstep_timeout with the held command (answering every state would run the rest of the
+        graph faster than it can follow); free-running it comes every period."""
+        if self.command.theta_d is None or t_ns <= self._last_cycle_ns:
+            return                                   # (this period has its command already)
+        self._last_cycle_ns = t_ns
+        moving = bool(self.command.velocity.any())
+        faults = self._faults(t_ns, None)
+        theta_d = self.command.update(None, hold=True)
+        self._publish(t_ns, theta_d, faults, True,
+                      send=moving or self.sync_mode == "latest" or not self._standing)
+        self._standing = not moving
+
+    def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
+        if send:
+            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN
-            self.report(level, "; ".join(f.message for f in faults[:3]),
-                        {"holding": hold, "faults": len(faults)}, stamp_ns=t_ns)
+            self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),
+                        {"holding": hold, "abort": hold and any(f.code in ABORTING for f in faults),
+                         "faults": len(faults)}, stamp_ns=t_ns)
         elif self.command.held:
-            self.report(DiagnosticStatus.ERROR, "command outside the model (non-finite IK): holding", stamp_ns=t_ns)
+            self.report(DiagnosticStatus.ERROR, "command outside the model (non-finite IK): holding",
+                        {"holding": True}, stamp_ns=t_ns)
         else:
             self.report(DiagnosticStatus.OK, f"ok ({self.mode})", stamp_ns=t_ns)
 
@@ -155,12 +217,20 @@ class JointCommandNode(CdprNode):
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
         now = t_ns * 1e-9
-        times = {name: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
+        times = {self.watched_topics[name]: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
         x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
-        return self.monitor.check(
+        faults = self.monitor.check(
             now, f=None if f_msg is None else np.asarray(f_msg.f), f_min=c.f_min, f_max=c.f_max,
             x_d=x_d, x=x, fk_converged=True if fk is None else fk.converged, input_times=times)
+        sync = self.sync
+        for name in sync.stale:
+            faults.append(Fault(STALE_INPUT, f"stale input {sync.topics[name]}: older than input_deadline "
+                                f"{sync.deadline} periods", True))
+        if self.infeasible >= self.infeasible_periods:
+            faults.append(Fault(WORKSPACE, f"set-point outside the wrench-feasible workspace: no feasible force "
+                                f"distribution for {self.infeasible_periods} periods", True))
+        return faults
 
 
 def main(args=None):

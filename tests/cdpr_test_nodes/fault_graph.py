@@ -1,0 +1,125 @@
+"""Fault injection on a running closed-loop graph (graphs/closed_loop.yaml, IPAnema 3 Mini, lockstep):
+a probe in a context of its own publishes bad messages and records /winch/command, /diagnostics
+and /program_status; the checks every fault test makes on what it recorded."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+from cdpr_msgs.msg import ProgramStatus
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+
+from cdpr_control.robot import load_robot
+from cdpr_tools.demo_cmd import GRAPH
+from cdpr_tools.launch import Launcher, select_nodes
+from cdpr_tools.launch_file import load_launch_file
+from cdpr_tools.program_client import run_program
+
+from .graph import Collector, Spinner, wait_for
+
+ROBOT = "ipanema3_mini"
+PERIOD_NS = 1_000_000
+TOPICS = {"/winch/command": JointState, "/diagnostics": DiagnosticArray, "/program_status": ProgramStatus}
+
+
+class FaultGraph:
+    """The closed loop without its visualisation, started in ``mode``, and a probe beside it."""
+
+    def __init__(self, mode: str, lockstep_timeout: float, state_timeout: float, input_deadline: int = 50,
+                 sync_mode: str = "exact"):
+        """``lockstep_timeout`` [s]: wall time a dead node costs the lockstep loop per period (the
+        simulator then advances without a command); ``state_timeout`` [s]: the interpreter fails its
+        program after this long without a winch state; ``input_deadline`` [periods]: every node's."""
+        description = select_nodes(load_launch_file(GRAPH, {"robot": ROBOT, "sync_mode": sync_mode}),
+                                   exclude=["visualization"])
+        description.parameters["input_deadline"] = input_deadline
+        extra = {"winch_platform_sim": {"lockstep_timeout": lockstep_timeout},
+                 "gcode_interpreter": {"state_timeout": state_timeout}}
+        for spec in description.nodes:
+            if spec.label in extra:
+                spec.parameters = list(spec.parameters) + [extra[spec.label]]
+        self.robot = load_robot(ROBOT)
+        self.spinner = Spinner()
+        self.collector = self.spinner.add(Collector, topics=TOPICS, qos=QoSProfile(depth=10000))
+        self.probe = self.spinner.add(Node, node_name="fault_probe")
+        self.launcher = Launcher(description, mode=mode).start()
+        self.wait_running()
+
+    def close(self) -> None:
+        self.launcher.stop()
+        self.spinner.close()
+
+    # -- observing ------------------------------------------------------------------------------
+    def commands(self) -> list[tuple[int, np.ndarray]]:
+        return [(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, np.asarray(m.position))
+                for m in self.collector.messages("/winch/command")]
+
+    def wait_running(self, periods: int = 50, timeout: float = 60.0) -> None:
+        """Until the loop has run ``periods`` more periods (commands with new stamps)."""
+        start = self.newest_command()
+        wait_for(lambda: self.newest_command() >= start + periods * PERIOD_NS, timeout=timeout,
+                 what=f"{periods} periods of the loop")
+
+    def newest_command(self) -> int:
+        messages = self.collector.messages("/winch/command")
+        return max((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in messages), default=-1)
+
+    def statuses(self, since: int = 0) -> list:
+        """Every DiagnosticStatus received (after the first ``since`` arrays)."""
+        return [s for a in self.collector.messages("/diagnostics")[since:] for s in a.status]
+
+    def diagnosed(self, *words: str, since: int = 0) -> list:
+        """Statuses whose message contains every word."""
+        return [s for s in self.statuses(since) if all(w in s.message for w in words)]
+
+    def wait_diagnosed(self, *words: str, since: int = 0, timeout: float = 20.0) -> list:
+        wait_for(lambda: self.diagnosed(*words, since=since), timeout=timeout,
+                 what=f"/diagnostics naming {words}")
+        return self.diagnosed(*words, since=since)
+
+    def mark(self) -> int:
+        return self.collector.count("/diagnostics")
+
+    # -- acting ---------------------------------------------------------------------------------
+    def publish(self, msg_type, topic: str, msg, count: int = 1) -> None:
+        publisher = self.probe.create_publisher(msg_type, topic, 10)
+        wait_for(lambda: publisher.get_subscription_count() > 0, what=f"a subscriber of {topic}")
+        for _ in range(count):
+            publisher.publish(msg)
+            time.sleep(0.01)
+
+    def start_program(self, text: str, name: str) -> dict:
+        """Run ``text`` in a thread; the returned dict gets ``result`` (or ``error``) when it ends."""
+        out: dict = {}
+
+        def run():
+            try:
+                out["result"] = run_program(text, name, timeout=120.0)
+            except Exception as exc:        # noqa: BLE001 - reported by the test
+                out["error"] = exc
+        out["thread"] = threading.Thread(target=run, daemon=True)
+        out["thread"].start()
+        return out
+
+    def wait_program_state(self, state: int, timeout: float = 30.0) -> None:
+        wait_for(lambda: any(m.state == state for m in self.collector.messages("/program_status")[-3:]),
+                 timeout=timeout, what=f"program state {state}")
+
+    # -- checks ---------------------------------------------------------------------------------
+    def check_commands(self, since_stamp: int = 0) -> None:
+        """No NaN and no step: every command finite, consecutive ones (by stamp) at most v_max per
+        period apart per cable (the joint command's rate limit, which a hold keeps too)."""
+        # by stamp, in arrival order within one (a hold and then the period's own command may share it)
+        commands = sorted(((t, q) for t, q in self.commands() if t >= since_stamp), key=lambda c: c[0])
+        assert commands, "no winch/command"
+        stamps = np.array([t for t, _ in commands])
+        q = np.vstack([q for _, q in commands])
+        assert q.shape[1] == self.robot.m and np.all(np.isfinite(q)), "a command is not finite"
+        periods = np.maximum(np.diff(stamps) / PERIOD_NS, 1.0)
+        steps = np.abs(np.diff(q, axis=0)).max(axis=1) / periods
+        v_step = self.robot.drive.v_max * PERIOD_NS * 1e-9
+        assert np.all(steps <= v_step * (1 + 1e-9) + 1e-12), f"a command steps {steps.max():.4g} m > {v_step:.4g} m"
