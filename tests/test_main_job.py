@@ -56,6 +56,7 @@ OTHER_TYPES = {  # present whenever the recorder saw a publisher; the first two 
     "/rosout": "rcl_interfaces/msg/Log",
     "/parameter_events": "rcl_interfaces/msg/ParameterEvent",
     "/visualization/markers": "visualization_msgs/msg/MarkerArray",  # 10 Hz of wall time
+    "/joint_command/mode": "std_msgs/msg/String",                    # latched, on each change
 }
 TYPES = {**LOOP_TYPES, **OTHER_TYPES}
 

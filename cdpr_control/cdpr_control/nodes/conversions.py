@@ -66,8 +66,12 @@ def pose_to_msg(x, msg: Pose | None = None) -> Pose:
 
 
 def pose_from_msg(msg: Pose) -> np.ndarray:
-    p, q = msg._position, msg._orientation          # the slots: several times a period in every node
-    return np.array([p._x, p._y, p._z, *quaternion_to_kardan(q._x, q._y, q._z, q._w)])
+    try:
+        p, q = msg._position, msg._orientation      # the slots: several times a period in every node
+        return np.array([p._x, p._y, p._z, *quaternion_to_kardan(q._x, q._y, q._z, q._w)])
+    except AttributeError:                          # a message of another reader (rosbags, mcap_ros2)
+        p, q = msg.position, msg.orientation
+        return np.array([p.x, p.y, p.z, *quaternion_to_kardan(q.x, q.y, q.z, q.w)])
 
 
 def vector3(v, msg: Vector3 | None = None) -> Vector3:
@@ -87,19 +91,27 @@ def _pair(cls, first: str, second: str, a, b):
 
 
 def from_vector3(msg: Vector3) -> np.ndarray:
-    return np.array([msg._x, msg._y, msg._z])
+    try:
+        return np.array([msg._x, msg._y, msg._z])
+    except AttributeError:                          # a message of another reader
+        return np.array([msg.x, msg.y, msg.z])
 
 
 def twist_to_msg(xdot) -> Twist:
     return _pair(Twist, "_linear", "_angular", vector3(xdot[:3]), vector3(xdot[3:6]))
 
 
-def _six(a: Vector3, b: Vector3) -> np.ndarray:
-    return np.array([a._x, a._y, a._z, b._x, b._y, b._z])
+def _six(msg, first: str, second: str) -> np.ndarray:
+    try:
+        a, b = getattr(msg, "_" + first), getattr(msg, "_" + second)
+        return np.array([a._x, a._y, a._z, b._x, b._y, b._z])
+    except AttributeError:                          # a message of another reader
+        a, b = getattr(msg, first), getattr(msg, second)
+        return np.array([a.x, a.y, a.z, b.x, b.y, b.z])
 
 
 def twist_from_msg(msg: Twist) -> np.ndarray:
-    return _six(msg._linear, msg._angular)
+    return _six(msg, "linear", "angular")
 
 
 def accel_to_msg(xddot) -> Accel:
@@ -107,7 +119,7 @@ def accel_to_msg(xddot) -> Accel:
 
 
 def accel_from_msg(msg: Accel) -> np.ndarray:
-    return _six(msg._linear, msg._angular)
+    return _six(msg, "linear", "angular")
 
 
 def wrench_to_msg(w) -> Wrench:
@@ -116,4 +128,4 @@ def wrench_to_msg(w) -> Wrench:
 
 
 def wrench_from_msg(msg: Wrench) -> np.ndarray:
-    return _six(msg._force, msg._torque)
+    return _six(msg, "force", "torque")
