@@ -105,7 +105,7 @@ class CableForceControllerNode(CdprNode):
         stage = self.stage
         state = ControllerState(header=self.header(t_ns), controller="cable_force_controller",
                                 enabled=stage.enabled, names=self.names, reference=f_d.tolist(), feedback=f.tolist())
-        if not (f_d.shape == f.shape == theta.shape == (m,) and np.all(np.isfinite(np.r_[f_d, f, theta]))):
+        if not (f_d.shape == f.shape == theta.shape == (m,) and np.isfinite(np.concatenate((f_d, f, theta))).all()):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
             state.output = [0.0] * m
             self.publisher.publish(state)

@@ -74,7 +74,7 @@ class ForwardKinematicsNode(CdprNode):
         header = self.header(t_ns)
         diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
         m = self.robot.m
-        if theta.shape != (m,) or f.shape != (m,) or not np.all(np.isfinite(np.r_[theta, f, x_d])):
+        if theta.shape != (m,) or f.shape != (m,) or not np.isfinite(np.concatenate((theta, f, x_d))).all():
             diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
             self.diag_pub.publish(diag)
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)

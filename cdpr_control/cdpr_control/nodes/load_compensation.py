@@ -109,7 +109,7 @@ class LoadCompensationNode(CdprNode):
         x = pose_from_msg(msgs["pose"].pose) if "pose" in msgs else None
         header = self.header(t_ns)
         lc = self.stage
-        valid = f.shape == (self.robot.m,) and np.all(np.isfinite(np.r_[x_d, xdot_d, xddot_d]))
+        valid = f.shape == (self.robot.m,) and np.isfinite(np.concatenate((x_d, xdot_d, xddot_d))).all()
         if valid:
             x_lc = lc.update(x_d, xdot_d, xddot_d, f, x)
         else:
