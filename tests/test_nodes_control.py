@@ -149,7 +149,7 @@ def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
     x_d = np.zeros(6)
     x = x_d - np.array([0.0, 0.0, 0.002, 0.0, 0.0, 0.0])         # a sag: both integrators run
     q, f, f_d = inverse_kinematics(robot, x_d).q, np.full(m, 10.0), np.full(m, 12.0)
-    period = [100]
+    period = [3]           # continues the stamps of the first test: a jump beyond input_deadline is dropped
 
     def step():
         period[0] += 1
