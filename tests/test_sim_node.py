@@ -103,6 +103,15 @@ def test_missed_deadline_advances_after_the_timeout(graph):
     steps = sim.sim.steps
     command.publish(JointState(position=[1.0, 2.0]))
     assert _spin_until(executor, lambda: sim.invalid_commands == 1)
+    # a command stamped after the newest state (no controller can answer a state not yet sent) is
+    # refused: it neither drives the winches nor advances time
+    held, steps = sim.theta_d.copy(), sim.sim.steps
+    future = JointState(position=[p + 0.05 for p in states[-1].position])
+    future.header.stamp.sec = 5000
+    command.publish(future)
+    assert _spin_until(executor, lambda: sim.invalid_commands == 2)
+    np.testing.assert_array_equal(sim.theta_d, held)
+    assert sim.sim.steps - steps <= 1                               # at most a timeout step
     assert sim.sim.steps - steps <= 1                               # at most a timeout step
 
 

@@ -215,10 +215,17 @@ class WinchPlatformSimNode(CdprNode):
         theta_d = np.asarray(msg.position, dtype=float)
         if theta_d.shape != (self.robot.m,) or not np.all(np.isfinite(theta_d)):
             self.invalid_commands += 1
-            self.get_logger().warn(f"ignoring winch/command with {len(msg.position)} positions "
-                                   f"(need {self.robot.m} finite values)", throttle_duration_sec=1.0)
+            self.input_fault("winch/command", f"{len(msg.position)} positions (need {self.robot.m} finite values)")
             return
         stamp = stamp_ns(msg)
+        t_ns = self.sim.steps * self.period_ns
+        if stamp > t_ns:
+            # a command answers a state published already: a later stamp is wrong (a clock fault,
+            # a foreign publisher) and must neither drive the winches nor advance time
+            self.invalid_commands += 1
+            self.input_fault("winch/command", f"stamp {stamp * 1e-9:.3f} s is after the newest state "
+                                              f"({t_ns * 1e-9:.3f} s)")
+            return
         if stamp < self._command_stamp:
             # older than the command held (e.g. a second answer to a repeated start-up state):
             # it must not replace a newer one, or the run would depend on when the repeat came
@@ -226,13 +233,12 @@ class WinchPlatformSimNode(CdprNode):
             return
         self.theta_d, self._command_stamp = theta_d, stamp
         self.got_command = True
-        t_ns = self.sim.steps * self.period_ns
         if not self.lockstep:
             sent = self._states_sent.pop(stamp, None)   # the first command answering that state
             if sent is not None:
                 self.command_latency.add(time.perf_counter() - sent)
             self.fresh_command = True
-        elif stamp >= t_ns:
+        elif stamp == t_ns:
             self._advance()
         else:
             self.late_commands += 1                     # for a period already advanced: only held
