@@ -56,9 +56,11 @@ class SafetyMonitor:
         for name, value in (("f", f), ("x_d", x_d), ("x", x)):
             if value is not None and not finite[name]:
                 faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
+        low = high = ()
         if finite["f"]:
-            low = np.flatnonzero(f < f_min - c.force_tolerance)
-            high = np.flatnonzero(f > f_max + c.force_tolerance)
+            below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
+            if below.any() or above.any():      # (the common case needs no indices)
+                low, high = np.flatnonzero(below), np.flatnonzero(above)
             for i in low:
                 faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N below f_min {f_min[i]:.1f} N", c.hold_on_force_limit))
             for i in high:
