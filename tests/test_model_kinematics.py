@@ -58,6 +58,12 @@ def test_twist_derivative_matches_finite_differences():
         return twist_from_pose_rates(x + dx * t + ddx * t * t / 2, dx + ddx * t)[0]
 
     np.testing.assert_allclose(xddot, (twist(h) - twist(-h)) / (2 * h), rtol=1e-8)
+    # the same through the batched (numpy) path, which one pose skips for scalar math
+    batched = twist_from_pose_rates(x[None], dx[None], ddx[None])
+    np.testing.assert_allclose(twist_from_pose_rates(x, dx, ddx)[0], batched[0][0], atol=1e-14)
+    np.testing.assert_allclose(xddot, batched[1][0], atol=1e-14)
+    np.testing.assert_allclose(twist(h), twist_from_pose_rates((x + dx * h + ddx * h * h / 2)[None],
+                                                               (dx + ddx * h)[None])[0][0], atol=1e-14)
 
 
 @pytest.mark.parametrize("pulleys", [True, False])

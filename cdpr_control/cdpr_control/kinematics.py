@@ -72,6 +72,8 @@ def twist_from_pose_rates(x, dx, ddx=None):
     is None when ddx is None.
     """
     x, dx = np.asarray(x, dtype=float), np.asarray(dx, dtype=float)
+    if x.shape == (6,) and dx.shape == (6,):
+        return _twist_from_pose_rates_one(x, dx, ddx)
     H = kardan_rate_matrix(x[..., 3:])
     xdot = np.concatenate([dx[..., :3], np.einsum("...ij,...j->...i", H, dx[..., 3:])], axis=-1)
     if ddx is None:
@@ -89,6 +91,23 @@ def twist_from_pose_rates(x, dx, ddx=None):
         "...ij,...j->...i", H_dot, dx[..., 3:]
     )
     return xdot, np.concatenate([ddx[..., :3], omega_dot], axis=-1)
+
+
+def _twist_from_pose_rates_one(x, dx, ddx):
+    """twist_from_pose_rates of one pose in scalar math (the interpreter runs it every period)."""
+    a, b = float(x[3]), float(x[4])
+    ca, cb, sa, sb = math.cos(a), math.cos(b), math.sin(a), math.sin(b)
+    da, db, dc = (float(v) for v in dx[3:])
+    omega = (da + sb * dc, ca * db - sa * cb * dc, sa * db + ca * cb * dc)   # H(phi) phi_dot
+    xdot = np.array([dx[0], dx[1], dx[2], *omega])
+    if ddx is None:
+        return xdot, None
+    ddx = np.asarray(ddx, dtype=float)
+    dda, ddb, ddc = (float(v) for v in ddx[3:])
+    omega_dot = (dda + sb * ddc + cb * db * dc,                                # H phi_ddot + H_dot phi_dot
+                 ca * ddb - sa * cb * ddc - sa * da * db + (-ca * cb * da + sa * sb * db) * dc,
+                 sa * ddb + ca * cb * ddc + ca * da * db + (-sa * cb * da - ca * sb * db) * dc)
+    return xdot, np.array([ddx[0], ddx[1], ddx[2], *omega_dot])
 
 
 def skew(v) -> np.ndarray:
