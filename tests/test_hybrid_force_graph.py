@@ -31,7 +31,7 @@ from cdpr_control import programs  # noqa: E402
 ROBOT = load_robot("ipanema3")
 F_D = 500.0
 TOPICS = ["/ground_truth/contact_wrench", "/hybrid_force_controller/state", "/ground_truth/cable_forces",
-          "/ground_truth/pose"]
+          "/ground_truth/pose", "/winch/command"]
 
 
 def _stamp(msg) -> int:
@@ -52,6 +52,7 @@ def floor_figures(bag) -> SimpleNamespace:
     F_d = np.array([-m.reference[2] for m in get("/hybrid_force_controller/state")])
     f = np.array([m.f for m in get("/ground_truth/cable_forces")])
     x = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z] for m in get("/ground_truth/pose")])
+    theta_d = np.array([m.position for m in get("/winch/command")])
     hold = np.nonzero((states == "D") & np.isclose(F_d, F_D))[0]
     k_a, k_d, k_r = (int(np.argmax(states == s)) for s in ("A", "D", "R"))
     first = k_a + int(np.argmax(F[k_a:] > 0.0))
@@ -63,13 +64,14 @@ def floor_figures(bag) -> SimpleNamespace:
         F_last=F[hold[-1] - 999:hold[-1] + 1],                      # the last second of the hold
         f_min_from_d=f[k_d + 300:k_r + int(np.argmax(states[k_r:] == "I")) + 1].min(axis=0),
         f_min_in_b=f[states == "B"].min(),
+        command_step=np.abs(np.diff(theta_d, axis=0)).max(),
         release_offset=float(np.linalg.norm(x[-1] - ROBOT.home[:3])), final_contact=F[-1])
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     bag = tmp_path_factory.mktemp("hpfc_graph") / "bag"
-    description = load_launch_file(GRAPH, {"robot": ROBOT.name})
+    description = load_launch_file(GRAPH, {"robot": "ipanema3"})
     description.record = RecordSpec(output=str(bag), topics=list(TOPICS))
     for spec in description.nodes:
         if spec.module.endswith("winch_platform_sim"):
@@ -91,10 +93,13 @@ def test_floor_program_through_the_graph_keeps_the_cables_tensed_and_releases(ru
     print(f"\ngraph floor program: overshoot {r.overshoot:.1f} %, settling {r.settling:.2f} s, last second of the "
           f"hold {r.F_last.min():.1f}..{r.F_last.max():.1f} N; cables from 0.3 s into D through the release "
           f"min {r.f_min_from_d.min():.0f} N (f_min {ROBOT.cable.f_min.min():.0f} N), in B {r.f_min_in_b:.0f} N; "
-          f"released to {1e3 * r.release_offset:.2f} mm from the programmed pose")
+          f"released to {1e3 * r.release_offset:.2f} mm from the programmed pose; largest drive command step "
+          f"{1e3 * r.command_step:.3f} mm per period")
     assert r.sequence == ["I", "A", "B", "D", "R", "I"]
     # section 5.1.2: the CFC runs in D and keeps the cables tensed (held, the upper ones went slack)
     assert np.all(r.f_min_from_d >= ROBOT.cable.f_min)
     assert np.all(np.abs(r.F_last - F_D) <= 0.02 * F_D)
     assert r.final_contact == 0.0
+    # the CFC's resumption and the hand-over ramp in (approaching at 50 mm/s: 0.025 mm per period)
+    assert r.command_step < 2e-4
     assert r.release_offset <= 5e-4
