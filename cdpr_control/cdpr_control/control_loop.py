@@ -29,7 +29,7 @@ from .filters import LowPass
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
-from .hybrid_force_control import (CONTACT, FORCE_CONTROLLED, RELEASE, CFCCoupling, HPFCParams, HybridForceControl,
+from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
                                    expected_contact_wrench, select_position_feedback, task_force_direction)
 from .joint_command import JointCommand
 from .offset_inputs import OffsetInputs, OffsetSample
@@ -133,7 +133,8 @@ class ControlLoop:
         """Section 5.1.2, the cable force control under hybrid force control -> (the CFC's set-point,
         its feed-forward, paused, x_comp (6,) the offset that hands the contact force over).
 
-        The CFC is paused in A-C and runs from D on (:meth:`CFCCoupling.contact_update`); it resumes
+        The CFC is paused in A-C and runs from D on (:meth:`CFCCoupling.run`, the node
+        ``cable_force_controller`` runs the same); it resumes
         bumpless (feedback filter restarted at the measured forces, the integral part taking the
         proportional part's step). Its feed-forward presses along the task axis with the expected
         contact force F_ff (the distribution's wrench carries it, :func:`expected_contact_wrench`);

@@ -29,7 +29,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from cdpr_control import kernels
-
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
 
@@ -140,7 +139,6 @@ class CableForceControllerNode(CdprNode):
         state.error = (np.asarray(state.reference) - np.asarray(state.feedback)).tolist()
         state.output = dq.tolist()
         self.publisher.publish(state)
-
 
     def _contact(self, msgs: dict, f_d, f, t_ns: int):
         """CFCCoupling.run with the state of the hybrid force controller and a = (A^T(x_d))_F^T z_t
