@@ -9,7 +9,7 @@ D through the release, the contact force within 2 % of F_d in steady D, the rele
 contact's loads and leave the platform millimetres above the programmed pose after the release
 (docs/hybrid_force_control.md), which is the plant's accuracy, not the release.
 
-One launch (about 40 s wall for the 12.4 s program) serves the module.
+One launch (30-50 s wall for the 12.4 s program, as the load of the machine allows) serves the module.
 """
 from types import SimpleNamespace
 
