@@ -74,8 +74,8 @@ class HybridForceControllerNode(CdprNode):
         super().__init__(NAME, **kwargs)
         self.stage: HybridForceControl | None = None
         self.hand_over: ContactHandOver | None = None
-        self.cfc_msg = None                # the last cable_force_controller/hand_over
-        self.absorbed_ns = -1              # its stamp when taken on x_t (each once)
+        self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
+        self.hand_overs: list = []         # hand-overs not yet taken on x_t
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
         self.sync = StampSync(self, {
@@ -93,7 +93,9 @@ class HybridForceControllerNode(CdprNode):
                              for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
 
     def _on_hand_over(self, msg) -> None:
-        self.cfc_msg = msg
+        self.cfc_on = bool(msg.enabled)
+        if msg.enabled and len(msg.output) == 6 and len(self.hand_overs) < 100:
+            self.hand_overs.append(msg)
 
     def _validate(self, v: dict) -> None:
         self._hpfc_params(v).validate()
@@ -112,11 +114,14 @@ class HybridForceControllerNode(CdprNode):
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         stage = self.stage
         k_t = stage.k_contact or stage.params.K_p
-        cfc = self.cfc_msg
-        cfc_on = cfc is not None and cfc.enabled
-        if cfc_on and len(cfc.output) == 6 and self.absorbed_ns < stamp_ns(cfc) < t_ns:  # period k-1, once
-            self.absorbed_ns = stamp_ns(cfc)
-            stage.absorb(float(stage.z_t @ np.asarray(cfc.output[:3], dtype=float)) / k_t)
+        later = []
+        for msg in self.hand_overs:        # in lockstep the one of period k - 1; each taken once
+            if stamp_ns(msg) < t_ns:
+                stage.absorb(float(stage.z_t @ np.asarray(msg.output[:3], dtype=float)) / k_t)
+            else:
+                later.append(msg)
+        self.hand_overs = later
+        cfc_on = self.cfc_on
         s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
         x_comp = self.hand_over.update(s, stage.k_contact or stage.params.K_p, cfc_on)
         zero3 = [0.0, 0.0, 0.0]
