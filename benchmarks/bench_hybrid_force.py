@@ -2,7 +2,10 @@
 OSPC (3.16) and the CFC (3.19)-(3.23) stages of the same loop as baselines measured in the same run.
 
 - ``HybridForceControl.update`` in state D (task frame (5.2), contact force, PID (5.3));
-- ``CFCCoupling.update`` (its per-period cost in the cable force controller);
+- ``CFCCoupling.update`` (the coupling without the structure matrix, used in state I);
+- what the node ``cable_force_controller`` adds per period under hybrid force control in D:
+  ``kernels.inverse_kinematics(robot, x_d)``, ``task_force_direction`` and ``CFCCoupling.run``;
+  and what ``hybrid_force_controller`` adds: ``ContactHandOver.update``;
 - baselines: ``OperationalSpacePositionController.update`` and ``CableForceControl.update``.
 
 Writes bench/hybrid_force.json. Run: .venv/bin/python benchmarks/bench_hybrid_force.py
@@ -18,8 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_control import kernels
 from cdpr_control.cable_force_control import CableForceControl
-from cdpr_control.hybrid_force_control import CFCCoupling, HybridForceControl
+from cdpr_control.hybrid_force_control import CFCCoupling, ContactHandOver, HybridForceControl, task_force_direction
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.ospc import OperationalSpacePositionController, OSPCParams
 from cdpr_control.robot import load_robot
@@ -67,10 +71,25 @@ def main() -> None:
     f = f_d + rng.normal(0.0, 2.0, f_d.shape)
     c = robot.cable
 
+    coupled = CableForceControl(robot, DT)
+    coupled.update(f_d[0], f[0], theta, c.f_min, c.f_max)             # calibrated (dq_0 set)
+    coupling_d = CFCCoupling(2.0, DT)
+    z_t = np.array([0.0, 0.0, -1.0])
+
+    def node_cfc_in_contact(k):
+        a = task_force_direction(kernels.inverse_kinematics(robot, x_d).AT, z_t)
+        coupling_d.run("D", f_d[k], 500.0, a, coupled.controller, f[k])
+
+    hand_over = ContactHandOver(0.3, DT)
+    state_d = hpfc.update(F_d0, w[0])
+    kernels.inverse_kinematics(robot, x_d)                              # compiled before timing
+
     calibration = python_calibration_us()
     results = {
         "hpfc_update_state_D": figures(timed(lambda k: hpfc.update(F_d0, w[k]))),
         "cfc_coupling_update": figures(timed(lambda k: coupling.update("D" if k % 2 else "I", f_d[k]))),
+        "cfc_node_contact_ik_and_coupling_run": figures(timed(node_cfc_in_contact)),
+        "contact_hand_over_update": figures(timed(lambda k: hand_over.update(state_d, 12600.0, True))),
         "baseline_ospc_update": figures(timed(lambda k: ospc.update(x_d, x[k]))),
         "baseline_cfc_update": figures(timed(lambda k: cfc.update(f_d[k], f[k], theta, c.f_min, c.f_max))),
     }

@@ -11,7 +11,9 @@ import pytest
 
 from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.controller_params import control_loop_params
-from cdpr_control.hybrid_force_control import (HAND_OVER_TIME, CFCCoupling, HPFCParams, HybridForceControl, MovingAverage,
+from cdpr_control.filters import LowPass
+from cdpr_control.hybrid_force_control import (HAND_OVER_TIME, CFCCoupling, ContactHandOver, HPFCParams, HPFCState,
+                                               HybridForceControl, MovingAverage,
                                                contact_force, expected_contact_wrench, format_state, parse_state,
                                                select_position_feedback, task_frame)
 from cdpr_control.robot import load_robot
@@ -117,6 +119,33 @@ def test_cfc_runs_in_contact_with_the_average_feed_forward_and_the_live_contact_
     assert F_ff == 500.0
     outs = [c.contact_update("I", f0, 0.0, a) for _ in range(12)]
     assert not outs[0][2] and np.allclose(outs[-1][1], f0) and outs[-1][3] == 0.0
+
+
+def test_the_graphs_hand_over_offset_is_the_one_of_the_cfc_coupling():
+    """The node graph's x_comp (ContactHandOver, in hybrid_force_controller) presses with the
+    F_ff that CFCCoupling.contact_update hands the in-process loop, through the same PT1 of the
+    expected contact force: 0 while paused (A-C), ramped in over HAND_OVER_TIME in D, all of it in
+    R and I, x_comp = -F_ff / k_t z_t, and 0 while the CFC's output is not applied."""
+    dt, k_t, T_c = 1e-3, 12600.0, 0.3
+    z = np.array([0.0, 0.0, -1.0])
+    a = np.r_[-np.ones(4), np.ones(4)] / np.sqrt(8.0)
+    coupling, hand_over, off = CFCCoupling(2.0, dt), ContactHandOver(T_c, dt), ContactHandOver(T_c, dt)
+    F_c = LowPass(T_c, dt)
+    states = ["I"] * 5 + ["A"] * 50 + ["B"] * 30 + ["D"] * 400 + ["R"] * 100 + ["I"] * 100
+    F_d = [500.0] * 485 + list(np.linspace(500.0, 0.0, 100)) + [0.0] * 100
+    seen = set()
+    for k, (state, F) in enumerate(zip(states, F_d)):
+        hpfc = HPFCState(state, True, z, 500.0 * z, np.zeros(3), F, 0.0, F, 0.0, 0.0, 0.0, False, np.zeros(6))
+        F_exp = F_c.update(F if state != "I" else 0.0)
+        F_ff = coupling.contact_update(state, np.full(8, 100.0), float(F_exp), a)[3]
+        x_comp = hand_over.update(hpfc, k_t, True)
+        assert x_comp[:3] == pytest.approx(-F_ff / k_t * z, abs=1e-15), (k, state)
+        assert np.all(x_comp[3:] == 0.0) and np.all(off.update(hpfc, k_t, False) == 0.0)
+        if F_ff != 0.0:
+            seen.add(state)
+        if state == "D" and states[k - 1] == "B":
+            assert F_ff == pytest.approx(dt / HAND_OVER_TIME * F_exp)      # the ramp starts
+    assert seen == {"D", "R", "I"}
 
 
 def test_absorb_moves_x_t_and_its_integral_part_in_contact_only():

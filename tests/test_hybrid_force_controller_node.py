@@ -65,6 +65,8 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
     probe.create_subscription(ControllerState, "hybrid_force_controller/state", states.append, CONTROL)
     probe.create_subscription(ControllerState, "ospc/state", ospc_states.append, CONTROL)
     probe.create_subscription(ControllerState, "cable_force_controller/state", cfc_states.append, CONTROL)
+    hand_overs = []
+    probe.create_subscription(ControllerState, "cable_force_controller/hand_over", hand_overs.append, CONTROL)
     assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
     x_d = ROBOT.home.copy()
     x = x_d + [0.0, 0.0, -0.003, 0.0, 0.0, 0.0]                 # 3 mm below x_d
@@ -101,6 +103,10 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
     z_integrator = [st.integrator[2] for st in ospc_states[-4:]]
     assert max(z_integrator) - min(z_integrator) == 0.0
     np.testing.assert_array_equal(cfc_states[-1].output, dq_free)
+    # the coupled CFC publishes its hand-over every period: applied, nothing handed over while paused
+    assert _spin_until(executor, lambda: len(hand_overs) >= 7)
+    assert [h.header.stamp.nanosec for h in hand_overs[-7:]] == [k * 1_000_000 for k in range(1, 8)]
+    assert hand_overs[-1].enabled and list(hand_overs[-1].output) == [0.0] * 6
 
 
 def test_rejected_parameter_keeps_the_old_value(graph):

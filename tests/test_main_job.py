@@ -38,6 +38,7 @@ LOOP_TYPES = {                                   # one message per control perio
     "/forward_kinematics/diagnostics": "cdpr_msgs/msg/ForwardKinematicsDiagnostics",
     "/force_distribution": "cdpr_msgs/msg/ForceDistribution",
     "/cable_force_controller/state": "cdpr_msgs/msg/ControllerState",
+    "/cable_force_controller/hand_over": "cdpr_msgs/msg/ControllerState",
     "/ospc/state": "cdpr_msgs/msg/ControllerState",
     "/admittance_controller/setpoint": "cdpr_msgs/msg/OperationalSetpoint",
     "/admittance_controller/state": "cdpr_msgs/msg/ControllerState",

@@ -29,7 +29,7 @@ from .filters import LowPass
 from .force_setpoint import ForceSetpoint, ForceSetpointParams
 from .forward_kinematics import PoseEstimator
 from .friction_compensation import FrictionCompensation, FrictionCompensationParams
-from .hybrid_force_control import (CONTACT, FORCE_CONTROLLED, RELEASE, CFCCoupling, HPFCParams, HybridForceControl,
+from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl,
                                    expected_contact_wrench, select_position_feedback, task_force_direction)
 from .joint_command import JointCommand
 from .offset_inputs import OffsetInputs, OffsetSample
@@ -124,7 +124,6 @@ class ControlLoop:
         self.hpfc = None if p.hpfc is None else HybridForceControl(robot, dt, p.hpfc, enabled=p.hpfc_enabled)
         self.coupling = None if p.hpfc is None else CFCCoupling(p.hpfc.T_MA, dt)
         self.contact_filter = LowPass(p.force.T_wrench_filter, dt)   # as the distribution's wrench filter
-        self._cfc_paused = False
         self.dq_cfc = np.zeros(robot.m)
         self.offset_stages = dict(offset_stages or {})
         self.offsets = OffsetInputs(self.offset_stages, dt, p.transfer_time)
@@ -134,7 +133,8 @@ class ControlLoop:
         """Section 5.1.2, the cable force control under hybrid force control -> (the CFC's set-point,
         its feed-forward, paused, x_comp (6,) the offset that hands the contact force over).
 
-        The CFC is paused in A-C and runs from D on (:meth:`CFCCoupling.contact_update`); it resumes
+        The CFC is paused in A-C and runs from D on (:meth:`CFCCoupling.run`, the node
+        ``cable_force_controller`` runs the same); it resumes
         bumpless (feedback filter restarted at the measured forces, the integral part taking the
         proportional part's step). Its feed-forward presses along the task axis with the expected
         contact force F_ff (the distribution's wrench carries it, :func:`expected_contact_wrench`);
@@ -150,21 +150,13 @@ class ControlLoop:
         state = self.state.hpfc if self.state is not None else None
         F_c = self.contact_filter.update(state.F_d if state is not None and state.state in FORCE_CONTROLLED else 0.0)
         a = task_force_direction(ik_d.AT, hpfc.z_t)
-        f_set, f_ff, paused, F_ff = self.coupling.contact_update(hpfc.state, f_d, F_c, a)
+        f_set, f_ff, paused, F_ff, F_a = self.coupling.run(hpfc.state, f_d, F_c, a, self.cfc.controller, f)
         k_t = self.hpfc.k_contact or self.hpfc.params.K_p
         x_comp = np.zeros(6)
         if F_ff != 0.0 and cfc_on:
             x_comp[:3] = -F_ff / k_t * hpfc.z_t
-        c = self.cfc.controller
-        if self._cfc_paused and not paused and c.dq_0 is not None:     # resume bumpless
-            c.feedback_filter.reset(f)
-            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
-        self._cfc_paused = paused
-        aa = float(a @ a)
-        if not paused and hpfc.state in (CONTACT, RELEASE) and aa > 0.0:
-            share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
-            c.pi.integrator = c.pi.integrator - share * a
-            self.hpfc.absorb(share * aa / k_t)          # the cables press with a . f along z_t
+        if F_a != 0.0:
+            self.hpfc.absorb(F_a / k_t)
         return f_set, f_ff, paused, x_comp
 
     def set_home_calibration(self, f_home) -> None:

@@ -52,7 +52,7 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
 # The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
-# (CFCCoupling.contact_update; CFCCoupling.update, without the structure matrix, holds it there too).
+# (CFCCoupling.contact_update, in ControlLoop and in the node cable_force_controller).
 CFC_PAUSED = (APPROACH, BRAKE, LOST)
 
 
@@ -377,12 +377,13 @@ class CFCCoupling:
 
     - The CFC is paused during contact establishment (A-C): its output Δq_CFC is held and its state
       does not change, since the abruptly changing cable forces would destabilise it (thesis).
-    - In D and R it runs (:meth:`contact_update`, used by ``ControlLoop``), its feed-forward through
-      the moving average of T_MA,HPFC, the thesis's filter "to slow down the control loop".
-    - :meth:`update` is the coupling without the structure matrix (the node
-      ``cable_force_controller``): it holds the CFC in D and R as well; when the contact has
-      ended (I) the set-point is blended from the one held at the pause to the live one through
-      the moving average, so the feed-forward f_d of (3.22) does not step.
+    - In D and R it runs (:meth:`contact_update`, used by ``ControlLoop`` and the node
+      ``cable_force_controller``), its feed-forward through the moving average of T_MA,HPFC, the
+      thesis's filter "to slow down the control loop".
+    - :meth:`update` is the coupling without the structure matrix: it holds the CFC in D and R as
+      well; when the contact has ended (I) the set-point is blended from the one held at the pause
+      to the live one through the moving average, so the feed-forward f_d of (3.22) does not step
+      (:meth:`contact_update` uses it in I).
 
     docs/hybrid_force_control.md has the variants tried and their figures.
     """
@@ -392,6 +393,7 @@ class CFCCoupling:
         self.average = MovingAverage(T_MA, dt)
         self.weight = 0.0                       # share of the filtered set-point, 0..1
         self.share = 1.0                        # share of the contact force handed over (contact_update)
+        self.paused = False                     # the CFC paused in the last period (run)
 
     def set_time_constant(self, T_MA: float) -> None:
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
@@ -464,6 +466,71 @@ class CFCCoupling:
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
         return out, out, False, float(F_c)
+
+
+    def run(self, state: str, f_d, F_c: float, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float, float]:
+        """:meth:`contact_update` and what it does to the cable force controller (a
+        :class:`cdpr_control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
+        before that controller's update of the period: f the measured cable forces (m,) [N]
+        -> (set-point, feed-forward, paused, F_ff, F_a).
+
+        - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
+          integral part takes the proportional part's step.
+        - In D and R the integral part along a (the cable forces that change the contact force) is
+          handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
+          integrator this period (the hybrid force controller takes F_a / k_t on x_t,
+          :meth:`HybridForceControl.absorb`), so the PID (5.3) owns the steady contact force and
+          nothing of it stays in Δq_CFC when the contact ends.
+        """
+        a = np.asarray(a, dtype=float)
+        f_set, f_ff, paused, F_ff = self.contact_update(state, f_d, F_c, a)
+        c = controller
+        if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
+            c.feedback_filter.reset(f)
+            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
+        self.paused = paused
+        aa = float(a @ a)
+        F_a = 0.0
+        if not paused and state in (CONTACT, RELEASE) and aa > 0.0:
+            share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
+            c.pi.integrator = c.pi.integrator - share * a
+            F_a = share * aa                            # the cables press with a . f along z_t
+        return f_set, f_ff, paused, F_ff, F_a
+
+
+class ContactHandOver:
+    """The hand-over offset x_comp of section 5.1.2 for the node graph, where the hybrid force
+    controller, not the cable force controller, publishes it (``ControlLoop._hpfc_cfc`` computes
+    the same from :meth:`CFCCoupling.contact_update`'s F_ff).
+
+    The CFC's feed-forward presses along z_t with F_ff = share F_c: F_c the expected contact force
+    F_d through the PT1 of the force distribution's wrench filter (T_c, so F_ff is what f_d
+    carries), share ramped from 0 over HAND_OVER_TIME from the start of D or R (0 while the CFC is
+    paused, A-C), all of F_c in I. x_comp = -F_ff / k_t z_t lifts the position offset by what that
+    press pushes the robot, k_t the contact stiffness measured in B (else K_p); 0 while the CFC's
+    output is not applied.
+    """
+
+    def __init__(self, T_c: float, dt: float):
+        self.dt = dt
+        self.filter = LowPass(T_c, dt)
+        self.share = 1.0
+
+    def set_time_constant(self, T_c: float) -> None:
+        self.filter.set_time_constant(T_c)
+
+    def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
+        """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]."""
+        F_c = float(self.filter.update(state.F_d if state.state in FORCE_CONTROLLED else 0.0))
+        if state.state in CFC_PAUSED:
+            self.share = 0.0
+        elif state.state in (CONTACT, RELEASE):
+            self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+        F_ff = self.share * F_c if state.state in (CONTACT, RELEASE) else (0.0 if state.state in CFC_PAUSED else F_c)
+        x_comp = np.zeros(6)
+        if F_ff != 0.0 and cfc_on and math.isfinite(F_ff) and k_t > 0.0:
+            x_comp[:3] = -F_ff / k_t * state.z_t
+        return x_comp
 
 
 def format_state(controller: str, state: str) -> str:

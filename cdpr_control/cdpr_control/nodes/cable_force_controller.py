@@ -9,9 +9,14 @@ of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control
 ``calibration_window`` samples (:mod:`cdpr_control.calibration`), as in the forward kinematics.
 
 With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
-``<force_controller>/state`` and, through :class:`cdpr_control.hybrid_force_control.CFCCoupling`,
-holds Δq_CFC while that controller makes, holds or breaks contact (states A-D, R) and blends its
-set-point back through a moving average of ``T_MA`` afterwards.
+``<force_controller>/state`` and ``setpoint`` (x_d, for the structure matrix A^T(x_d)) and runs
+:meth:`cdpr_control.hybrid_force_control.CFCCoupling.run`: Δq_CFC is held while that controller
+makes or loses contact (states A-C); in D and R the CFC runs, its feed-forward through the moving
+average of ``T_MA`` except along the task axis, and the integral part along the task axis is
+handed over to x_t: published per period on ``cable_force_controller/hand_over``
+(cdpr_msgs/ControllerState, ``output`` = [F_a z_t; 0 0 0], the contact force F_a [N] taken out of the
+integrator, ``enabled`` = Δq_CFC applied), which the hybrid force controller takes on x_t the next
+period, as the in-process loop does.
 
 While ``joint_command`` runs IK-only (its mode on ``joint_command/mode``, :mod:`.mode`) Δq_CFC is
 not applied and the integrator is held (the filter and the calibration stay current).
@@ -19,14 +24,16 @@ not applied and the integrator is held (the filter and the calibration stay curr
 from __future__ import annotations
 
 import numpy as np
-from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution
+from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
+from cdpr_control import kernels
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
-from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state
+from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
 
 from .base import CdprNode, spin_node
+from .conversions import pose_from_msg
 from .mode import follow_mode
 from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
 from .qos import CONTROL
@@ -69,10 +76,13 @@ class CableForceControllerNode(CdprNode):
             "f": (CableForces, "cable_forces"),
             "theta": (JointState, "winch/state"),
         }
+        self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
         if self.force_controller:
             inputs["hpfc"] = (ControllerState, f"{self.force_controller}/state")
+            inputs["setpoint"] = (OperationalSetpoint, "setpoint")
+            self.hand_over = self.create_publisher(ControllerState, "cable_force_controller/hand_over", CONTROL)
         self.sync = StampSync(self, inputs, primary="f", callback=self._cycle, mode=self.sync_mode,
-                              optional=("hpfc",) if self.force_controller else ())
+                              optional=("hpfc", "setpoint") if self.force_controller else ())
 
     @staticmethod
     def _cfc_params(v: dict) -> CFCParams:
@@ -110,23 +120,52 @@ class CableForceControllerNode(CdprNode):
             state.output = [0.0] * m
             self.publisher.publish(state)
             return
-        hpfc = msgs.get("hpfc")
-        contact_state = parse_state(hpfc.controller) if hpfc is not None else None
-        f_d, paused = self.coupling.update(contact_state or "I", f_d)
-        if not paused:                      # held while the hybrid force controller is in contact
-            self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
+        f_ff = None
+        if self.force_controller:           # section 5.1.2: paused in A-C, running in D and R
+            f_d, f_ff, paused = self._contact(msgs, f_d, f, t_ns)
+        else:
+            paused = False
+        if not paused:
+            self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max), f_ff)
         dq = self.dq_held
         c = stage.controller
         if stage.enabled and c.f_filtered is not None:
             state.feedback = c.f_filtered.tolist()
             state.integrator = c.pi.integrator.tolist()
-            state.feedforward = f_d.tolist()
+            state.feedforward = (f_d if f_ff is None else f_ff).tolist()
             state.saturated = c.pi.saturated.tolist()
             self.report(DiagnosticStatus.WARN if c.pi.saturated.any() else DiagnosticStatus.OK,
                         "saturated" if c.pi.saturated.any() else "ok", stamp_ns=t_ns)
         state.error = (np.asarray(state.reference) - np.asarray(state.feedback)).tolist()
         state.output = dq.tolist()
         self.publisher.publish(state)
+
+    def _contact(self, msgs: dict, f_d, f, t_ns: int):
+        """CFCCoupling.run with the state of the hybrid force controller and a = (A^T(x_d))_F^T z_t
+        -> (set-point, feed-forward, paused); publishes the hand-over of the integral part."""
+        hpfc, sp = msgs.get("hpfc"), msgs.get("setpoint")
+        state = (parse_state(hpfc.controller) if hpfc is not None else None) or "I"
+        a = np.zeros(self.robot.m)
+        if hpfc is not None and sp is not None:
+            F_d0 = np.asarray(hpfc.reference[:3], dtype=float)
+            x_d = pose_from_msg(sp.pose)
+            if np.all(np.isfinite(F_d0)) and np.all(np.isfinite(x_d)):
+                self.z_t = task_axis(F_d0, self.z_t)
+                a = task_force_direction(kernels.inverse_kinematics(self.robot, x_d).AT, self.z_t)
+            else:
+                self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
+                            "no hand-over this period", stamp_ns=t_ns)
+        elif state != "I":
+            self.report(DiagnosticStatus.WARN, "no set-point: no hand-over this period", stamp_ns=t_ns)
+        stage = self.stage
+        f_set, f_ff, paused, _, F_a = self.coupling.run(state, f_d, 0.0, a, stage.controller, f)
+        if not stage.enabled or stage.controller.dq_0 is None:
+            F_a = 0.0
+        self.hand_over.publish(ControllerState(
+            header=self.header(t_ns), controller="cable_force_controller:hand_over",
+            enabled=bool(stage.enabled and not stage.controller.pi.hold), names=["x", "y", "z", "a", "b", "c"],
+            output=np.r_[F_a * self.z_t, 0.0, 0.0, 0.0].tolist()))
+        return f_set, f_ff, paused
 
 
 def main(args=None):

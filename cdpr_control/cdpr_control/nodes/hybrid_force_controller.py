@@ -14,9 +14,18 @@ ControllerState fields (names x y z a b c, base frame):
 - ``enabled``: the output is in use (``enabled``, or releasing after a disable);
 - ``reference``: F_d,0 [N] and 0 0 0; ``feedback``: the contact force vector F [N] and 0 0 0;
   ``error``: their difference (e_F = F_d - F is its component along the task z axis);
-- ``output``: x_d,HPFC = [R_t [0 0 x_t]; 0 0 0] [m, rad]; ``integrator``: the same direction times
-  the integral part of x_t; ``feedforward``: the position-controlled part of x_t (A, B, C, R);
+- ``output``: x_d,HPFC + x_comp = [R_t [0 0 x_t] + x_comp; 0 0 0] [m, rad], x_comp = -F_ff / k_t z_t
+  the hand-over offset of section 5.1.2 (:class:`cdpr_control.hybrid_force_control.ContactHandOver`:
+  the contact force F_ff the cable force controller's feed-forward presses with in D and R, over
+  the contact stiffness k_t measured in B); ``integrator``: the task z axis times the integral
+  part of x_t; ``feedforward``: the position-controlled part of x_t (A, B, C, R);
 - ``saturated``: |x_t| at ``x_max`` (all six entries alike).
+
+It also subscribes ``cable_force_controller/hand_over`` (cdpr_msgs/ControllerState, see the node
+``cable_force_controller``): the contact force F_a the cable force controller's integral part
+handed over in a period is taken on x_t (F_a / k_t, :meth:`HybridForceControl.absorb`) at the
+start of the next period, as the in-process loop does; its ``enabled`` (Δq_CFC applied) switches
+x_comp. Without that topic x_comp is 0 and nothing is handed over.
 
 The computation is :class:`cdpr_control.hybrid_force_control.HybridForceControl`.
 """
@@ -27,15 +36,16 @@ from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
-from cdpr_control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceControl,
-                                               format_state)
+from cdpr_control.force_setpoint import ForceSetpointParams
+from cdpr_control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, ContactHandOver, HPFCParams,
+                                               HybridForceControl, format_state)
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
 from .conversions import from_vector3, wrench_from_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
-from .sync import StampSync
+from .sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
@@ -53,6 +63,9 @@ PARAMS = [
     ParamSpec("T_F", _D.T_F, "PT1 time constant on the contact force [s]", range=(0.0, 1.0)),
     ParamSpec("payload", _D.payload, "known payload whose weight is no contact force [kg]", range=(0.0, 1e4)),
     ParamSpec("tare", _D.tare, "zero the contact force when an approach starts in free space (sensor offsets)"),
+    ParamSpec("T_wrench_filter", ForceSetpointParams().T_wrench_filter, "PT1 of the contact force handed over "
+              "to the cable force controller's feed-forward [s]: force_distribution's T_wrench_filter, whose "
+              "filter carries it into f_d (5.1.2)", range=(0.0, 1.0)),
 ]
 
 
@@ -60,6 +73,9 @@ class HybridForceControllerNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__(NAME, **kwargs)
         self.stage: HybridForceControl | None = None
+        self.hand_over: ContactHandOver | None = None
+        self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
+        self.hand_overs: list = []         # hand-overs not yet taken on x_t
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
         self.sync = StampSync(self, {
@@ -67,12 +83,19 @@ class HybridForceControllerNode(CdprNode):
             "wrench": (WrenchStamped, "platform/wrench"),
             "pose": (PoseStamped, "platform/pose"),
         }, primary="pose", callback=self._cycle, mode=self.sync_mode)
+        # the previous period's hand-over (not synchronised: the CFC of period k runs after this node)
+        self.create_subscription(ControllerState, "cable_force_controller/hand_over", self._on_hand_over, CONTROL)
 
     @staticmethod
     def _hpfc_params(v: dict) -> HPFCParams:
         # T_MA filters the CFC's input: a parameter of cable_force_controller
         return HPFCParams(**{name: (bool(v[name]) if name == "tare" else float(v[name]))
                              for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
+
+    def _on_hand_over(self, msg) -> None:
+        self.cfc_on = bool(msg.enabled)
+        if msg.enabled and len(msg.output) == 6 and len(self.hand_overs) < 100:
+            self.hand_overs.append(msg)
 
     def _validate(self, v: dict) -> None:
         self._hpfc_params(v).validate()
@@ -83,10 +106,24 @@ class HybridForceControllerNode(CdprNode):
         else:
             self.stage.set_params(self._hpfc_params(v))
             self.stage.enabled = v["enabled"]
+        if self.hand_over is None:
+            self.hand_over = ContactHandOver(v["T_wrench_filter"], self.dt)
+        else:
+            self.hand_over.set_time_constant(v["T_wrench_filter"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         stage = self.stage
+        k_t = stage.k_contact or stage.params.K_p
+        later = []
+        for msg in self.hand_overs:        # in lockstep the one of period k - 1; each taken once
+            if stamp_ns(msg) < t_ns:
+                stage.absorb(float(stage.z_t @ np.asarray(msg.output[:3], dtype=float)) / k_t)
+            else:
+                later.append(msg)
+        self.hand_overs = later
+        cfc_on = self.cfc_on
         s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
+        x_comp = self.hand_over.update(s, stage.k_contact or stage.params.K_p, cfc_on)
         zero3 = [0.0, 0.0, 0.0]
         feedforward = np.zeros(6) if s.state in (CONTACT, IDLE) else s.x     # the position-controlled x_t
         reference, feedback = np.r_[s.F_d0, zero3], np.r_[s.F_vec, zero3]
@@ -94,7 +131,7 @@ class HybridForceControllerNode(CdprNode):
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference.tolist(), feedback=feedback.tolist(), error=(reference - feedback).tolist(),
             integrator=np.r_[s.integrator * s.z_t, zero3].tolist(), feedforward=feedforward.tolist(),
-            output=s.x.tolist(), saturated=[bool(s.saturated)] * 6))
+            output=(s.x + x_comp).tolist(), saturated=[bool(s.saturated)] * 6))
         # published when state or saturation change (report() compares level and message)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
         self.report(level, f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else ""),
