@@ -140,7 +140,8 @@ def test_force_distribution_plans_for_the_expected_contact_force(graph):
             header = CdprNode.header(k * 1_000_000)
             pubs["hpfc"].publish(ControllerState(header=header, controller=f"hybrid_force_controller:{state}",
                                                  reference=[0.0, 0.0, -10.0, 0.0, 0.0, 0.0],
-                                                 feedback=[0.0, 0.0, -3.0, 0.0, 0.0, 0.0]))   # F = 3 N
+                                                 feedback=[0.0, 0.0, -3.0, 0.0, 0.0, 0.0],    # F = 3 N
+                                                 output=[0.0] * 6))       # (a valid state has its offset)
             pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(ROBOT.home),
                                                    force=vector3([0, 0, -10.0])))
             pubs["w"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))

@@ -126,11 +126,11 @@ class HybridForceControllerNode(CdprNode):
         x_comp = self.hand_over.update(s, stage.k_contact or stage.params.K_p, cfc_on)
         zero3 = [0.0, 0.0, 0.0]
         feedforward = np.zeros(6) if s.state in (CONTACT, IDLE) else s.x     # the position-controlled x_t
-        reference, feedback = np.r_[s.F_d0, zero3], np.r_[s.F_vec, zero3]
+        reference, feedback = s.F_d0.tolist() + zero3, s.F_vec.tolist() + zero3
         self.publisher.publish(ControllerState(
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
-            reference=reference.tolist(), feedback=feedback.tolist(), error=(reference - feedback).tolist(),
-            integrator=np.r_[s.integrator * s.z_t, zero3].tolist(), feedforward=feedforward.tolist(),
+            reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
+            integrator=(s.integrator * s.z_t).tolist() + zero3, feedforward=feedforward.tolist(),
             output=(s.x + x_comp).tolist(), saturated=[bool(s.saturated)] * 6))
         # published when state or saturation change (report() compares level and message)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
