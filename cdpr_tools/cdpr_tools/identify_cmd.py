@@ -78,6 +78,8 @@ def add_parser(sub) -> None:
     ls.add_argument("--dwell", type=float, default=3.0, help="time per step [s] (default 3)")
     ls.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
                     help="the simulated robot: cdpr_sim.plant (default mismatched)")
+    ls.add_argument("--model", help="robot file of the load compensation's model (e.g. with the identified "
+                    "cable stiffness); default: --robot, from which the simulated plant is built")
     ls.set_defaults(run=run_load_steps)
 
     lp = what.add_parser("load-program", help="a program run with payloads, with and without load "
@@ -199,7 +201,7 @@ def run_load_steps(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     summary = run_experiment(args.outdir, args.robot, configs, position=tuple(args.position),
                              step_mass=args.step_mass, steps=args.steps, dwell=args.dwell,
-                             progress=lambda line: print(line, flush=True), plant=args.plant)
+                             progress=lambda line: print(line, flush=True), plant=args.plant, model=args.model)
     for name, s in summary.items():
         print(f"{name:18s} sag {s['sag_mm_per_kg']:6.3f} mm/kg  worst static z error {s['max_abs_z_error_mm']:6.1f} mm")
     return 0
@@ -214,7 +216,7 @@ def run_load_program(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     payloads = [float(m) for m in args.payloads.split(",") if m]
     summary = run_program_experiment(args.outdir, args.robot, configs, payloads, args.program,
-                                     progress=lambda line: print(line, flush=True), plant=args.plant)
+                                     progress=lambda line: print(line, flush=True), plant=args.plant, model=args.model)
     for key, s in summary.items():
         print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
               f"estimate error {s['max_estimate_error_percent']:5.1f} %")
