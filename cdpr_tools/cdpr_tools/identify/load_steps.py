@@ -245,7 +245,8 @@ def sag_cut_percent(reference: dict, compensated: dict) -> list:
 
 def run_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc", "ospc", "force_control", "force_control_lc"),
                    position=(-1.0, -1.0, 0.5), step_mass: float = 8.0, steps: int = 16, dwell: float = 1.5,
-                   rest: float = 0.5, progress=print, plant: str = "mismatched", model=None) -> dict:
+                   rest: float = 0.5, progress=print, plant: str = "mismatched", model=None,
+                   lc_params: LoadCompensationParams | None = None) -> dict:
     """The standstill experiment for each configuration: plot, JSON summary; returns the summary
     (per configuration; with ``ik`` also the sag cut of each other configuration against it).
     model: the load compensation's robot model (a robot file name or path, or a Robot; e.g. one with
@@ -257,7 +258,7 @@ def run_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc", "ospc", "fo
     for config in configs:
         progress(f"payload steps, {config} ...")
         runs[config] = payload_steps(robot, config, position, step_mass=step_mass, steps=steps, dwell=dwell, rest=rest,
-                                     plant=plant, model=model)
+                                     plant=plant, model=model, lc_params=lc_params)
         s = step_summary(runs[config], dwell, rest)
         s["plant"] = plant
         s["model"] = "robot" if model is None else model.name
