@@ -239,9 +239,10 @@ class SettlementModel:
         self.f_settled: np.ndarray | None = None
         self.set_params(ratio, T)
 
-    def set_params(self, ratio: float, T: float) -> None:
-        self.ratio, self.T = float(ratio), float(T)
-        self.alpha = 1.0 - np.exp(-self.dt / self.T) if self.T > 0.0 else 1.0
+    def set_params(self, ratio: float, T) -> None:
+        """T may be an array (k, 1) of time constants: s is then (k, m), one row each (for a fit)."""
+        self.ratio, self.T = float(ratio), T
+        self.alpha = 1.0 - np.exp(-self.dt / np.asarray(T, dtype=float))
 
     def reset(self, f_settled) -> None:
         """The cables have settled to the forces f_settled (m,) [N] (at power-on, or at a tare)."""

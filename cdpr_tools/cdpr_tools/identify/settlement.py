@@ -57,12 +57,13 @@ def identify(bag, robot, friction_params: dict | None = None, rest: float = 0.4,
     s_meas = u - u[ref].mean(axis=0)
     use = (~ref)[:, None] & (f >= f_taut)
     T_grid = np.geomspace(0.2, 20.0, 41) if T_grid is None else np.asarray(T_grid, dtype=float)
+    model = SettlementModel(robot, dt, ratio=1.0, T=T_grid[:, None])       # all T of the grid at once
+    model.reset(f[ref].mean(axis=0))
+    s_unit = np.array([model.update(fk, lk) for fk, lk in zip(f, l_t)])     # (N, len(T_grid), m), ratio 1
+    b = s_meas[use]
     best = None
-    for T in T_grid:
-        model = SettlementModel(robot, dt, ratio=1.0, T=float(T))
-        model.reset(f[ref].mean(axis=0))
-        s_unit = np.array([model.update(fk, lk).copy() for fk, lk in zip(f, l_t)])
-        a, b = s_unit[use], s_meas[use]
+    for j, T in enumerate(T_grid):
+        a = s_unit[:, j][use]
         ratio = max(float(a @ b / (a @ a)), 0.0) if a @ a > 0.0 else 0.0
         rms = float(np.sqrt(np.mean((ratio * a - b) ** 2)))
         if best is None or rms < best[2]:
