@@ -1,6 +1,7 @@
 """Cost of one period of the load identification and compensation (4.4)-(4.6), per robot.
 
-LoadCompensation.update (moving averages, the secant offset of (4.5)-(4.6), output filter) on a
+LoadCompensation.update (moving averages, the secant offset of (4.5)-(4.6), output filter; also
+with the cable settlement model on) on a
 circle set-point with the forces that carry it, beside two baselines of the same run: the OSPC
 update (one PI per DOF, the other offset input of the joint command) and the IK of x_d (which the
 control loop shares with this stage). Figures in microseconds (median), plus the machine's
@@ -28,9 +29,9 @@ STEPS = 2000
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "load_compensation.json"
 
 
-def bench(name: str) -> dict:
+def bench(name: str, params: LoadCompensationParams | None = None) -> dict:
     robot = load_robot(name)
-    lc = LoadCompensation(robot, 1e-3, LoadCompensationParams())
+    lc = LoadCompensation(robot, 1e-3, params or LoadCompensationParams())
     ospc = OperationalSpacePositionController(OSPCParams(), 1e-3)
     r = 0.02 * robot.frame_size[0]
     w = np.pi
@@ -62,6 +63,8 @@ def bench(name: str) -> dict:
 def main():
     result = {"python_calibration_us": python_calibration_us(), "machine": platform.machine(),
               "robots": {name: bench(name) for name in ("ipanema3_mini", "ipanema3")}}
+    # with the cable settlement model on (identified parameters, docs/load_compensation.md)
+    result["ipanema3_settlement_model"] = bench("ipanema3", LoadCompensationParams(settlement_ratio=0.3))
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(result, indent=1))
     print(json.dumps(result, indent=1))

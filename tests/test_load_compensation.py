@@ -16,7 +16,7 @@ from cdpr_control.forward_kinematics import ForwardKinematics
 from cdpr_control.kinematics import inverse_kinematics
 from cdpr_control.load_compensation import (LoadCompensation, LoadCompensationParams, MovingAverage,
                                             cable_stiffness_model, compensating_wrench, compliance, load_offset,
-                                            mass_estimate, payload_wrench, secant_offset)
+                                            mass_estimate, payload_wrench, secant_offset, SettlementModel)
 from cdpr_control.robot import load_robot
 from cdpr_control.stiffness import operational_stiffness
 
@@ -25,7 +25,8 @@ IPANEMA3 = load_robot("ipanema3")
 # the sag cut: x_d,LC is a feed-forward of the cable model, so the plant's cable stiffness (8-15 %
 # off) and its cable settlement under load (a lasting elongation of tens of mm after 128 kg, section
 # 4.1.3) stay in the error; the >= 90 % of the sag it removes is a property of the model, measured
-# on the nominal plant (docs/load_compensation.md gives the figures on both plants).
+# on the nominal plant (docs/load_compensation.md gives the figures on both plants). On the
+# mismatched plant the >= 90 % needs the identified cable and settlement (the last tests).
 PLANT = "mismatched"
 MINI = load_robot("ipanema3_mini")
 POSE = np.r_[-1.0, -1.0, 0.5, 0.0, 0.0, 0.0]            # section 4.1.3
@@ -119,6 +120,32 @@ def test_secant_offset_is_the_command_that_holds_128_kg_at_the_set_point():
     np.testing.assert_allclose(secant_offset(IPANEMA3, ik, f_0, np.zeros(6), f_ref=f_0), 0.0, atol=1e-12)
     with pytest.raises(np.linalg.LinAlgError):
         secant_offset(IPANEMA3, ik, np.r_[f[:4], np.zeros(4)], w_c)
+
+
+def test_secant_offset_shortens_the_cables_by_their_settlement():
+    """Cable settlement (section 4.1.3) s = A c0 of a pose offset c0 and no payload: the command
+    must shorten each cable by s, so the secant offset is c0 (the forces stay those of the state)."""
+    x_0, f_0 = _ik_only_state(IPANEMA3, POSE, 0.0)
+    ik = inverse_kinematics(IPANEMA3, POSE)
+    c0 = np.r_[0.0, 0.0, 0.004, 0.0, 0.0, 0.0]
+    s = ik.AT.T @ c0
+    c = secant_offset(IPANEMA3, ik, f_0, np.zeros(6), f_ref=f_0, settlement=s)
+    np.testing.assert_allclose(c, c0, atol=1e-3 * 0.004)
+
+
+def test_settlement_model_grows_towards_its_target_and_never_shrinks():
+    """s_i -> ratio l_t (f_i - f_settled) / k0 with time constant T; lower forces leave it."""
+    model = SettlementModel(MINI, 1e-3, ratio=0.3, T=0.5)
+    f0, l_t = np.full(MINI.m, 20.0), np.full(MINI.m, 1.5)
+    model.reset(f0)
+    for _ in range(5000):                                   # 10 T
+        model.update(f0 + 10.0, l_t)
+    np.testing.assert_allclose(model.s, 0.3 * 1.5 * 10.0 / MINI.cable.k0, rtol=1e-4)
+    s = model.s.copy()
+    model.update(f0, l_t)
+    np.testing.assert_array_equal(model.s, s)
+    model.set_params(0.0, 0.5)                              # off: held
+    np.testing.assert_array_equal(model.update(f0 + 50.0, l_t), s)
 
 
 def test_slack_cables_have_no_stiffness_whatever_the_noise_on_their_force():
@@ -337,3 +364,54 @@ def test_pose_error_while_moving_lower_with_load_compensation(move_program):
         load_steps.payload_program(IPANEMA3, config, 40.0, move_program, plant=PLANT),
                                                  40.0)["rms_position_error_mm"] for config in ("ik", "ik_lc")}
     assert errors["ik_lc"] < 0.5 * errors["ik"]
+
+
+# --- identify first, then compensate: the mismatched plant ----------------------------------
+
+@pytest.fixture(scope="module")
+def identified_ipanema3(tmp_path_factory):
+    """The user's workflow on the IPAnema 3's mismatched plant: the stiffness from tension steps
+    (sensor forces) -> a robot file with the identified cable (load_robot); with it the settlement
+    from a 64 kg payload run with the pose (tracker) -> load_compensation parameters."""
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import experiments, settlement, stiffness
+
+    tmp = tmp_path_factory.mktemp("identify")
+    bag = experiments.record_stiffness_run(tmp / "stiffness", "ipanema3")
+    path = stiffness.write_robot_file("ipanema3", stiffness.identify(BagReader(bag), IPANEMA3), tmp / "robot.yaml")
+    robot = load_robot(path)
+    bag = experiments.record_settlement_run(tmp / "settlement", IPANEMA3, hold=6.0)
+    return robot, settlement.identify(BagReader(bag), robot)
+
+
+def test_settlement_identified_with_the_identified_stiffness(identified_ipanema3):
+    """The plant's settlement (ratio 0.3 of its own k0, T 2 s, cdpr_sim/plants/mismatch.yaml) is found
+    as the ratio relative to the identified k0 (what the compensation runs on)."""
+    from cdpr_sim.simulator import SimConfig, plant_of
+
+    robot, fit = identified_ipanema3
+    plant = plant_of(IPANEMA3, SimConfig())
+    expected = plant.settlement_ratio * robot.cable.k0 / plant.robot.cable.k0
+    assert abs(fit.ratio / expected - 1.0) < 0.05, (fit.ratio, expected)
+    assert abs(fit.T / plant.settlement_time - 1.0) < 0.15, fit.T
+    assert abs(robot.cable.k0 / plant.robot.cable.k0 - 1.0) < 0.04
+
+
+def test_sag_cut_by_90_percent_on_the_mismatched_plant_with_the_identified_model(identified_ipanema3):
+    """Section 4.1.3 on the mismatched plant, two steps of 64 kg (over 1.5 s, 6 s each: the cables
+    settle with T = 2 s): IK-only + LC with the robot file's model (no settlement model) removes
+    about 80 % of the sag; with the identified cable and settlement >= 90 % at 64 and 128 kg."""
+    robot, fit = identified_ipanema3
+    kwargs = dict(step_mass=64.0, steps=2, dwell=6.0, ramp=1.5, down=False)
+    _, s_ik = _steps(IPANEMA3, "ik", POSE[:3], **kwargs)
+    _, s_nom = _steps(IPANEMA3, "ik_lc", POSE[:3], **kwargs)
+    params = LoadCompensationParams(tare_at_start=True, settlement_ratio=fit.ratio, settlement_time=fit.T)
+    run, s_id = _steps(IPANEMA3, "ik_lc", POSE[:3], model=robot, lc_params=params, **kwargs)
+
+    def sags(s):
+        return np.array([r["z_error_mm"] - s["unloaded_z_error_mm"] for r in s["steps"]])
+
+    cut_nom, cut_id = 1.0 - np.abs(sags(s_nom) / sags(s_ik)), 1.0 - np.abs(sags(s_id) / sags(s_ik))
+    assert np.all(cut_nom < 0.9) and np.all(cut_id >= 0.9), (cut_nom, cut_id)
+    assert s_id["steps"][-1]["payload_kg"] == 128.0
+    assert np.all(np.isfinite(run.theta_d)) and np.all(np.isfinite(run.x_lc))

@@ -166,7 +166,8 @@ def compensating_wrench(m_c: float, gravity, cog=None, R=None) -> np.ndarray:
     return w_c
 
 
-def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, iterations: int = 6) -> np.ndarray:
+def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, iterations: int = 6,
+                  settlement=None) -> np.ndarray:
     """The set-point offset c (6,) [m, rad] (twist coordinates) that carries the compensating wrench
     w_c (6,) [N, N m] at the pose of ``ik``, from the loaded state with the measured forces f (m,):
     the non-linear (secant) form of (4.5)-(4.6) at a fixed platform pose.
@@ -184,7 +185,10 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
     by Newton's method with the Jacobian K_c at f_U. A cable measured below ``f_slack`` [N] is
     slack: its elongation is not observable from its force, so its unloaded force is taken from
     ``f_ref`` (m,) (the forces of a known unloaded state, e.g. at the tare; None: zero);
-    f_slack None: 20 % of the robot's f_min.
+    f_slack None: 20 % of the robot's f_min. ``settlement`` (m,) [m]: the growth of the unstretched
+    lengths since the unloaded state (cable settlement under load, section 4.1.3; see
+    :class:`SettlementModel`): the command shortens each cable by it as well,
+    e_U = e_L - A c + s.
 
     Raises numpy.linalg.LinAlgError where the tensed cables do not hold the platform (fewer than
     six of them, or K_c ill-conditioned) or Newton's method does not converge: the offset is then
@@ -199,6 +203,8 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
     w_c = np.asarray(w_c, dtype=float)
     if np.count_nonzero(~slack) < 6:
         raise np.linalg.LinAlgError("fewer than 6 tensed cables: K_c singular")
+    if settlement is not None:
+        e_L = e_L + np.asarray(settlement, dtype=float)
     c = np.zeros(6)
     scale = np.linalg.norm(w_c) + 1.0
     for _ in range(iterations + 1):
@@ -213,6 +219,44 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
             raise np.linalg.LinAlgError("K_c ill-conditioned: the tensed cables do not hold the platform")
         c = c + np.linalg.solve(K_c, residual)
     raise np.linalg.LinAlgError("secant offset: Newton's method did not converge")
+
+
+class SettlementModel:
+    """Cable settlement under load (section 4.1.3: 9.2 mm lasting error after 128 kg), predicted
+    from the measured forces: a cable that carries more than the force it has settled to grows
+    by a lasting s_i towards ratio * l_t,i (f_i - f_settled,i) / k0 with time constant T, and s
+    never shrinks. ratio and T come from an identification with an external pose measurement
+    (cdpr_tools.identify.settlement); ratio 0 switches the model off.
+
+    The settlement is not observable from the forces and encoders at a standstill (the payload's
+    weight fixes the forces; the sinking platform changes them only through the cable directions),
+    so the compensation needs this model of the force history.
+    """
+
+    def __init__(self, robot, dt: float, ratio: float = 0.0, T: float = 2.0):
+        self.robot, self.dt = robot, dt
+        self.s = np.zeros(robot.m)
+        self.f_settled: np.ndarray | None = None
+        self.set_params(ratio, T)
+
+    def set_params(self, ratio: float, T) -> None:
+        """T may be an array (k, 1) of time constants: s is then (k, m), one row each (for a fit)."""
+        self.ratio, self.T = float(ratio), T
+        self.alpha = 1.0 - np.exp(-self.dt / np.asarray(T, dtype=float))
+
+    def reset(self, f_settled) -> None:
+        """The cables have settled to the forces f_settled (m,) [N] (at power-on, or at a tare)."""
+        self.s = np.zeros(self.robot.m)
+        self.f_settled = np.array(f_settled, dtype=float)
+
+    def update(self, f, l_t) -> np.ndarray:
+        """One period with the (window-mean) measured forces f (m,) [N] and free lengths l_t (m,) [m]
+        -> s (m,) [m]."""
+        if self.ratio == 0.0 or self.f_settled is None:
+            return self.s
+        target = self.ratio * np.asarray(l_t) * np.maximum(np.asarray(f) - self.f_settled, 0.0) / self.robot.cable.k0
+        self.s = self.s + self.alpha * np.maximum(target - self.s, 0.0)
+        return self.s
 
 
 def twist_to_pose_offset(dx, phi) -> np.ndarray:
@@ -262,6 +306,8 @@ class LoadCompensationParams:
     tare_at_start: bool = False     # tare the estimate once its first window is full (start at a known payload)
     tare_payload: float = 0.0       # kg, the payload known to be on the platform at a tare
     omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
+    settlement_ratio: float = 0.0   # -, cable settlement model (SettlementModel, identified); 0: off
+    settlement_time: float = 2.0    # s, its time constant
 
     def validate(self) -> None:
         if self.acceleration_source not in ACCELERATION_SOURCES:
@@ -272,10 +318,12 @@ class LoadCompensationParams:
         if self.stiffness_model not in STIFFNESS_MODELS:
             raise ValueError(f"stiffness_model must be one of {STIFFNESS_MODELS}, got {self.stiffness_model!r}")
         for name in ("T_filter", "time_shift", "accel_guard", "platform_mass", "cog_min_mass", "T_output", "v_max",
-                     "omega_max", "slack_fraction", "tare_payload"):
+                     "omega_max", "slack_fraction", "tare_payload", "settlement_ratio"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not (np.isfinite(self.settlement_time) and self.settlement_time > 0.0):
+            raise ValueError(f"settlement_time must be finite and > 0 s, got {self.settlement_time}")
         if self.accel_guard <= 0.0:
             raise ValueError("accel_guard must be > 0 m/s² (else (4.4) may divide by zero)")
 
@@ -311,6 +359,7 @@ class LoadCompensation:
         self.output_filter.reset(np.zeros(6))
         self.x_lc = np.zeros(6)
         self.rate_limited = np.zeros(6, dtype=bool)
+        self.settlement = SettlementModel(robot, dt)
         self.set_params(params or LoadCompensationParams())
 
     def set_params(self, p: LoadCompensationParams) -> None:
@@ -320,6 +369,7 @@ class LoadCompensation:
         self.force_filter.set_window(p.T_filter)
         self.cog_filter.set_window(p.T_filter)
         self.output_filter.set_time_constant(p.T_output)
+        self.settlement.set_params(p.settlement_ratio, p.settlement_time)
         n = int(round(p.time_shift / self.dt))
         if self.delay is None or len(self.delay) != n + 1:
             last = None if self.delay is None else self.delay[(self.delay_index - 1) % len(self.delay)]
@@ -358,6 +408,8 @@ class LoadCompensation:
         self.m_hat = self.m_p + payload
         self.m_c = payload
         self.tared = True
+        if self.force_filter.mean is not None:
+            self.settlement.reset(self.force_filter.mean)       # settled to the forces of the known state
         return self.m_tare
 
     def _shifted(self, x_d, xdot_d, xddot_d) -> np.ndarray:
@@ -443,6 +495,10 @@ class LoadCompensation:
             f = self.force_filter.update(f)                       # the forces of the window of (4.4)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:
                 self.f_ref = f.copy()                             # an unloaded state (see secant_offset)
+            if self.settlement.ratio > 0.0:
+                if self.settlement.f_settled is None and self.f_ref is not None:
+                    self.settlement.reset(self.f_ref)             # no tare: settled to the first unloaded state
+                self.settlement.update(f, cable.total_free_length(self.robot, ik.q))
         p = self.params
         if not p.enabled:
             self.x_lc = np.zeros(6)
@@ -454,7 +510,8 @@ class LoadCompensation:
                 cog = self.cog if p.torque else None
                 w_c = compensating_wrench(self.m_c, self.robot.gravity, cog, rotation_matrix(x_d[3:]))
                 if p.offset_model == "secant":
-                    dx = secant_offset(self.robot, ik, f, w_c, self._reference_forces(), self.f_slack)
+                    dx = secant_offset(self.robot, ik, f, w_c, self._reference_forces(), self.f_slack,
+                                       settlement=self.settlement.s if self.settlement.ratio > 0.0 else None)
                 else:
                     k_l = cable_stiffness_model(self.robot, ik, f, p.stiffness_model, self.f_slack)
                     dx = compliance(ik, f, k_l) @ w_c                                      # (4.5)-(4.6)

@@ -3,7 +3,8 @@
     cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
     cdpr identify drive BAG [--model pt1_deadtime|second_order] [--robot NAME] [--plot fit.png]
     cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
-    cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference] [-o robot.yaml]
+    cdpr identify settlement BAG [--robot robot.yaml] [--friction params.yaml] [-o lc_params.yaml]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
     cdpr identify load-steps OUTDIR [--robot NAME] [--configs ik,ik_lc,...] [--step-mass KG] [--steps N] [--plant P]
@@ -50,7 +51,16 @@ def add_parser(sub) -> None:
     k = what.add_parser("stiffness", help="cable stiffness k0, k1, k2 (2.16) from tension steps at rest")
     k.add_argument("bag", help="bag with winch/state, winch/command and ground_truth/pose or setpoint")
     _force_arguments(k)
+    k.add_argument("-o", "--output", metavar="ROBOT_YAML",
+                   help="write a copy of the --robot file with the identified k0, k1, k2 and l_0")
     k.set_defaults(run=run_stiffness)
+
+    st = what.add_parser("settlement", help="cable settlement under load (4.1.3) from a payload run with the pose")
+    st.add_argument("bag", help="bag with winch/state and ground_truth/pose (record_settlement_run)")
+    _force_arguments(st)
+    st.add_argument("--rest", type=float, default=0.4, help="s before the payload: the settled reference")
+    st.add_argument("-o", "--output", help="write the load_compensation parameter file (YAML)")
+    st.set_defaults(run=run_settlement)
 
     e = what.add_parser("eigenfrequency", help="platform eigenfrequency in z from a knock, against (4.8)")
     e.add_argument("bag", help="bag with winch/state, ground_truth/cable_forces and ground_truth/pose")
@@ -78,6 +88,10 @@ def add_parser(sub) -> None:
     ls.add_argument("--dwell", type=float, default=3.0, help="time per step [s] (default 3)")
     ls.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
                     help="the simulated robot: cdpr_sim.plant (default mismatched)")
+    ls.add_argument("--model", help="robot file of the load compensation's model (e.g. with the identified "
+                    "cable stiffness); default: --robot, from which the simulated plant is built")
+    ls.add_argument("--lc-params", metavar="YAML", help="load_compensation parameter file (e.g. the settlement "
+                    "of `cdpr identify settlement -o`) over the defaults")
     ls.set_defaults(run=run_load_steps)
 
     lp = what.add_parser("load-program", help="a program run with payloads, with and without load "
@@ -170,6 +184,27 @@ def run_stiffness(args) -> int:
           f"{fit.n_samples} samples at rest, rms {fit.rms:.3g} m")
     print("encoder offsets delta [mm]: " + " ".join(f"{1e3 * d:.4f}" for d in fit.delta))
     print("free-length corrections g [%]: " + " ".join(f"{1e2 * g:.3f}" for g in fit.g))
+    if args.output:
+        print(f"wrote {stiffness.write_robot_file(args.robot, fit, args.output)}")
+    return 0
+
+
+def run_settlement(args) -> int:
+    from cdpr_control.robot import load_robot
+    from cdpr_tools.bag import BagReader
+    from cdpr_tools.identify import settlement
+
+    fit = settlement.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args), args.rest)
+    print(f"settlement_ratio = {fit.ratio:.4g}, settlement_time = {fit.T:.3g} s  ({fit.n_samples} samples, "
+          f"rms {1e3 * fit.rms:.3f} mm)")
+    print("lasting growth at the end [mm]: " + " ".join(f"{1e3 * s:.3f}" for s in fit.s_final))
+    if args.output:
+        import yaml
+
+        with open(args.output, "w") as f:
+            yaml.safe_dump({"load_compensation": {"ros__parameters": {
+                "settlement_ratio": float(fit.ratio), "settlement_time": float(fit.T)}}}, f, sort_keys=False)
+        print(f"wrote {args.output}")
     return 0
 
 
@@ -190,6 +225,20 @@ def run_record(args) -> int:
     return 0
 
 
+def _lc_params(path):
+    """LoadCompensationParams (tared at the start, as the experiments run) with a load_compensation
+    parameter file's entries; None without a file."""
+    if not path:
+        return None
+    import yaml
+
+    from cdpr_control.load_compensation import LoadCompensationParams
+
+    with open(path) as f:
+        values = yaml.safe_load(f)["load_compensation"]["ros__parameters"]
+    return LoadCompensationParams(**{"tare_at_start": True, **values})
+
+
 def run_load_steps(args) -> int:
     from cdpr_tools.identify.load_steps import CONFIGS, run_experiment
 
@@ -199,7 +248,8 @@ def run_load_steps(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     summary = run_experiment(args.outdir, args.robot, configs, position=tuple(args.position),
                              step_mass=args.step_mass, steps=args.steps, dwell=args.dwell,
-                             progress=lambda line: print(line, flush=True), plant=args.plant)
+                             progress=lambda line: print(line, flush=True), plant=args.plant, model=args.model,
+                             lc_params=_lc_params(args.lc_params))
     for name, s in summary.items():
         print(f"{name:18s} sag {s['sag_mm_per_kg']:6.3f} mm/kg  worst static z error {s['max_abs_z_error_mm']:6.1f} mm")
     return 0
@@ -214,7 +264,8 @@ def run_load_program(args) -> int:
         raise SystemExit(f"unknown configurations {sorted(unknown)}; known: {', '.join(CONFIGS)}")
     payloads = [float(m) for m in args.payloads.split(",") if m]
     summary = run_program_experiment(args.outdir, args.robot, configs, payloads, args.program,
-                                     progress=lambda line: print(line, flush=True), plant=args.plant)
+                                     progress=lambda line: print(line, flush=True), plant=args.plant, model=args.model,
+                             lc_params=_lc_params(args.lc_params))
     for key, s in summary.items():
         print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
               f"estimate error {s['max_estimate_error_percent']:5.1f} %")

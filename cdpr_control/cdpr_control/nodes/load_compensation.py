@@ -64,6 +64,9 @@ PARAMS = [
     ParamSpec("T_output", D.T_output, "PT1 time constant on C_x w_c [s]", range=(0.0, 10.0)),
     ParamSpec("v_max", D.v_max, "rate limit of the translation of x_d,LC [m/s]", range=(0.0, 10.0)),
     ParamSpec("omega_max", D.omega_max, "rate limit of the rotation of x_d,LC [rad/s]", range=(0.0, 10.0)),
+    ParamSpec("settlement_ratio", D.settlement_ratio, "cable settlement model (section 4.1.3; `cdpr identify "
+              "settlement`): settlement strain per elastic strain of the extra force; 0: off", range=(0.0, 10.0)),
+    ParamSpec("settlement_time", D.settlement_time, "time constant of the cable settlement [s]", range=(1e-3, 1e3)),
 ]
 
 

@@ -286,3 +286,26 @@ def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=pr
         bags[name] = record(outdir / name, robot=robot, seed=seed)
         progress(f"  {bags[name]}")
     return bags
+
+
+def record_settlement_run(bag_path, robot="ipanema3", payload: float = 64.0, rest: float = 0.5, ramp: float = 0.3,
+                          hold: float = 6.0, after: float = 1.0, seed: int = 1, level: float = 0.5,
+                          plant: str = "mismatched") -> Path:
+    """Record the cable settlement under load (section 4.1.3): the drives hold IK{home} (IK-only
+    control at standstill), ``payload`` kg is put on after ``rest`` s (cosine over ``ramp`` s),
+    held ``hold`` s and taken off again (``after`` s more). The pose (``ground_truth/pose``, the
+    laser tracker) shows the lasting elongation the forces do not (cdpr_tools.identify.settlement)."""
+    robot = load_robot(robot) if isinstance(robot, str) else robot
+    n_rest, n_ramp, n_hold = (int(round(v / 1e-3)) for v in (rest, ramp, hold))
+    n = n_rest + 2 * n_ramp + n_hold + int(round(after / 1e-3))
+    commands = np.repeat(inverse_kinematics(robot, robot.home).q[None], n, axis=0)
+
+    def mass(k):
+        s = np.clip(np.array([k - n_rest, n_rest + n_ramp + n_hold - k]) / n_ramp, 0.0, 1.0).min()
+        return payload * 0.5 * (1.0 - np.cos(np.pi * s))
+
+    def before_step(sim, k):
+        if n_rest <= k <= n_rest + 2 * n_ramp + n_hold:
+            sim.set_payload(mass(k))
+
+    return _run(robot, bag_path, commands, None, seed, None, level, before_step=before_step, plant=plant)

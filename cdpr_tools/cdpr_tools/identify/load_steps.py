@@ -58,7 +58,8 @@ def loop_params(config: str, robot="ipanema3_mini") -> ControlLoopParams:
     return control_loop_params(robot, mode="force_control", cfc_enabled=cfc, ospc_enabled=ospc)
 
 
-def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, payload0=0.0, plant="mismatched"):
+def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, payload0=0.0, plant="mismatched",
+         model=None):
     """Closed loop with the load compensation stage; payload_at(k) -> mass to set before step k or None;
     ``plant``: the simulator's (cdpr_sim.plant: mismatched by default, or nominal)."""
     from cdpr_sim.closed_loop import run
@@ -70,7 +71,7 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
     params = LoadCompensationParams(**{**params.__dict__, "enabled": lc_enabled})
     # with cable force control the identified payload also feeds the force distribution's model
     # wrench, as the parameter files set it (force_distribution.payload_input)
-    stage = LoadCompensationStage(robot, 1e-3, params, feed_force_setpoint=CONFIGS[config][3])
+    stage = LoadCompensationStage(robot if model is None else model, 1e-3, params, feed_force_setpoint=CONFIGS[config][3])
     lc = stage.compensation
     log = {"payload": [], "m_c": [], "guarded": []}
     current = [payload0]
@@ -107,11 +108,12 @@ def step_schedule(step_mass: float, steps: int, down: bool = True) -> np.ndarray
 def payload_steps(robot="ipanema3", config: str = "ik_lc", position=(-1.0, -1.0, 0.5), step_mass: float = 8.0,
                   steps: int = 16, dwell: float = 1.5, rest: float = 0.5, ramp: float = 0.3,
                   lc_params: LoadCompensationParams | None = None, plant: str = "mismatched",
-                  down: bool = True) -> PayloadRun:
+                  down: bool = True, model=None) -> PayloadRun:
     """Payload steps at standstill (section 4.1.3, Fig. 4.6): ``rest`` s unloaded, then a step of
     ``step_mass`` every ``dwell`` s up to steps * step_mass and back to zero.
 
-    ``down`` False: only the way up. Each step is applied over ``ramp`` s (cosine), as a plate put down by hand: an instantaneous
+    ``down`` False: only the way up. ``model``: the load compensation's robot model (default
+    ``robot``; the simulated plant is always built from ``robot``). Each step is applied over ``ramp`` s (cosine), as a plate put down by hand: an instantaneous
     step would excite the lightly damped vertical mode of the simulated platform (about 1 % of
     critical damping under load) for many seconds, which the hand-placed plates of the thesis did not.
     """
@@ -132,7 +134,7 @@ def payload_steps(robot="ipanema3", config: str = "ik_lc", position=(-1.0, -1.0,
         return float(masses[j - 1] + s * (masses[j] - masses[j - 1]))
 
     duration = rest + dwell * (len(masses) - 1)
-    return _run(robot, hold(x), duration, config, x, payload_at, lc_params, plant=plant)
+    return _run(robot, hold(x), duration, config, x, payload_at, lc_params, plant=plant, model=model)
 
 
 def step_summary(run: PayloadRun, dwell: float, rest: float, window: float = 0.3, settle: float = 1.0) -> dict:
@@ -243,18 +245,23 @@ def sag_cut_percent(reference: dict, compensated: dict) -> list:
 
 def run_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc", "ospc", "force_control", "force_control_lc"),
                    position=(-1.0, -1.0, 0.5), step_mass: float = 8.0, steps: int = 16, dwell: float = 1.5,
-                   rest: float = 0.5, progress=print, plant: str = "mismatched") -> dict:
+                   rest: float = 0.5, progress=print, plant: str = "mismatched", model=None,
+                   lc_params: LoadCompensationParams | None = None) -> dict:
     """The standstill experiment for each configuration: plot, JSON summary; returns the summary
-    (per configuration; with ``ik`` also the sag cut of each other configuration against it)."""
+    (per configuration; with ``ik`` also the sag cut of each other configuration against it).
+    model: the load compensation's robot model (a robot file name or path, or a Robot; e.g. one with
+    the identified cable parameters); None: ``robot``, whose nominal parameters the plant is built from."""
+    model = load_robot(model) if isinstance(model, (str, Path)) else model
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     runs, summary = {}, {}
     for config in configs:
         progress(f"payload steps, {config} ...")
         runs[config] = payload_steps(robot, config, position, step_mass=step_mass, steps=steps, dwell=dwell, rest=rest,
-                                     plant=plant)
+                                     plant=plant, model=model, lc_params=lc_params)
         s = step_summary(runs[config], dwell, rest)
         s["plant"] = plant
+        s["model"] = "robot" if model is None else model.name
         s["sag_mm_per_kg"] = sag_per_kg(s)
         s["max_abs_z_error_mm"] = float(max(abs(r["z_error_mm"]) for r in s["steps"]))
         s["estimate_settle_percent"] = estimate_settle_percent(s, step_mass)

@@ -96,3 +96,28 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
     delta, g = corrections(res.x)
     return StiffnessFit(float(k0), float(k1), float(k2), delta, g,
                         float(np.sqrt(np.mean(res.fun**2))), int(mask.sum()))
+
+
+def write_robot_file(robot_name_or_path, fit: StiffnessFit, out) -> "Path":
+    """A copy of the robot file with the identified cable: k0, k1, k2 of (2.16) and l_0 + g_i l_t,i
+    (the free-length correction of the fit, taken at the robot's home, where
+    :func:`experiments.record_stiffness_run` records: l_t (1 + g) = q + l_0 + g l_t (2.14)).
+    The result loads with :func:`cdpr_control.robot.load_robot` (checked); comments are not kept."""
+    from pathlib import Path
+
+    import yaml
+
+    from cdpr_control.robot import load_robot, robot_path
+
+    path = robot_path(robot_name_or_path)
+    robot = load_robot(path)
+    data = yaml.safe_load(path.read_text())
+    l_t = cable.total_free_length(robot, inverse_kinematics(robot, robot.home).q)
+    data["cable"].update(k0=float(fit.k0), k1=float(fit.k1), k2=float(fit.k2))
+    data["geometry"]["l_0"] = [float(v) for v in robot.l_0 + fit.g * l_t]
+    data["name"] = f"{robot.name} (identified cable)"
+    out = Path(out)
+    out.write_text("# robot file with the cable identified by `cdpr identify stiffness` (2.16)\n"
+                   + yaml.safe_dump(data, sort_keys=False))
+    load_robot(out)
+    return out
