@@ -14,7 +14,9 @@ from cdpr_test_nodes.graph import wait_for  # noqa: E402
 
 @pytest.fixture(scope="module")
 def graph():
-    g = FaultGraph("composed", lockstep_timeout=1.0, state_timeout=5.0, sync_mode="latest")
+    # a quarter of real time: the graph needs about 1 ms of CPU a period here (docs/performance.md), and
+    # a free-running loop that falls behind its set-points is itself a fault (stale input, a hold)
+    g = FaultGraph("composed", lockstep_timeout=1.0, state_timeout=5.0, sync_mode="latest", realtime_factor=0.25)
     yield g
     g.close()
 

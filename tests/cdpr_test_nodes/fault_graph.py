@@ -30,14 +30,16 @@ class FaultGraph:
     """The closed loop without its visualisation, started in ``mode``, and a probe beside it."""
 
     def __init__(self, mode: str, lockstep_timeout: float, state_timeout: float, input_deadline: int = 50,
-                 sync_mode: str = "exact"):
+                 sync_mode: str = "exact", realtime_factor: float = 1.0):
         """``lockstep_timeout`` [s]: wall time a dead node costs the lockstep loop per period (the
         simulator then advances without a command); ``state_timeout`` [s]: the interpreter fails its
-        program after this long without a winch state; ``input_deadline`` [periods]: every node's."""
+        program after this long without a winch state; ``input_deadline`` [periods]: every node's;
+        ``realtime_factor``: free-running, the simulator's pace (below 1 where this machine cannot
+        compute the graph's period in real time, which the stale-input check would rightly call a fault)."""
         description = select_nodes(load_launch_file(GRAPH, {"robot": ROBOT, "sync_mode": sync_mode}),
                                    exclude=["visualization"])
         description.parameters["input_deadline"] = input_deadline
-        extra = {"winch_platform_sim": {"lockstep_timeout": lockstep_timeout},
+        extra = {"winch_platform_sim": {"lockstep_timeout": lockstep_timeout, "realtime_factor": realtime_factor},
                  "gcode_interpreter": {"state_timeout": state_timeout}}
         for spec in description.nodes:
             if spec.label in extra:
