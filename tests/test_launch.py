@@ -212,7 +212,8 @@ def test_cdpr_launch_stops_cleanly_on_sigint(tmp_path, listen, mode):
         wait_for(lambda: all(f"subscribed to {ns}/{t}" in "".join(lines) for t in ("chatter", "heard")),
                  timeout=30, what="the recorder")
         start = collector.count(f"{ns}/heard")
-        wait_for(lambda: collector.count(f"{ns}/heard") >= start + 5, timeout=30, what=f"the {mode} graph")
+        # half a second (100 Hz) after the recorder subscribed: DDS matches its reader asynchronously
+        wait_for(lambda: collector.count(f"{ns}/heard") >= start + 50, timeout=30, what=f"the {mode} graph")
         launch.send_signal(signal.SIGINT)
         assert launch.wait(30) == 0, "".join(lines)
     finally:
