@@ -164,7 +164,7 @@ class CableForceControllerNode(CdprNode):
         self.hand_over.publish(ControllerState(
             header=self.header(t_ns), controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=["x", "y", "z", "a", "b", "c"],
-            output=np.r_[F_a * self.z_t, 0.0, 0.0, 0.0].tolist()))
+            output=(F_a * self.z_t).tolist() + [0.0, 0.0, 0.0]))
         return f_set, f_ff, paused
 
 
