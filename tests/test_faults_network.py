@@ -16,7 +16,7 @@ import sys
 import numpy as np
 
 from cdpr_control.robot import load_robot
-from test_graph_distributed import launch_part, python_env, stop, two_hosts  # noqa: F401 (fixture)
+from test_graph_distributed import split_over_hosts, stop, two_hosts  # noqa: F401 (fixture)
 
 CUT_S = 3.0           # s the link is down
 PERIODS = 100         # periods answered before the cut, and again after it
@@ -68,20 +68,13 @@ print(json.dumps({"before": before, "after": answered(), "commands": commands, "
 
 
 def test_cut_link_between_simulator_and_controllers(two_hosts):
-    (host_a, address_a), (host_b, address_b) = two_hosts
+    host_a = two_hosts[0][0]
     dev = subprocess.run(["ip", "-n", host_a, "-o", "link", "show", "type", "veth"], capture_output=True,
                          text=True, check=True).stdout.split(":")[1].strip().split("@")[0]
-
-    def env(peer: str) -> dict:
-        return python_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=peer,
-                          FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
-
-    in_a, in_b = ("ip", "netns", "exec", host_a), ("ip", "netns", "exec", host_b)
-    sim = launch_part("--only", "winch_platform_sim", prefix=in_a, env=env(address_b))
-    controllers = launch_part("--exclude", "winch_platform_sim", prefix=in_b, env=env(address_a))
+    sim, controllers, in_a, env_a = split_over_hosts(two_hosts)
     try:
         done = subprocess.run([*in_a, sys.executable, "-c", PROBE, str(TIMEOUT_S), str(PERIODS), str(CUT_S), dev],
-                              env=env(address_b), capture_output=True, text=True, timeout=TIMEOUT_S + 60)
+                              env=env_a, capture_output=True, text=True, timeout=TIMEOUT_S + 60)
     finally:
         log = stop(sim, controllers)
     assert done.returncode == 0, done.stderr[-2000:]

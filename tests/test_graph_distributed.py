@@ -162,21 +162,27 @@ def two_hosts():
         subprocess.run(["ip", "netns", "del", name], capture_output=True)
 
 
-def test_simulator_and_controllers_on_two_hosts_joined_by_a_veth_pair(two_hosts):
+def host_env(peer: str) -> dict:
+    """The environment of a process on one of the two hosts: UDP over the veth only (no shared
+    memory between the "hosts"), discovery beyond localhost, ``peer`` the other host's address."""
+    return python_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=peer,
+                      FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
+
+
+def split_over_hosts(two_hosts):
+    """The simulator on host A, the controllers on host B: (sim, controllers, prefix and env on A)."""
     (host_a, address_a), (host_b, address_b) = two_hosts
-
-    def env(peer: str) -> dict:
-        # UDP over the veth only (no shared memory between the "hosts"), discovery beyond localhost
-        return python_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=peer,
-                          FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
-
     in_a, in_b = ("ip", "netns", "exec", host_a), ("ip", "netns", "exec", host_b)
-    sim = launch_part("--only", "winch_platform_sim", prefix=in_a, env=env(address_b))
-    controllers = launch_part("--exclude", "winch_platform_sim", prefix=in_b, env=env(address_a))
+    sim = launch_part("--only", "winch_platform_sim", prefix=in_a, env=host_env(address_b))
+    controllers = launch_part("--exclude", "winch_platform_sim", prefix=in_b, env=host_env(address_a))
+    return sim, controllers, in_a, host_env(address_b)
+
+
+def test_simulator_and_controllers_on_two_hosts_joined_by_a_veth_pair(two_hosts):
+    sim, controllers, in_a, env_a = split_over_hosts(two_hosts)
     try:
         # the probe on host A sees the commands that crossed from host B
-        result = probe({t: LOOP_TOPICS[t] for t in ("/winch/state", "/winch/command")}, prefix=in_a,
-                       env=env(address_b))
+        result = probe({t: LOOP_TOPICS[t] for t in ("/winch/state", "/winch/command")}, prefix=in_a, env=env_a)
     finally:
         log = stop(sim, controllers)
     check_loop_closed(result, log)
