@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from cdpr_control import cable
+from cdpr_control.kernels.model import _cholesky_solve
 from cdpr_control.kinematics import inverse_kinematics
 
 _TABLE_POINTS = 20001
@@ -301,7 +302,7 @@ def _implicit_wrench(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w
             rhs[a] *= h
             for b in range(a):
                 K[a, b] = K[b, a]
-        _solve_spd6(K, rhs, x)
+        _cholesky_solve(K, rhs, x, K)                   # in place: K becomes its Cholesky factor
         again = False
         for i in range(m):
             if active[i]:
@@ -327,29 +328,3 @@ def _implicit_wrench(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w
         for a in range(6):
             FT[a] += A[i, a] * fi
     return dropped
-
-
-@numba.njit(cache=True)
-def _solve_spd6(K, rhs, x):
-    """x = K^-1 rhs for a symmetric positive definite 6x6 K (Cholesky; K is overwritten)."""
-    n = 6
-    for j in range(n):
-        s = K[j, j]
-        for k in range(j):
-            s -= K[j, k] * K[j, k]
-        K[j, j] = np.sqrt(s)
-        for i in range(j + 1, n):
-            s = K[i, j]
-            for k in range(j):
-                s -= K[i, k] * K[j, k]
-            K[i, j] = s / K[j, j]
-    for i in range(n):
-        s = rhs[i]
-        for k in range(i):
-            s -= K[i, k] * x[k]
-        x[i] = s / K[i, i]
-    for i in range(n - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, n):
-            s -= K[k, i] * x[k]
-        x[i] = s / K[i, i]
