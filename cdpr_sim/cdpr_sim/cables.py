@@ -86,10 +86,6 @@ class CableModel:
         self._anchors_at_refresh = None
         self.moved = 0.0        # largest anchor displacement since the refresh, at the last wrench [m]
 
-    def strain_force(self, e) -> np.ndarray:
-        """f(e) of (2.17) for strains e = dq / l_t from the table (0 for e <= 0)."""
-        return np.interp(e, self._e_grid, self._f_grid)
-
     def potential_energy(self, r, R, theta) -> float:
         """Elastic energy [J] stored in the cables at platform origin r, rotation R and unstretched
         lengths theta (m,): sum of l_t int_0^e f(e') de' over the taut cables (the integral of
