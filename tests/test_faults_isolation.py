@@ -88,6 +88,21 @@ def test_valid_messages_pass():
     assert "need 8" in input_problem(ControllerState(output=[0.0] * 6), M, size=M)
 
 
+def test_a_message_checked_for_one_subscriber_is_judged_alike_for_the_next():
+    """In-process every subscriber gets the same object: its check is kept, per robot and output size."""
+    state = ControllerState(output=[0.0] * 6)
+    assert input_problem(state, M, size=6) is None
+    assert "need 8" in input_problem(state, M, size=M)
+    assert input_problem(state, M, size=6) is None
+    forces = CableForces(f=[10.0] * M)
+    assert input_problem(forces, M) is None
+    assert "robot has 4 cables" in input_problem(forces, 4)    # another robot: checked again
+    assert input_problem(forces, M) is None
+    bad = JointState(position=[math.nan] * M)
+    assert "non-finite" in input_problem(bad, M)
+    assert "non-finite" in input_problem(bad, M)
+
+
 def test_a_stamp_jump_is_refused_unless_the_stream_continues_from_it():
     period = 1_000_000
     jumps = StampJumps(50, 50 * period)

@@ -195,6 +195,22 @@ def test_transient_local_history_reaches_a_late_local_subscriber(spaces):
     assert reliable == []                   # DDS would not match these QoS either
 
 
+def test_transient_local_history_reaches_a_late_subscriber_outside_the_process(spaces):
+    """A latched message published while nobody outside listened still reaches a reader in another
+    process that joins later (DDS keeps the history only of what went over DDS)."""
+    graph, outside = spaces(), spaces()
+    publisher = graph.node("ipc_latched_out").create_publisher(Int64, "/ipc_latched_out/status", STATUS)
+    graph.start()
+    publisher.publish(Int64(data=41))
+    publisher.publish(Int64(data=42))
+    late = []
+    outside.node("ipc_late_reader", cls=Node).create_subscription(Int64, "/ipc_latched_out/status", late.append, STATUS)
+    outside.start()
+    wait_for(lambda: late, "the latched message at the late reader")
+    time.sleep(0.2)
+    assert [m.data for m in late] == [42]   # depth 1, the newest
+
+
 def test_clock_reaches_every_sim_time_node_in_one_delivery(spaces):
     """/clock sets every local node's ROS clock (use_sim_time), converted once per message."""
     from rclpy.parameter import Parameter

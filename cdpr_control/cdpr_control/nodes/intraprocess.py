@@ -42,6 +42,7 @@ import weakref
 from collections import deque
 
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -52,9 +53,9 @@ from rclpy.time_source import TimeSource
 BUDGET_S = 0.005        # longest time one drain keeps the executor from other events [s]
 # runner.spin: longest slice of a lockstep chain between two executor turns [s]. One turn of the
 # SingleThreadedExecutor rebuilds its wait set over every entity of the composed graph (about 1.6 ms
-# for closed_loop.yaml's 14 nodes), so a turn every 5 ms cost a quarter of the loop; every 20 ms
-# leaves timers and services at most 20 ms late.
-PUMP_SLICE_S = 0.02
+# for closed_loop.yaml's 14 nodes), so a turn every 5 ms cost a quarter of the loop; every 50 ms
+# (measured: 20 ms 131, 50 ms 64 us of turns a period) leaves timers and services at most 50 ms late.
+PUMP_SLICE_S = 0.05
 RECENT = 64             # local messages per topic remembered to recognise their DDS copies
 ENV = "CDPR_INTRA_PROCESS"  # "0": every node of the process uses DDS only (the baseline transport)
 
@@ -317,8 +318,9 @@ class IntraProcessPublisher(Publisher):
                     else:
                         items.append((s.callback, obj))
                 topic.recent.append(obj)
-        # rcl's count without rclpy's handle guard (this thread owns the publisher; 20 calls a period)
-        if self._Publisher__publisher.get_subscription_count() > len(matched):
+        # rcl's count without rclpy's handle guard (this thread owns the publisher; 20 calls a period).
+        # Transient local: always, so that DDS keeps the history for a reader that joins later
+        if self.history is not None or self._Publisher__publisher.get_subscription_count() > len(matched):
             super().publish(msg)    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
             self._ipc_registry.post(items)
@@ -337,7 +339,15 @@ def has_subscribers(publisher) -> bool:
 
 
 class IntraProcessNode(Node):
-    """An rclpy Node whose publishers and subscriptions use intra-process delivery in its context."""
+    """An rclpy Node whose publishers and subscriptions use intra-process delivery in its context.
+
+    NO_EVENTS: its publishers and subscriptions have no QoS event handlers unless the caller passes
+    ``event_callbacks``. rclpy gives each two by default (incompatible QoS, incompatible type), that
+    log a warning; each is an entity every turn of a SingleThreadedExecutor waits on and checks
+    against all the others (closed_loop.yaml: 221 of 388 entities; a turn between two slices of the
+    lockstep ring 3.2 -> 2.5 ms without the publishers' alone). A mismatch with a node of another
+    make is still reported, by that node's own handler.
+    """
 
     def _intra_process(self) -> IntraProcess | None:
         registry = IntraProcess.of(self.context)
@@ -347,6 +357,7 @@ class IntraProcessNode(Node):
         return registry
 
     def create_publisher(self, msg_type, topic, qos_profile, **kwargs):
+        kwargs.setdefault("event_callbacks", PublisherEventCallbacks(use_default_callbacks=False))  # see NO_EVENTS
         registry = self._intra_process()
         if registry is None or kwargs.get("publisher_class", Publisher) is not Publisher:
             return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
@@ -361,6 +372,7 @@ class IntraProcessNode(Node):
         return publisher
 
     def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False, **kwargs):
+        kwargs.setdefault("event_callbacks", SubscriptionEventCallbacks(use_default_callbacks=False))  # NO_EVENTS
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
