@@ -42,7 +42,7 @@ import weakref
 from collections import deque
 
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -341,12 +341,12 @@ def has_subscribers(publisher) -> bool:
 class IntraProcessNode(Node):
     """An rclpy Node whose publishers and subscriptions use intra-process delivery in its context.
 
-    NO_EVENTS: its publishers and subscriptions have no QoS event handlers unless the caller passes
-    ``event_callbacks``. rclpy gives each two by default (incompatible QoS, incompatible type), that
-    log a warning; each is an entity every turn of a SingleThreadedExecutor waits on and checks
+    NO_EVENTS: its publishers have no QoS event handlers unless the caller passes ``event_callbacks``.
+    rclpy gives every publisher and subscription two by default (incompatible QoS, incompatible type)
+    that log a warning; each is an entity every turn of a SingleThreadedExecutor waits on and checks
     against all the others (closed_loop.yaml: 221 of 388 entities; a turn between two slices of the
-    lockstep ring 3.2 -> 2.5 ms without the publishers' alone). A mismatch with a node of another
-    make is still reported, by that node's own handler.
+    lockstep ring 3.2 -> 2.5 ms without the publishers'). The subscription's handler, kept, reports
+    the same mismatch ("New publisher discovered on topic ..., offering incompatible QoS").
     """
 
     def _intra_process(self) -> IntraProcess | None:
@@ -372,7 +372,6 @@ class IntraProcessNode(Node):
         return publisher
 
     def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False, **kwargs):
-        kwargs.setdefault("event_callbacks", SubscriptionEventCallbacks(use_default_callbacks=False))  # NO_EVENTS
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
