@@ -175,6 +175,28 @@ def test_a_publishing_ring_runs_as_a_queue_and_the_executor_keeps_its_turn(space
     assert len(seen) > 1000                 # far beyond any recursion limit
 
 
+def test_urgent_subscriptions_are_delivered_before_the_queue_in_their_own_order(spaces):
+    """What a callback publishes is queued; deliveries to urgent subscriptions go first, each
+    subscription still in publication order."""
+    graph = spaces()
+    node = graph.node("ipc_urgent")
+    order = []
+    node.create_subscription(Int64, "/ipc_urgent/slow", lambda m: order.append(("slow", m.data)), CONTROL)
+    node.create_subscription(Int64, "/ipc_urgent/fast", lambda m: order.append(("fast", m.data)), CONTROL,
+                             urgent=True)
+    slow = node.create_publisher(Int64, "/ipc_urgent/slow", CONTROL)
+    fast = node.create_publisher(Int64, "/ipc_urgent/fast", CONTROL)
+
+    def burst(_):
+        slow.publish(Int64(data=1))
+        fast.publish(Int64(data=1))
+        slow.publish(Int64(data=2))
+        fast.publish(Int64(data=2))
+    node.create_subscription(Int64, "/ipc_urgent/go", burst, CONTROL)
+    node.create_publisher(Int64, "/ipc_urgent/go", CONTROL).publish(Int64(data=0))
+    assert order == [("fast", 1), ("fast", 2), ("slow", 1), ("slow", 2)]
+
+
 def test_transient_local_history_reaches_a_late_local_subscriber(spaces):
     graph = spaces()
     node = graph.node("ipc_latched")

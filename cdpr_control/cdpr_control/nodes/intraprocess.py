@@ -23,6 +23,12 @@ same to every tool, but the nodes of one rclpy ``Context`` also register them in
   is the executor's thread (or no executor spins yet, e.g. during construction); any other thread
   only appends and wakes the executor. After ``BUDGET_S`` of draining the rest of the queue is
   handed to the executor (a one-shot timer), so timers, services and DDS messages keep their turn.
+- An ``urgent`` subscription (``create_subscription(..., urgent=True)``) has its deliveries queued
+  in a second FIFO, drained before the first: the robot's command path (winch state -> cable forces
+  -> CFC -> joint command -> winch command) marks its inputs so, and a free-running period's command
+  goes out before the rest of the graph computes that period. Each subscription still receives its
+  topic in publication order; in lockstep, where a node computes a period when all of its inputs are
+  there, the order of deliveries changes nothing.
 - The nodes' TimeSources (``use_sim_time``) take /clock as one delivery per message: the time is
   converted once and set on every node's clock (rather than one callback per node and period).
 - Transient-local publishers keep their last ``depth`` messages for local subscriptions that
@@ -71,8 +77,8 @@ def compatible(pub_qos, sub_qos) -> bool:
 class LocalSubscription:
     """The in-process side of one subscription: its callback and the DDS subscription beside it."""
 
-    def __init__(self, registry: "IntraProcess", callback, raw: bool):
-        self.registry, self.callback, self.raw = registry, callback, raw
+    def __init__(self, registry: "IntraProcess", callback, raw: bool, urgent: bool = False):
+        self.registry, self.callback, self.raw, self.urgent = registry, callback, raw, urgent
         self.topic: Topic | None = None
         self.qos = None
         self.dds = None   # the rclpy Subscription and its node, set once created
@@ -87,7 +93,8 @@ class LocalSubscription:
                 return                                  # every publisher is local: a copy
             if topic.seen_locally(msg, self.raw):
                 return
-        self.registry.post(((self.callback, msg),))
+        item = ((self.callback, msg),)
+        self.registry.post((), item) if self.urgent else self.registry.post(item)
 
 
 def clock_fanout(sources: list[TimeSource]):
@@ -134,6 +141,7 @@ class IntraProcess:
         self.enabled = enabled
         self.topics: dict[str, Topic] = {}
         self.queue: deque = deque()
+        self.urgent: deque = deque()        # deliveries to urgent subscriptions, delivered first
         self.lock = threading.Lock()
         self.busy = False
         self.owner: int | None = None       # thread ident of the executor spinning these nodes
@@ -163,10 +171,16 @@ class IntraProcess:
         return topic
 
     # -- the queue ---------------------------------------------------------------------------
-    def post(self, items) -> None:
-        """Append (callback, message) pairs; drain now when this thread may run callbacks."""
+    def pending(self) -> bool:
+        return bool(self.queue or self.urgent)
+
+    def post(self, items, urgent=()) -> None:
+        """Append (callback, message) pairs (``urgent``: to the queue delivered first); drain now when
+        this thread may run callbacks."""
         with self.lock:
             self.queue.extend(items)
+            if urgent:
+                self.urgent.extend(urgent)
             if self.busy:
                 return                          # the running drain delivers them, in order
             if self.owner is not None and self.owner != threading.get_ident():
@@ -176,20 +190,20 @@ class IntraProcess:
         self._drain()
 
     def _drain(self, budget: float = BUDGET_S) -> None:
-        queue, deadline = self.queue, time.perf_counter() + budget
+        queue, urgent, deadline = self.queue, self.urgent, time.perf_counter() + budget
         try:
             while True:
                 try:
-                    callback, msg = queue.popleft()
+                    callback, msg = urgent.popleft() if urgent else queue.popleft()
                 except IndexError:
                     with self.lock:
-                        if not queue:
+                        if not queue and not urgent:
                             self.busy = False
                             return
                     continue
                 self.deliveries += 1
                 callback(msg)
-                if queue and time.perf_counter() > deadline:
+                if (queue or urgent) and time.perf_counter() > deadline:
                     with self.lock:
                         self.busy = False
                         if not self.pumped:
@@ -216,7 +230,7 @@ class IntraProcess:
         if self.wake_timer is not None:
             self.wake_timer.cancel()
         with self.lock:
-            if self.busy or not self.queue:
+            if self.busy or not (self.queue or self.urgent):
                 return
             self.busy = True
         self._drain(budget)
@@ -303,7 +317,7 @@ class IntraProcessPublisher(Publisher):
             raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
         if self._ipc_version != topic.version:      # the local subscriptions changed: match again
             self._rematch(topic)
-        matched, items = self._ipc_matched, []
+        matched, items, urgent = self._ipc_matched, [], []
         if obj is not None:
             if self.history is not None:
                 self.history.append(obj)
@@ -314,16 +328,16 @@ class IntraProcessPublisher(Publisher):
                 for s in self._ipc_others:
                     if s.raw:
                         data = serialize_message(obj) if data is None else data
-                        items.append((s.callback, data))
+                        (urgent if s.urgent else items).append((s.callback, data))
                     else:
-                        items.append((s.callback, obj))
+                        (urgent if s.urgent else items).append((s.callback, obj))
                 topic.recent.append(obj)
         # rcl's count without rclpy's handle guard (this thread owns the publisher; 20 calls a period).
         # Transient local: always, so that DDS keeps the history for a reader that joins later
         if self.history is not None or self._Publisher__publisher.get_subscription_count() > len(matched):
             super().publish(msg)    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
-            self._ipc_registry.post(items)
+            self._ipc_registry.post(items, urgent)
 
 
 def has_subscribers(publisher) -> bool:
@@ -371,11 +385,14 @@ class IntraProcessNode(Node):
         topic_entry.publishers.append(publisher)
         return publisher
 
-    def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False, **kwargs):
+    def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False,
+                            urgent: bool = False, **kwargs):
+        """``urgent``: in-process deliveries to this subscription go before the others queued (the
+        robot's command path: a free-running period's command does not wait for the rest of the graph)."""
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
-        local = LocalSubscription(registry, callback, raw)
+        local = LocalSubscription(registry, callback, raw, urgent)
         subscription = super().create_subscription(msg_type, topic, local.from_dds, qos_profile, raw=raw, **kwargs)
         local.dds, local.node, local.qos = subscription, self, subscription.qos_profile
         local.topic = registry.topic(subscription.topic_name)

@@ -34,13 +34,14 @@ def spin(executor, stop: threading.Event | None = None) -> None:
     try:
         while context.ok() and not (stop is not None and stop.is_set()):
             try:
-                if registry.queue and isinstance(executor, Executor):
+                pending = registry.pending()
+                if pending and isinstance(executor, Executor):
                     _run_ready(executor)
                 else:
-                    executor.spin_once(timeout_sec=0.0 if registry.queue else SPIN_PERIOD)
+                    executor.spin_once(timeout_sec=0.0 if pending else SPIN_PERIOD)
             except ExternalShutdownException:
                 return
-            if registry.queue:
+            if registry.pending():
                 registry.pump()
     finally:
         registry.owner = None

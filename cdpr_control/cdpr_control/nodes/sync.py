@@ -182,7 +182,10 @@ class StampSync:
     def __init__(self, node, inputs: dict[str, tuple[type, str]], primary: str,
                  callback: Callable[[dict, int], None], mode: str = "exact", qos=CONTROL,
                  optional: tuple[str, ...] = (), sizes: dict[str, int] | None = None,
-                 deadline: int | None = None, on_stale: Callable[[int], None] | None = None):
+                 deadline: int | None = None, on_stale: Callable[[int], None] | None = None,
+                 urgent: tuple[str, ...] = ()):
+        """``urgent``: inputs on the robot's command path, delivered in-process before other queued
+        messages (intraprocess.py: a free-running period's command then waits for nothing else)."""
         if primary not in inputs:
             raise ValueError(f"primary input {primary!r} not among {list(inputs)}")
         if primary in optional or not set(optional) <= set(inputs):
@@ -207,8 +210,11 @@ class StampSync:
         self.stale: tuple[str, ...] = ()     # required inputs older than the deadline
         self.on_stale = on_stale             # called with t for each new period while an input is stale
         self.sim_time = node.has_parameter("use_sim_time") and bool(node.get_parameter("use_sim_time").value)
+        if not set(urgent) <= set(inputs):
+            raise ValueError(f"urgent inputs {urgent} must be among {list(inputs)}")
         self.subscriptions = [
-            node.create_subscription(msg_type, topic, self._receiver(name), qos)
+            node.create_subscription(msg_type, topic, self._receiver(name), qos,
+                                     **({"urgent": True} if name in urgent else {}))
             for name, (msg_type, topic) in inputs.items()
         ]
         # on simulated time the clock (/clock of the simulator) advances also when every input of
