@@ -3,6 +3,7 @@
 Every kernel is the same computation as its numpy module; they differ only in the rounding of
 sums (BLAS, fused multiply-add), so the comparisons use tolerances of a few 1e-12 relative.
 """
+import contextlib
 from dataclasses import replace
 
 import numpy as np
@@ -70,6 +71,22 @@ def test_inverse_kinematics_kernel_equals_the_reference(robot, pulleys):
         np.testing.assert_allclose(kernels.cable_lengths(robot, x), ref.q, rtol=1e-13, atol=0)
         f = rng.uniform(robot.cable.f_min, robot.cable.f_max)
         np.testing.assert_allclose(kernels.measured_wrench(robot, x, f), -ref.AT @ f, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("pulleys", [True, False])
+def test_inverse_kinematics_fields_are_those_of_inverse_kinematics(robot, pulleys):
+    """inverse_kinematics_fields: the same numbers as the full result, compiled and numpy."""
+    robot = robot if pulleys else replace(robot, swivelling_pulleys=False)
+    names = ("q", "beta", "gamma", "l_f", "kappa", "AT", "cT")
+    for x in random_poses(robot, 20, np.random.default_rng(12)):
+        for reference in (False, True):
+            with kernels.numpy_reference() if reference else contextlib.nullcontext():
+                ik = kernels.inverse_kinematics(robot, x)
+                fields = kernels.inverse_kinematics_fields(robot, x, *names)
+            for name, a in zip(names, fields):
+                b = ik.c.T if name == "cT" else getattr(ik, name)
+                assert a.flags.c_contiguous or reference, name
+                np.testing.assert_array_equal(a, b, err_msg=name)
 
 
 def test_inverse_kinematics_kernel_inside_the_pulley_circle(robot):
