@@ -303,3 +303,9 @@ def test_control_loop_compiled_equals_numpy_reference_in_closed_loop(robot):
     np.testing.assert_allclose(f_d, f_d_ref, rtol=0, atol=1e-6)                    # N
     np.testing.assert_allclose(dq, dq_ref, rtol=0, atol=1e-10)
     np.testing.assert_allclose(x_ospc, x_ospc_ref, rtol=0, atol=1e-12)
+
+
+def test_all_finite_equals_numpy_also_where_the_sum_overflows():
+    for v in ([1.0, -2.0, 3.0], [1.0, np.nan, 0.0], [np.inf, 1.0], [np.inf, -np.inf], [1e308, 1e308, -1.0],
+              np.full(6, -1.7e308), np.zeros(6), [1e308, np.nan]):
+        assert kernels.all_finite(v) == bool(np.isfinite(v).all()), v

@@ -9,7 +9,6 @@ move smoothly and the platform does not.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,12 +51,6 @@ class ForceSetpointParams:
             if value is not None and (np.shape(value) != (m,) or not np.all(np.isfinite(value))):
                 raise ValueError(f"{name} needs {m} finite values")
         BorderPolicy(overload_factor=self.overload_factor).validate()
-
-
-def all_finite(v) -> bool:
-    """np.isfinite(v).all() of a short vector, cheaper: one sum first (a NaN or inf makes it
-    non-finite); only a sum that overflowed (values near 1e308) needs the test per element."""
-    return math.isfinite(sum(np.asarray(v, dtype=float).ravel().tolist())) or bool(np.isfinite(v).all())
 
 
 class ForceSetpoint:
@@ -132,7 +125,7 @@ class ForceSetpoint:
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
-        if self.params.wrench_source == "measured" and all_finite(w):
+        if self.params.wrench_source == "measured" and kernels.all_finite(w):
             self.w_d = self.smith.update(w, w_dyn, self.w_dist_max,             # (3.26), disturbance
                                          self.wrench_filter.update, w_model)   # filtered, saturated
         else:

@@ -44,7 +44,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cable, kernels
-from .dynamics import platform_wrench
 from .filters import LowPass
 from .kinematics import cross, kardan_rate_matrix, rotation_matrix
 from .stiffness import operational_stiffness
@@ -61,7 +60,7 @@ COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period 
 def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
     """m̂_p = -w_z / (ẍ_d,z - g) (4.4) [kg]; None where |ẍ_d,z - g| < guard [m/s²] (held)."""
     denominator = xddot_z - g_z
-    if not abs(denominator) >= guard or not np.isfinite(w_z):
+    if not abs(denominator) >= guard or not math.isfinite(w_z):
         return None
     return -w_z / denominator
 
@@ -454,11 +453,11 @@ class LoadCompensation:
         w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
         if self.m_hat is None:
             self.m_hat = self.m_p
-        if not np.all(np.isfinite(w)):
+        if not kernels.all_finite(w):
             self.guarded = True
             return                                                           # hold the estimate
         w_z, a = self.wrench_filter.update([w[2], xddots[2]])               # means over the window
-        if self.params.acceleration_source == "estimated" and x is not None and np.isfinite(x[2]):
+        if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
             a_est = self._estimated_acceleration(float(x[2]))
             a = a if a_est is None else a_est          # commanded until the history spans a window
         estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
@@ -470,7 +469,7 @@ class LoadCompensation:
         if self.samples % COG_DECIMATION:
             return
         # payload share of the wrench, in the platform frame: τ_p = c × f_p = -[f_p] c
-        w_p = w - platform_wrench(self.robot, xs, xdots, xddots)
+        w_p = w - kernels.platform_wrench(self.robot, xs, xdots, xddots)
         RT = rotation_matrix(xs[3:]).T
         f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
         S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
@@ -493,16 +492,20 @@ class LoadCompensation:
         ik_d: inverse_kinematics(robot, x_d) when the caller has it.
         """
         x_d = np.asarray(x_d, dtype=float)
-        ik = kernels.inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d   # compiled: every period
+        ik = ik_d
+        if ik is None and (self.params.enabled or self.settlement.ratio > 0.0):
+            ik = kernels.inverse_kinematics(self.robot, x_d)           # compiled: every period
+        # the identification (4.4) alone (disabled) needs only A^T
+        AT = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")[0] if ik is None else ik.AT
         f = np.asarray(f, dtype=float)
-        self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x)
+        self.identify(x_d, xdot_d, xddot_d, f, AT, x)
         self.m_c = self.m_hat - self.m_p
         self.periods += 1
         if (self.params.tare_at_start and not self.tared
                 and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
-        finite = bool(np.all(np.isfinite(f)))
+        finite = kernels.all_finite(f)
         if finite:
             f = self.force_filter.update(f)                       # the forces of the window of (4.4)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:
