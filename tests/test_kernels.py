@@ -89,6 +89,20 @@ def test_inverse_kinematics_fields_are_those_of_inverse_kinematics(robot, pulley
                 np.testing.assert_array_equal(a, b, err_msg=name)
 
 
+def test_inverse_kinematics_fields_serve_the_same_pose_again_and_only_it(robot):
+    """The last result is reused for the same robot and pose (the stages of one period), never for
+    another pose or robot."""
+    x0, x1 = np.array(robot.home), robot.home + np.r_[0.01, 0.0, -0.02, 0.01, 0.0, 0.0]
+    fixed = replace(robot, swivelling_pulleys=False)
+    first, = kernels.inverse_kinematics_fields(robot, x0, "AT")
+    again, = kernels.inverse_kinematics_fields(robot, x0.copy(), "AT")
+    assert np.shares_memory(first, again)
+    for r, x in ((robot, x1), (fixed, x1), (robot, x0)):
+        AT, = kernels.inverse_kinematics_fields(r, x, "AT")
+        np.testing.assert_array_equal(AT, kernels.inverse_kinematics(r, x).AT)
+    assert not np.shares_memory(AT, first)
+
+
 def test_inverse_kinematics_kernel_inside_the_pulley_circle(robot):
     """As the reference: no tangent from a platform point inside the pulley circle, q is NaN."""
     ik = kinematics.inverse_kinematics(robot, robot.home)

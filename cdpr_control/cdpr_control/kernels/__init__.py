@@ -83,15 +83,37 @@ def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
     """The fields ``names`` (among q, beta, gamma, l_f, kappa, AT and cT = c^T) of
     :func:`inverse_kinematics` of one pose x (6,), the same numbers: a stage that needs two of them
     (the force set-point A^T, the friction beta) saves building the other ten views (about 6 us of
-    its 10). They are views of one new array per call (C-contiguous rows, as the kernels take them)."""
+    its 10). They are C-contiguous rows (as the kernels take them) of an array that the next call
+    for the same robot and pose returns again (see :func:`_packed`): read them, never write."""
     if ENABLED:
-        d = robot_data(robot)
-        if d.a.shape[0] >= 3:                # else R does not fit the packed layout
-            P = np.empty((_ROWS + 3, d.a.shape[0]))
-            ik_packed(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
+        P = _packed(robot, x)
+        if P is not None:
             return tuple(P[_FIELD_ROWS[name]] for name in names)
     ik = inverse_kinematics(robot, x)
     return tuple(ik.c.T if name == "cT" else getattr(ik, name) for name in names)
+
+
+_last_packed: tuple = (None, b"", None)      # (robot, pose bytes, packed IK) of the last _packed call
+
+
+def _packed(robot, x) -> np.ndarray | None:
+    """model.ik_packed of one pose (None where R does not fit its layout, m < 3). The last result is
+    kept and returned again for the same robot and pose: the stages of a composed graph (friction
+    compensation, forward kinematics, force set-point, load compensation) all take the IK of the
+    period's x_d, which one computation then serves."""
+    global _last_packed
+    x = vector(x)
+    key = x.tobytes()
+    last_robot, last_key, P = _last_packed
+    if last_robot is robot and last_key == key:
+        return P
+    d = robot_data(robot)
+    if d.a.shape[0] < 3:
+        return None
+    P = np.empty((_ROWS + 3, d.a.shape[0]))
+    ik_packed(x, d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
+    _last_packed = (robot, key, P)
+    return P
 
 
 def cable_lengths(robot, x) -> np.ndarray:
