@@ -323,3 +323,27 @@ def test_all_finite_equals_numpy_also_where_the_sum_overflows():
     for v in ([1.0, -2.0, 3.0], [1.0, np.nan, 0.0], [np.inf, 1.0], [np.inf, -np.inf], [1e308, 1e308, -1.0],
               np.full(6, -1.7e308), np.zeros(6), [1e308, np.nan]):
         assert kernels.all_finite(v) == bool(np.isfinite(v).all()), v
+
+
+def test_smith_predictor_kernel_equals_the_numpy_update():
+    """WrenchSetpoint.update_filtered (compiled) against update with LowPass.update: the same
+    numbers, through saturation, a known wrench, a delay change and a reset."""
+    from cdpr_control.filters import LowPass
+    from cdpr_control.wrench_setpoint import WrenchSetpoint
+
+    rng = np.random.default_rng(5)
+    pairs = [(WrenchSetpoint(0.005, 1e-3), LowPass(0.02, 1e-3)) for _ in range(2)]
+    w_max = np.array([3.0, 3.0, 3.0, 0.5, 0.5, 0.5])
+    for k in range(400):
+        w, w_dyn = rng.normal(scale=4.0, size=(2, 6))
+        known = None if k % 3 else rng.normal(size=6)
+        if k == 150:
+            for smith, _ in pairs:
+                smith.set_delay(0.012)
+        if k == 300:
+            for smith, _ in pairs:
+                smith.reset(w_dyn)
+        (s0, f0), (s1, f1) = pairs
+        reference = s0.update(w, w_dyn, w_max, f0.update, known)
+        np.testing.assert_array_equal(s1.update_filtered(w, w_dyn, w_max, f1, known), reference)
+        np.testing.assert_array_equal(f1.y, f0.y)

@@ -126,8 +126,8 @@ class ForceSetpoint:
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and kernels.all_finite(w):
-            self.w_d = self.smith.update(w, w_dyn, self.w_dist_max,             # (3.26), disturbance
-                                         self.wrench_filter.update, w_model)   # filtered, saturated
+            self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
+                                                  self.wrench_filter, w_model)  # filtered, saturated
         else:
             self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
         if AT is None:

@@ -4,15 +4,15 @@ The controller's stages (friction compensation, forward kinematics, force set-po
 joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cost mostly call
 overhead. This package holds the numeric cores of one period compiled with numba: the inverse
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
-(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44) and the PI
-arithmetic (3.16)/(3.19). The control flow and the state stay in the stage classes, which call the
-functions below at their call sites.
+(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
+predictor of the wrench set-point (3.24)-(3.26) and the PI arithmetic (3.16)/(3.19). The control
+flow and the state stay in the stage classes, which call the functions below at their call sites.
 
-The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_control) stay the readable
-reference: each function below is the same computation, and the tests compare the two on random
-poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the environment variable
-``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to check a suspicion
-against it; :func:`numpy_reference` switches it off for a block.
+The numpy modules (kinematics, forward_kinematics, dynamics, friction, wrench_setpoint, pi_control)
+stay the readable reference: each function below is the same computation, and the tests compare the
+two on random poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the
+environment variable ``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to
+check a suspicion against it; :func:`numpy_reference` switches it off for a block.
 
 Compiled code is cached in ``__pycache__`` (``cache=True``): the first use on a machine (or after an
 edit of a kernel's source) compiles for some tens of seconds, later processes load the cache in
@@ -42,6 +42,7 @@ from .model import inverse_kinematics as _inverse_kinematics
 from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
+from .setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
@@ -175,8 +176,8 @@ def warm_up(robot=None) -> None:
     control loop passes (see :func:`.robot_data.vector`), so that the first period does not.
 
     The stage classes call it when they are built: without a robot the robot-free kernels (PI,
-    widened saturation, cable stiffness), with one all of them. Once per process (the compiled
-    code does not depend on the robot's values); nothing when ENABLED is False.
+    widened saturation, cable stiffness, Smith predictor), with one all of them. Once per process
+    (the compiled code does not depend on the robot's values); nothing when ENABLED is False.
     """
     if not ENABLED:
         return
@@ -187,6 +188,7 @@ def warm_up(robot=None) -> None:
         pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
         widened_saturation(CFCParams(), f, f, f)
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
+        smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return
