@@ -74,7 +74,7 @@ class ForwardKinematicsNode(CdprNode):
         header = self.header(t_ns)
         diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
         m = self.robot.m
-        # one sum instead of numpy calls: a NaN or inf (or inf - inf) makes it non-finite
+        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
         if len(position) != m or len(forces) != m or not math.isfinite(sum(position) + sum(forces) + sum(x_d.tolist())):
             diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
             self.diag_pub.publish(diag)

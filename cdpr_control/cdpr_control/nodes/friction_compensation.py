@@ -82,7 +82,7 @@ class FrictionCompensationNode(CdprNode):
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]
         effort = state.effort
-        # one sum instead of numpy calls: a NaN or inf (or inf - inf) makes it non-finite
+        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
         if len(effort) != self.robot.m or not math.isfinite(sum(effort)):
             self.report(DiagnosticStatus.ERROR, "sensor forces missing or non-finite", stamp_ns=t_ns)
             return
@@ -94,6 +94,7 @@ class FrictionCompensationNode(CdprNode):
         beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(msgs["setpoint"].pose), "beta")
         f = self.stage.update(F_s, theta, thetadot, beta)
         self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.f_min, f_max=self.f_max))
+
 
 def main(args=None):
     spin_node(FrictionCompensationNode, args)
