@@ -3,6 +3,7 @@
 Every kernel is the same computation as its numpy module; they differ only in the rounding of
 sums (BLAS, fused multiply-add), so the comparisons use tolerances of a few 1e-12 relative.
 """
+import contextlib
 from dataclasses import replace
 
 import numpy as np
@@ -70,6 +71,36 @@ def test_inverse_kinematics_kernel_equals_the_reference(robot, pulleys):
         np.testing.assert_allclose(kernels.cable_lengths(robot, x), ref.q, rtol=1e-13, atol=0)
         f = rng.uniform(robot.cable.f_min, robot.cable.f_max)
         np.testing.assert_allclose(kernels.measured_wrench(robot, x, f), -ref.AT @ f, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("pulleys", [True, False])
+def test_inverse_kinematics_fields_are_those_of_inverse_kinematics(robot, pulleys):
+    """inverse_kinematics_fields: the same numbers as the full result, compiled and numpy."""
+    robot = robot if pulleys else replace(robot, swivelling_pulleys=False)
+    names = ("q", "beta", "gamma", "l_f", "kappa", "AT", "cT")
+    for x in random_poses(robot, 20, np.random.default_rng(12)):
+        for reference in (False, True):
+            with kernels.numpy_reference() if reference else contextlib.nullcontext():
+                ik = kernels.inverse_kinematics(robot, x)
+                fields = kernels.inverse_kinematics_fields(robot, x, *names)
+            for name, a in zip(names, fields):
+                b = ik.c.T if name == "cT" else getattr(ik, name)
+                assert a.flags.c_contiguous or reference, name
+                np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_inverse_kinematics_fields_serve_the_same_pose_again_and_only_it(robot):
+    """The last result is reused for the same robot and pose (the stages of one period), never for
+    another pose or robot."""
+    x0, x1 = np.array(robot.home), robot.home + np.r_[0.01, 0.0, -0.02, 0.01, 0.0, 0.0]
+    fixed = replace(robot, swivelling_pulleys=False)
+    first, = kernels.inverse_kinematics_fields(robot, x0, "AT")
+    again, = kernels.inverse_kinematics_fields(robot, x0.copy(), "AT")
+    assert np.shares_memory(first, again)
+    for r, x in ((robot, x1), (fixed, x1), (robot, x0)):
+        AT, = kernels.inverse_kinematics_fields(r, x, "AT")
+        np.testing.assert_array_equal(AT, kernels.inverse_kinematics(r, x).AT)
+    assert not np.shares_memory(AT, first)
 
 
 def test_inverse_kinematics_kernel_inside_the_pulley_circle(robot):
@@ -286,3 +317,33 @@ def test_control_loop_compiled_equals_numpy_reference_in_closed_loop(robot):
     np.testing.assert_allclose(f_d, f_d_ref, rtol=0, atol=1e-6)                    # N
     np.testing.assert_allclose(dq, dq_ref, rtol=0, atol=1e-10)
     np.testing.assert_allclose(x_ospc, x_ospc_ref, rtol=0, atol=1e-12)
+
+
+def test_all_finite_equals_numpy_also_where_the_sum_overflows():
+    for v in ([1.0, -2.0, 3.0], [1.0, np.nan, 0.0], [np.inf, 1.0], [np.inf, -np.inf], [1e308, 1e308, -1.0],
+              np.full(6, -1.7e308), np.zeros(6), [1e308, np.nan]):
+        assert kernels.all_finite(v) == bool(np.isfinite(v).all()), v
+
+
+def test_smith_predictor_kernel_equals_the_numpy_update():
+    """WrenchSetpoint.update_filtered (compiled) against update with LowPass.update: the same
+    numbers, through saturation, a known wrench, a delay change and a reset."""
+    from cdpr_control.filters import LowPass
+    from cdpr_control.wrench_setpoint import WrenchSetpoint
+
+    rng = np.random.default_rng(5)
+    pairs = [(WrenchSetpoint(0.005, 1e-3), LowPass(0.02, 1e-3)) for _ in range(2)]
+    w_max = np.array([3.0, 3.0, 3.0, 0.5, 0.5, 0.5])
+    for k in range(400):
+        w, w_dyn = rng.normal(scale=4.0, size=(2, 6))
+        known = None if k % 3 else rng.normal(size=6)
+        if k == 150:
+            for smith, _ in pairs:
+                smith.set_delay(0.012)
+        if k == 300:
+            for smith, _ in pairs:
+                smith.reset(w_dyn)
+        (s0, f0), (s1, f1) = pairs
+        reference = s0.update(w, w_dyn, w_max, f0.update, known)
+        np.testing.assert_array_equal(s1.update_filtered(w, w_dyn, w_max, f1, known), reference)
+        np.testing.assert_array_equal(f1.y, f0.y)

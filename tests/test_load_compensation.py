@@ -13,7 +13,7 @@ import pytest
 from cdpr_control import cable
 from cdpr_control.dynamics import gravity_wrench, platform_wrench
 from cdpr_control.forward_kinematics import ForwardKinematics
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.kinematics import inverse_kinematics, rotation_matrix
 from cdpr_control.load_compensation import (LoadCompensation, LoadCompensationParams, MovingAverage,
                                             cable_stiffness_model, compensating_wrench, compliance, load_offset,
                                             mass_estimate, payload_wrench, secant_offset, SettlementModel)
@@ -195,6 +195,20 @@ def test_payload_wrench_is_the_difference_of_the_platform_wrench_2_33():
     expected = (platform_wrench(IPANEMA3.with_payload(12.0, cog), x, xdot, xddot)
                 - platform_wrench(IPANEMA3, x, xdot, xddot))
     np.testing.assert_allclose(payload_wrench(IPANEMA3, x, xdot, xddot, 12.0, cog), expected, atol=1e-9)
+
+
+def test_payload_wrench_scalar_math_equals_the_numpy_formula():
+    """payload_wrench is scalar math (it runs every period): the numpy form of its equation, up to
+    the rounding of the sums."""
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        x, xdot, xddot = rng.normal(size=(3, 6))
+        cog, mass = rng.normal(scale=0.2, size=3), rng.uniform(0.0, 50.0)
+        c = rotation_matrix(x[3:]) @ cog
+        a_c = xddot[:3] + np.cross(xddot[3:], c) + np.cross(xdot[3:], np.cross(xdot[3:], c))
+        f = mass * (IPANEMA3.gravity - a_c)
+        w = payload_wrench(IPANEMA3, x, xdot, xddot, mass, tuple(cog))
+        np.testing.assert_allclose(w, np.r_[f, np.cross(c, f)], rtol=1e-12, atol=1e-12 * mass * (1.0 + np.abs(a_c).max()))
 
 
 def _forces(robot, x, xdot, xddot, m_c, cog):

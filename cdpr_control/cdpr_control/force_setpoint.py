@@ -125,11 +125,11 @@ class ForceSetpoint:
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
-        if self.params.wrench_source == "measured" and np.all(np.isfinite(w)):
-            self.w_d = self.smith.update(w, w_dyn, self.w_dist_max,             # (3.26), disturbance
-                                         self.wrench_filter.update, w_model)   # filtered, saturated
+        if self.params.wrench_source == "measured" and kernels.all_finite(w):
+            self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
+                                                  self.wrench_filter, w_model)  # filtered, saturated
         else:
             self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
         if AT is None:
-            AT = kernels.inverse_kinematics(self.robot, x_d).AT
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
         return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)

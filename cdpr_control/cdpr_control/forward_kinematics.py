@@ -192,11 +192,13 @@ class ForwardKinematics:
         """elastic(pulleys='frozen') as one compiled call (cdpr_control.kernels), same numbers."""
         robot = self.robot
         d = kernels.robot_data(robot)
-        if ik_d is None:
-            ik_d = kernels.inverse_kinematics(robot, x_d)
+        if ik_d is None:      # the four fields the kernel takes, without building the others
+            q, AT, cT, beta = kernels.inverse_kinematics_fields(robot, x_d, "q", "AT", "cT", "beta")
+        else:
+            q, AT, cT, beta = ik_d.q, ik_d.AT, ik_d.c.T, ik_d.beta
         v, x = kernels.vector, np.empty(6)
         code, iterations, norm = kernels.elastic_frozen(
-            v(x_d), v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta), d.b, d.r_p, v(theta), v(f), d.l_0,
+            v(x_d), v(q), v(AT), v(cT), v(beta), d.b, d.r_p, v(theta), v(f), d.l_0,
             d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .friction import PulleyFriction, winch_force_from_sensor
+from .friction import PulleyFriction
 
 
 @dataclass
@@ -53,11 +53,12 @@ class FrictionCompensation:
         self.shift = int(round(self.params.time_shift / self.dt))
         self.model: PulleyFriction | None = None          # rebuilt at the next sample
         self.delayed: deque = deque(maxlen=self.shift + 1)
+        self.sensor_gain = 1.0 - np.cos(self.robot.sensor.beta_1)    # F_s / f_w of winch_force_from_sensor (3.40)
 
     def update(self, F_s, theta, thetadot, beta) -> np.ndarray:
         """Sensor forces F_s (m,), cable motion θ, θ̇ driving the friction, swivel-pulley wrap angle
         β_np (m,) from the IK (2.6) -> cable forces at the platform f (m,)."""
-        f_w = winch_force_from_sensor(F_s, self.robot.sensor.beta_1)           # (3.40)
+        f_w = np.asarray(F_s, dtype=float) / self.sensor_gain                  # (3.40), as winch_force_from_sensor
         if not self.params.enabled:
             return f_w
         if self.model is None:

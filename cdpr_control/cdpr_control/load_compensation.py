@@ -38,12 +38,12 @@ minimum-norm solution leaves the unobservable part at zero.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import cable, kernels
-from .dynamics import platform_wrench
 from .filters import LowPass
 from .kinematics import cross, kardan_rate_matrix, rotation_matrix
 from .stiffness import operational_stiffness
@@ -60,7 +60,7 @@ COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period 
 def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
     """m̂_p = -w_z / (ẍ_d,z - g) (4.4) [kg]; None where |ẍ_d,z - g| < guard [m/s²] (held)."""
     denominator = xddot_z - g_z
-    if not abs(denominator) >= guard or not np.isfinite(w_z):
+    if not abs(denominator) >= guard or not math.isfinite(w_z):
         return None
     return -w_z / denominator
 
@@ -266,22 +266,33 @@ def twist_to_pose_offset(dx, phi) -> np.ndarray:
     return np.concatenate((dx[:3], np.linalg.solve(kardan_rate_matrix(phi), dx[3:])))
 
 
+def _rotate(phi_x: float, phi_y: float, phi_z: float, px: float, py: float, pz: float) -> tuple[float, float, float]:
+    """R p for R = Rx Ry Rz of Kardan angles (kinematics.rotation_matrix) in scalar math: equal to
+    rotation_matrix(phi) @ p up to the rounding of the sums."""
+    ca, cb, cc = math.cos(phi_x), math.cos(phi_y), math.cos(phi_z)
+    sa, sb, sc = math.sin(phi_x), math.sin(phi_y), math.sin(phi_z)
+    sa_sb, ca_sb = sa * sb, ca * sb
+    return (cb * cc * px + -cb * sc * py + sb * pz,
+            (ca * sc + sa_sb * cc) * px + (ca * cc - sa_sb * sc) * py + -sa * cb * pz,
+            (sa * sc - ca_sb * cc) * px + (sa * cc + ca_sb * sc) * py + ca * cb * pz)
+
+
 def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> np.ndarray:
     """Wrench (6,) of a point-mass payload [kg] at ``cog`` (platform frame) on the moving platform,
     about the platform origin in the base frame: what it adds to the w of (2.10), (2.33):
 
         f = m (g - a_c),  τ = (R c) × f,  a_c = a + ω̇ × R c + ω × (ω × R c) .
     """
-    # scalar math: the force distribution node runs this every period (numpy: 50 us, this: 5)
-    x, xdot, xddot = (np.asarray(v, dtype=float) for v in (x, xdot, xddot))
-    cx, cy, cz = (rotation_matrix(x[3:]) @ np.asarray(cog, dtype=float)).tolist()
-    wx, wy, wz = xdot[3:].tolist()
-    ax, ay, az, dwx, dwy, dwz = xddot.tolist()
+    # scalar math: the force distribution node runs this every period (numpy: 50 us, this: 4)
+    phi_x, phi_y, phi_z = np.asarray(x, dtype=float)[3:].tolist()
+    cx, cy, cz = _rotate(phi_x, phi_y, phi_z, *np.asarray(cog, dtype=float).tolist())   # R c
+    wx, wy, wz = np.asarray(xdot, dtype=float)[3:].tolist()
+    ax, ay, az, dwx, dwy, dwz = np.asarray(xddot, dtype=float).tolist()
     vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx           # ω × R c
     a = (ax + dwy * cz - dwz * cy + wy * vz - wz * vy,                               # a + ω̇ × R c + ω × (ω × R c)
          ay + dwz * cx - dwx * cz + wz * vx - wx * vz,
          az + dwx * cy - dwy * cx + wx * vy - wy * vx)
-    gx, gy, gz = (float(g) for g in robot.gravity)
+    gx, gy, gz = robot.gravity.tolist()
     fx, fy, fz = mass * (gx - a[0]), mass * (gy - a[1]), mass * (gz - a[2])
     return np.array([fx, fy, fz, cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx])
 
@@ -442,11 +453,11 @@ class LoadCompensation:
         w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
         if self.m_hat is None:
             self.m_hat = self.m_p
-        if not np.all(np.isfinite(w)):
+        if not kernels.all_finite(w):
             self.guarded = True
             return                                                           # hold the estimate
         w_z, a = self.wrench_filter.update([w[2], xddots[2]])               # means over the window
-        if self.params.acceleration_source == "estimated" and x is not None and np.isfinite(x[2]):
+        if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
             a_est = self._estimated_acceleration(float(x[2]))
             a = a if a_est is None else a_est          # commanded until the history spans a window
         estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
@@ -458,7 +469,7 @@ class LoadCompensation:
         if self.samples % COG_DECIMATION:
             return
         # payload share of the wrench, in the platform frame: τ_p = c × f_p = -[f_p] c
-        w_p = w - platform_wrench(self.robot, xs, xdots, xddots)
+        w_p = w - kernels.platform_wrench(self.robot, xs, xdots, xddots)
         RT = rotation_matrix(xs[3:]).T
         f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
         S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
@@ -481,16 +492,20 @@ class LoadCompensation:
         ik_d: inverse_kinematics(robot, x_d) when the caller has it.
         """
         x_d = np.asarray(x_d, dtype=float)
-        ik = kernels.inverse_kinematics(self.robot, x_d) if ik_d is None else ik_d   # compiled: every period
+        ik = ik_d
+        if ik is None and (self.params.enabled or self.settlement.ratio > 0.0):
+            ik = kernels.inverse_kinematics(self.robot, x_d)           # compiled: every period
+        # the identification (4.4) alone (disabled) needs only A^T
+        AT = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")[0] if ik is None else ik.AT
         f = np.asarray(f, dtype=float)
-        self.identify(x_d, xdot_d, xddot_d, f, ik.AT, x)
+        self.identify(x_d, xdot_d, xddot_d, f, AT, x)
         self.m_c = self.m_hat - self.m_p
         self.periods += 1
         if (self.params.tare_at_start and not self.tared
                 and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
-        finite = bool(np.all(np.isfinite(f)))
+        finite = kernels.all_finite(f)
         if finite:
             f = self.force_filter.update(f)                       # the forces of the window of (4.4)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:

@@ -20,9 +20,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import kernels
+from .kernels.robot_data import vector
+from .kernels.setpoint import smith_step
+
 
 class WrenchSetpoint:
     """Discrete (3.26): a ring buffer delays w_dyn by round(T_d,w / dt) periods."""
+
+    _zeros: np.ndarray | None = None          # w_known of update_filtered when there is none
 
     def __init__(self, T_d_w: float, dt: float, n: int = 6):
         if not dt > 0.0 or not T_d_w >= 0.0:
@@ -35,15 +41,14 @@ class WrenchSetpoint:
         """Change T_d,w; the buffer restarts filled with the latest w_dyn (no jump in w_d)."""
         self.T_d_w = T_d_w
         self.delay = int(round(T_d_w / self.dt))
-        last = getattr(self, "_last", None)
-        self._buffer = np.zeros((self.delay + 1, self.n)) if last is None else np.tile(last, (self.delay + 1, 1))
+        buffer = getattr(self, "_buffer", None)
+        last = np.zeros(self.n) if buffer is None else buffer[self._index - 1]      # the row written last
+        self._buffer = np.tile(last, (self.delay + 1, 1))
         self._index = 0
 
     def reset(self, w_dyn=None) -> None:
         """Fill the delay line with w_dyn (e.g. the static wrench at start-up)."""
-        fill = np.zeros(self.n) if w_dyn is None else np.asarray(w_dyn, dtype=float)
-        self._buffer[:] = fill
-        self._last = fill.copy()
+        self._buffer[:] = 0.0 if w_dyn is None else np.asarray(w_dyn, dtype=float)
 
     def update(self, w, w_dyn, w_dist_max=None, dist_filter=None, w_known=None) -> np.ndarray:
         """One period: measured wrench w and model wrench w_dyn -> w_d (3.26), optionally with
@@ -56,11 +61,24 @@ class WrenchSetpoint:
         self._buffer[self._index] = w_dyn
         self._index = (self._index + 1) % (self.delay + 1)
         delayed = self._buffer[self._index]        # written `delay` periods ago
-        self._last = w_dyn.copy()
         w_dist = np.asarray(w, dtype=float) - delayed                                 # (3.24)
         if dist_filter is not None:
             w_dist = dist_filter(w_dist)
         if w_dist_max is not None:
             known = 0.0 if w_known is None else np.asarray(w_known, dtype=float)
-            w_dist = known + np.clip(w_dist - known, -w_dist_max, w_dist_max)
+            w_dist = known + np.minimum(np.maximum(w_dist - known, -w_dist_max), w_dist_max)    # np.clip, faster
         return w_dyn + w_dist
+
+    def update_filtered(self, w, w_dyn, w_dist_max, low_pass, w_known=None) -> np.ndarray:
+        """:meth:`update` with the disturbance filtered by ``low_pass`` (a LowPass) and saturated to
+        ±w_dist_max (6,): one compiled call (kernels.setpoint.smith_step, ~1 us against ~6 us of numpy
+        calls) with the same numbers, where the kernels are enabled and the filter has started."""
+        if not kernels.ENABLED or low_pass.y is None:     # (its first sample initialises the filter)
+            return self.update(w, w_dyn, w_dist_max, low_pass.update, w_known)
+        if self._zeros is None:
+            self._zeros = np.zeros(self.n)
+        w_d = np.empty(self.n)
+        smith_step(self._buffer, self._index, vector(w), vector(w_dyn), low_pass.y, low_pass.alpha,
+                   vector(w_dist_max), self._zeros if w_known is None else vector(w_known), w_d)
+        self._index = (self._index + 1) % (self.delay + 1)
+        return w_d

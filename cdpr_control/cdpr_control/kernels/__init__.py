@@ -4,15 +4,15 @@ The controller's stages (friction compensation, forward kinematics, force set-po
 joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cost mostly call
 overhead. This package holds the numeric cores of one period compiled with numba: the inverse
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
-(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44) and the PI
-arithmetic (3.16)/(3.19). The control flow and the state stay in the stage classes, which call the
-functions below at their call sites.
+(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
+predictor of the wrench set-point (3.24)-(3.26) and the PI arithmetic (3.16)/(3.19). The control
+flow and the state stay in the stage classes, which call the functions below at their call sites.
 
-The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_control) stay the readable
-reference: each function below is the same computation, and the tests compare the two on random
-poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the environment variable
-``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to check a suspicion
-against it; :func:`numpy_reference` switches it off for a block.
+The numpy modules (kinematics, forward_kinematics, dynamics, friction, wrench_setpoint, pi_control)
+stay the readable reference: each function below is the same computation, and the tests compare the
+two on random poses to a tight tolerance. ``ENABLED`` selects per call: with it False (or the
+environment variable ``CDPR_KERNELS=0`` at import) every stage runs the numpy reference, e.g. to
+check a suspicion against it; :func:`numpy_reference` switches it off for a block.
 
 Compiled code is cached in ``__pycache__`` (``cache=True``): the first use on a machine (or after an
 edit of a kernel's source) compiles for some tens of seconds, later processes load the cache in
@@ -22,6 +22,7 @@ period, not in it. See docs/kernels.md.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 
 import numpy as np
@@ -35,16 +36,18 @@ from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
 from .friction import friction_platform_force
 from .model import cable_lengths as _cable_lengths
-from .model import elastic_cable_state, elastic_frozen, secant_stiffness
+from .model import _AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q, _ROWS, elastic_cable_state, elastic_frozen, ik_packed
+from .model import secant_stiffness
 from .model import inverse_kinematics as _inverse_kinematics
 from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
+from .setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
-           "friction_platform_force", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
+__all__ = ["ENABLED", "RobotData", "all_finite", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
+           "friction_platform_force", "inverse_kinematics", "inverse_kinematics_fields", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
@@ -59,11 +62,59 @@ def numpy_reference():
         ENABLED = before
 
 
+def all_finite(v) -> bool:
+    """np.isfinite(v).all() of a short vector, cheaper: one sum first (a NaN or inf makes it
+    non-finite); only a sum that overflowed (values near 1e308) needs the test per element."""
+    return math.isfinite(sum(np.asarray(v, dtype=float).ravel().tolist())) or bool(np.isfinite(v).all())
+
+
 def inverse_kinematics(robot, x) -> np_kinematics.InverseKinematics:
     """kinematics.inverse_kinematics of one pose x (6,) with the robot's pulley model."""
     if ENABLED:
         return _inverse_kinematics(robot, x)
     return np_kinematics.inverse_kinematics(robot, x)
+
+
+# rows of model.ik_packed's array per field of inverse_kinematics_fields (cT: the c_i as columns)
+_FIELD_ROWS = {"q": _Q, "beta": _BETA, "gamma": _GAMMA, "l_f": _L_F, "kappa": _KAPPA, "AT": slice(_AT, _AT + 6),
+               "cT": slice(_C, _C + 3)}
+
+
+def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
+    """The fields ``names`` (among q, beta, gamma, l_f, kappa, AT and cT = c^T) of
+    :func:`inverse_kinematics` of one pose x (6,), the same numbers: a stage that needs two of them
+    (the force set-point A^T, the friction beta) saves building the other ten views (about 6 us of
+    its 10). They are C-contiguous rows (as the kernels take them) of an array that the next call
+    for the same robot and pose returns again (see :func:`_packed`): read them, never write."""
+    if ENABLED:
+        P = _packed(robot, x)
+        if P is not None:
+            return tuple(P[_FIELD_ROWS[name]] for name in names)
+    ik = inverse_kinematics(robot, x)
+    return tuple(ik.c.T if name == "cT" else getattr(ik, name) for name in names)
+
+
+_last_packed: tuple = (None, b"", None)      # (robot, pose bytes, packed IK) of the last _packed call
+
+
+def _packed(robot, x) -> np.ndarray | None:
+    """model.ik_packed of one pose (None where R does not fit its layout, m < 3). The last result is
+    kept and returned again for the same robot and pose: the stages of a composed graph (friction
+    compensation, forward kinematics, force set-point, load compensation) all take the IK of the
+    period's x_d, which one computation then serves."""
+    global _last_packed
+    x = vector(x)
+    key = x.tobytes()
+    last_robot, last_key, P = _last_packed
+    if last_robot is robot and last_key == key:
+        return P
+    d = robot_data(robot)
+    if d.a.shape[0] < 3:
+        return None
+    P = np.empty((_ROWS + 3, d.a.shape[0]))
+    ik_packed(x, d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
+    _last_packed = (robot, key, P)
+    return P
 
 
 def cable_lengths(robot, x) -> np.ndarray:
@@ -125,8 +176,8 @@ def warm_up(robot=None) -> None:
     control loop passes (see :func:`.robot_data.vector`), so that the first period does not.
 
     The stage classes call it when they are built: without a robot the robot-free kernels (PI,
-    widened saturation, cable stiffness), with one all of them. Once per process (the compiled
-    code does not depend on the robot's values); nothing when ENABLED is False.
+    widened saturation, cable stiffness, Smith predictor), with one all of them. Once per process
+    (the compiled code does not depend on the robot's values); nothing when ENABLED is False.
     """
     if not ENABLED:
         return
@@ -137,6 +188,7 @@ def warm_up(robot=None) -> None:
         pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
         widened_saturation(CFCParams(), f, f, f)
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
+        smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return

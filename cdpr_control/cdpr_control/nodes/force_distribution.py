@@ -34,7 +34,8 @@ from rclpy.parameter import Parameter
 
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
-from cdpr_control.hybrid_force_control import expected_contact_wrench_of, parse_state, task_axis
+from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of, parse_state,
+                                               task_axis)
 from cdpr_control.load_compensation import payload_wrench
 
 from .base import CdprNode, spin_node
@@ -82,6 +83,7 @@ class ForceDistributionNode(CdprNode):
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
+        self.F_d0 = None                           # its reference F_d,0 that gave z_t
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
@@ -133,9 +135,12 @@ class ForceDistributionNode(CdprNode):
         w = wrench_from_msg(msgs["wrench"].wrench)
         hpfc = msgs.get("hpfc")
         if hpfc is not None:                 # section 5.1.2: the expected contact force, not the measured
-            F_d0 = np.asarray(hpfc.reference[:3], dtype=float)
-            self.z_t = task_axis(F_d0, self.z_t)
-            w = w + expected_contact_wrench_of(parse_state(hpfc.controller), F_d0, hpfc.feedback[:3], self.z_t)
+            F_d0 = hpfc.reference[:3]
+            if F_d0 != self.F_d0:            # task_axis of an unchanged F_d,0 keeps z_t
+                self.F_d0, self.z_t = F_d0, task_axis(np.asarray(F_d0, dtype=float), self.z_t)
+            state = parse_state(hpfc.controller)
+            if state in FORCE_CONTROLLED:    # else the expected contact wrench is zero
+                w = w + expected_contact_wrench_of(state, np.asarray(F_d0, dtype=float), hpfc.feedback[:3], self.z_t)
         res = self.stage.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
         self.publisher.publish(ForceDistribution(
             header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),

@@ -13,6 +13,7 @@ then carries the last converged estimate. The computation is
 from __future__ import annotations
 
 import inspect
+import math
 import time
 
 import numpy as np
@@ -68,17 +69,18 @@ class ForwardKinematicsNode(CdprNode):
         e.solver.xtol = float(v["xtol"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        theta = np.asarray(msgs["theta"].position, dtype=float)
-        f = np.asarray(msgs["f"].f, dtype=float)
+        position, forces = msgs["theta"].position, msgs["f"].f
         x_d = pose_from_msg(msgs["setpoint"].pose)
         header = self.header(t_ns)
         diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
         m = self.robot.m
-        if theta.shape != (m,) or f.shape != (m,) or not np.isfinite(np.concatenate((theta, f, x_d))).all():
+        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
+        if len(position) != m or len(forces) != m or not math.isfinite(sum(position) + sum(forces) + sum(x_d.tolist())):
             diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
             self.diag_pub.publish(diag)
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)
             return
+        theta, f = np.asarray(position, dtype=float), np.asarray(forces, dtype=float)
         start = time.perf_counter()
         x, w = self.estimator.update(theta, f, x_d)
         result = self.estimator.result

@@ -14,6 +14,8 @@ friction`` writes a parameter file with identified ones. The computation is
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -48,6 +50,7 @@ class FrictionCompensationNode(CdprNode):
         self.command: tuple[float, np.ndarray, np.ndarray] | None = None     # (t, θ_d, θ̇_d)
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
+        self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
         self.create_subscription(JointState, "winch/command", self._keep_command, CONTROL)
         self.sync = StampSync(self, {
             "state": (JointState, "winch/state"),
@@ -78,19 +81,19 @@ class FrictionCompensationNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]
-        F_s = np.asarray(state.effort, dtype=float)
-        m = self.robot.m
-        if F_s.shape != (m,) or not np.all(np.isfinite(F_s)):
+        effort = state.effort
+        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
+        if len(effort) != self.robot.m or not math.isfinite(sum(effort)):
             self.report(DiagnosticStatus.ERROR, "sensor forces missing or non-finite", stamp_ns=t_ns)
             return
+        F_s = np.asarray(effort, dtype=float)
         if self.velocity_source == "desired" and self.command is not None:
             _, theta, thetadot = self.command
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
-        beta = kernels.inverse_kinematics(self.robot, pose_from_msg(msgs["setpoint"].pose)).beta
+        beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(msgs["setpoint"].pose), "beta")
         f = self.stage.update(F_s, theta, thetadot, beta)
-        self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.robot.cable.f_min.tolist(),
-                                           f_max=self.robot.cable.f_max.tolist()))
+        self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.f_min, f_max=self.f_max))
 
 
 def main(args=None):

@@ -29,6 +29,7 @@ from std_srvs.srv import Trigger
 
 from cdpr_control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
                                             LoadCompensationParams)
+from cdpr_control.kernels import all_finite
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
@@ -112,7 +113,7 @@ class LoadCompensationNode(CdprNode):
         x = pose_from_msg(msgs["pose"].pose) if "pose" in msgs else None
         header = self.header(t_ns)
         lc = self.stage
-        valid = f.shape == (self.robot.m,) and np.isfinite(np.concatenate((x_d, xdot_d, xddot_d))).all()
+        valid = f.shape == (self.robot.m,) and all_finite((x_d, xdot_d, xddot_d))
         if valid:
             x_lc = lc.update(x_d, xdot_d, xddot_d, f, x)
         else:
@@ -121,7 +122,7 @@ class LoadCompensationNode(CdprNode):
         self.state_pub.publish(ControllerState(
             header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
             reference=x_d.tolist(), feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
-            saturated=[bool(s) for s in lc.rate_limited]))
+            saturated=lc.rate_limited.tolist()))
         com = Vector3() if lc.cog is None else Vector3(x=float(lc.cog[0]), y=float(lc.cog[1]), z=float(lc.cog[2]))
         self.payload_pub.publish(InertiaStamped(header=self.header(t_ns, "platform"),
                                                 inertia=Inertia(m=float(lc.m_c), com=com)))
