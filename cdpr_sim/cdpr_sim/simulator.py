@@ -50,7 +50,7 @@ from .cables import CableModel
 from .contacts import PlatformShape, add_obstacle, platform_collision_shape
 from .plant import KINDS, Settlement, build_plant
 from .platform import PlatformBody, kardan_angles
-from .sensors import Encoder, ForceSensor
+from .sensors import Encoder, ForceSensor, encoder_count
 from .wrench import WrenchPulse
 
 
@@ -370,16 +370,14 @@ class Simulator:
         self._pending = (f, A.copy(), d.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity
-        thetadot = (theta - self._theta_prev) * (1.0 / period)
+        thetadot, theta_true, theta_enc, thetadot_enc = _winch_readings(
+            theta, self._theta_prev, self.encoder_offset, self.encoder.resolution, self._theta_enc_prev, 1.0 / period)
         self._theta_prev = theta
+        self._theta_enc_prev = theta_enc
         if self.config.friction:
             F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
         else:
             F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
-        theta_true = theta + self.encoder_offset
-        theta_enc = self.encoder.read(theta_true)
-        thetadot_enc = (theta_enc - self._theta_enc_prev) * (1.0 / period)
-        self._theta_enc_prev = theta_enc
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
         return SimOutput(
             t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
@@ -397,3 +395,19 @@ class Simulator:
             w[:3] += F
             w[3:] += np.cross(np.array(c[5]) - r, F)
         return w
+
+
+@numba.njit(cache=True)
+def _winch_readings(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
+    """The winch side of Simulator._measure in one pass over the cables (once per control period;
+    as numpy expressions on m values they cost several times more): the period's mean velocity
+    (theta - theta_prev) rate, the drive position in encoder coordinates theta_true = theta +
+    encoder_offset, the encoder reading of it (Encoder.read) and that reading's difference quotient."""
+    m = theta.shape[0]
+    thetadot, theta_true, theta_enc, thetadot_enc = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):
+        thetadot[i] = (theta[i] - theta_prev[i]) * rate
+        theta_true[i] = theta[i] + encoder_offset[i]
+        theta_enc[i] = encoder_count(theta_true[i], resolution)
+        thetadot_enc[i] = (theta_enc[i] - theta_enc_prev[i]) * rate
+    return thetadot, theta_true, theta_enc, thetadot_enc

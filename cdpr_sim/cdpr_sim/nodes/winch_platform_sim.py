@@ -213,7 +213,7 @@ class WinchPlatformSimNode(CdprNode):
 
     def _on_command(self, msg: JointState) -> None:
         theta_d = np.asarray(msg.position, dtype=float)
-        if theta_d.shape != (self.robot.m,) or not np.all(np.isfinite(theta_d)):
+        if theta_d.shape != (self.robot.m,) or not np.isfinite(theta_d).all():
             self.invalid_commands += 1
             self.input_fault("winch/command", f"{len(msg.position)} positions (need {self.robot.m} finite values)")
             return
@@ -320,9 +320,7 @@ class WinchPlatformSimNode(CdprNode):
         out = self.sim.output
         t_ns = self.sim.steps * self.period_ns
         header = self.header(t_ns)
-        clock = Clock()
-        clock.clock = header.stamp
-        self.clock_pub.publish(clock)
+        self.clock_pub.publish(Clock(clock=header.stamp))
         if not self.lockstep:
             self._states_sent[t_ns] = time.perf_counter()
             if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
