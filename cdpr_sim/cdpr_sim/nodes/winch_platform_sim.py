@@ -30,6 +30,7 @@ unstretched cable length.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -212,11 +213,13 @@ class WinchPlatformSimNode(CdprNode):
     # --- inputs ----------------------------------------------------------------------------
 
     def _on_command(self, msg: JointState) -> None:
-        theta_d = np.asarray(msg.position, dtype=float)
-        if theta_d.shape != (self.robot.m,) or not np.isfinite(theta_d).all():
+        position = msg.position
+        # finite as cdpr_control.nodes.sync checks it: one sum, which a NaN or inf makes non-finite
+        if len(position) != self.robot.m or not math.isfinite(sum(position)):
             self.invalid_commands += 1
-            self.input_fault("winch/command", f"{len(msg.position)} positions (need {self.robot.m} finite values)")
+            self.input_fault("winch/command", f"{len(position)} positions (need {self.robot.m} finite values)")
             return
+        theta_d = np.asarray(position, dtype=float)
         stamp = stamp_ns(msg)
         t_ns = self.sim.steps * self.period_ns
         if stamp > t_ns:
