@@ -361,11 +361,11 @@ class Simulator:
         r, R, v, omega = body.state()
         theta = drives.theta
         theta_u = theta + self.settlement.s                  # unstretched length incl. settlement
-        f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
-        phi = kardan_angles(R)
+        f, _, _, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
+        x = np.concatenate((r, kardan_angles(R)))
         if cables.needs_refresh():
-            cables.refresh(np.concatenate([r, phi]))
-            f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
+            cables.refresh(x)
+            f, _, _, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         f = f.copy()
         self.settlement.update(f, cable.total_free_length(self.robot, theta_u))   # acts from the next step
         A, d = cables.linearisation()
@@ -383,7 +383,7 @@ class Simulator:
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
         return SimOutput(
             t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
-            x=np.concatenate([r, phi]), xdot=np.concatenate([v, omega]), f=f,
+            x=x, xdot=np.concatenate((v, omega)), f=f,
             F_s_true=F_s_true, theta_true=theta_true, beta=cables.beta, w_ext=w_ext,
             w_contact=self._w_contact,
         )
