@@ -28,6 +28,7 @@ import copy
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 import yaml
 
@@ -154,6 +155,16 @@ class Settlement:
             return self.s
         if self.f_settled is None:
             self.reset(f)
-        target = self.ratio * l_t * np.maximum(np.asarray(f) - self.f_settled, 0.0) / self.k0
-        self.s += self.alpha * np.maximum(target - self.s, 0.0)
+        _settle(self.s, np.asarray(f, dtype=float), np.asarray(l_t, dtype=float), self.f_settled, self.ratio, self.k0,
+                self.alpha)
         return self.s
+
+
+@numba.njit(cache=True)
+def _settle(s, f, l_t, f_settled, ratio, k0, alpha):
+    """The loop of Settlement.update (once per control period: as numpy calls on m values it cost
+    five times more), the same expression per cable as the array form
+    s += alpha max(ratio l_t max(f - f_settled, 0) / k0 - s, 0)."""
+    for i in range(s.shape[0]):
+        target = ratio * l_t[i] * max(f[i] - f_settled[i], 0.0) / k0
+        s[i] += alpha * max(target - s[i], 0.0)

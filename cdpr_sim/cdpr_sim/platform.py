@@ -22,6 +22,13 @@ def kardan_angles(R: np.ndarray) -> np.ndarray:
     return np.array([math.atan2(-r12, r22), math.asin(max(-1.0, min(1.0, r02))), math.atan2(-r01, r00)])
 
 
+def cross3(a, b) -> np.ndarray:
+    """a x b of two 3-vectors: np.cross's arithmetic (the same numbers) in plain Python, since
+    np.cross costs about 10 us a call (several calls a period with a payload, contacts or a push)."""
+    (a0, a1, a2), (b0, b1, b2) = a, b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(moments (3,), V (3, 3)) with inertia = V diag(moments) V^T and det V = +1 (V = I if diagonal)."""
     inertia = np.asarray(inertia, dtype=float)
@@ -73,7 +80,7 @@ class PlatformBody:
         R = rotation_matrix(x[3:])
         Rc = R @ self.c
         r_I = x[:3] + Rc
-        v_I = xdot[:3] + np.cross(xdot[3:], Rc)
+        v_I = xdot[:3] + cross3(xdot[3:], Rc)
         quat = Rotation.from_matrix(R @ self.V).as_quat()
         self.pb.resetBasePositionAndOrientation(self.body, r_I.tolist(), list(quat), physicsClientId=self.client)
         self.pb.resetBaseVelocity(self.body, v_I.tolist(), xdot[3:].tolist(), physicsClientId=self.client)
@@ -89,7 +96,7 @@ class PlatformBody:
             R = R @ self.V.T
             Rc = R @ self.c
             r = r - Rc
-            v = v - np.cross(omega, Rc)
+            v = v - cross3(omega, Rc)
         return r, R, v, omega
 
     def pose_and_twist(self) -> tuple[np.ndarray, np.ndarray]:

@@ -16,9 +16,13 @@ import numba
 import numpy as np
 
 
+NOISE_BLOCK = 1000      # force sensor readings whose noise is drawn at once
+
+
 class ForceSensor:
     """m winch force sensors. sensor: cdpr_control.robot.SensorParams (range, bits, noise_std and the
-    calibration gamma_1, gamma_0); rng: numpy Generator for the noise; gamma_1, gamma_0 (m,): the
+    calibration gamma_1, gamma_0); rng: numpy Generator for the noise (drawn NOISE_BLOCK readings
+    ahead, so do not draw from it elsewhere); gamma_1, gamma_0 (m,): the
     true sensor lines (default: the calibration); noise_std [N] overrides sensor.noise_std."""
 
     def __init__(self, sensor, m: int, rng: np.random.Generator, gamma_1=None, gamma_0=None,
@@ -38,9 +42,8 @@ class ForceSensor:
         # code = gamma / lsb with gamma = F / gamma_1 + gamma_0; reading = cal_1 (code lsb - cal_0)
         self._k1, self._k0 = 1.0 / (self.gamma_1 * self.lsb), self.gamma_0 / self.lsb
         self._r1, self._r0 = float(self.cal_gamma_1 * self.lsb), float(self.cal_gamma_1 * self.cal_gamma_0)
-
-    def _noisy(self, F_s) -> np.ndarray:
-        return F_s + self.rng.normal(0.0, self.noise_std, self.m) if self.noise_std else np.asarray(F_s, dtype=float)
+        self._noise = np.empty((0, m))     # noise of the coming readings, one row each
+        self._next = 0
 
     def line(self, F_s) -> np.ndarray:
         """The calibrated reading [N] (m,) of F_s without noise and quantisation: the true line
@@ -49,15 +52,26 @@ class ForceSensor:
 
     def read(self, F_s) -> np.ndarray:
         """Calibrated reading [N] (m,): quantised signal through the robot file's line (3.29)."""
-        return _quantise(self._noisy(F_s), self._k1, self._k0, self._code_min, self._code_max, self._r1, self._r0)
+        noise = None
+        if self.noise_std:
+            # drawn for NOISE_BLOCK readings at once: the generator's stream in the same order, so the
+            # same numbers as one draw per reading, for one call a block instead of one a period
+            if self._next == self._noise.shape[0]:
+                self._noise, self._next = self.rng.normal(0.0, self.noise_std, (NOISE_BLOCK, self.m)), 0
+            noise = self._noise[self._next]
+            self._next += 1
+        return _quantise(np.asarray(F_s, dtype=float), noise, self._k1, self._k0, self._code_min, self._code_max,
+                         self._r1, self._r0)
 
 
 @numba.njit(cache=True)
-def _quantise(F, k1, k0, code_min, code_max, r1, r0):
-    """AD code of each force, clipped to the converter's range, read back through the calibration."""
+def _quantise(F, noise, k1, k0, code_min, code_max, r1, r0):
+    """AD code of each force plus its noise (None: none), clipped to the converter's range, read
+    back through the calibration."""
     out = np.empty_like(F)
     for i in range(F.shape[0]):
-        code = min(max(np.rint(F[i] * k1[i] + k0[i]), code_min), code_max)
+        F_i = F[i] if noise is None else F[i] + noise[i]
+        code = min(max(np.rint(F_i * k1[i] + k0[i]), code_min), code_max)
         out[i] = code * r1 - r0
     return out
 
@@ -78,6 +92,18 @@ class Encoder:
         return cls(2.0 * math.pi * drive.drum_radius / (drive.gear_ratio * counts_per_revolution))
 
     def read(self, theta) -> np.ndarray:
-        if not self.resolution:
-            return np.array(theta, dtype=float)
-        return np.rint(np.asarray(theta) / self.resolution) * self.resolution
+        reading = np.array(theta, dtype=float)
+        _count_all(reading.reshape(-1), self.resolution)
+        return reading
+
+
+@numba.njit(cache=True)
+def encoder_count(theta: float, resolution: float) -> float:
+    """A cable length theta [m] in whole counts of ``resolution`` [m per count] (0: ideal)."""
+    return np.rint(theta / resolution) * resolution if resolution else theta
+
+
+@numba.njit(cache=True)
+def _count_all(theta, resolution):
+    for i in range(theta.shape[0]):
+        theta[i] = encoder_count(theta[i], resolution)

@@ -49,8 +49,8 @@ from cdpr_control.kinematics import inverse_kinematics
 from .cables import CableModel
 from .contacts import PlatformShape, add_obstacle, platform_collision_shape
 from .plant import KINDS, Settlement, build_plant
-from .platform import PlatformBody, kardan_angles
-from .sensors import Encoder, ForceSensor
+from .platform import PlatformBody, cross3, kardan_angles
+from .sensors import Encoder, ForceSensor, encoder_count
 from .wrench import WrenchPulse
 
 
@@ -314,7 +314,9 @@ class Simulator:
     def step(self, theta_d) -> SimOutput:
         """Advance one control period with the drive command theta_d (m,) (encoder coordinates)."""
         u = np.asarray(theta_d, dtype=float) - self.encoder_offset
-        if u.shape != (self.m,) or not np.isfinite(u).all():
+        # finite: one sum, which a NaN or inf makes non-finite (so would lengths near 1e308, which no
+        # cable has), a fifth of the cost of isfinite().all() on m values, every period
+        if u.shape != (self.m,) or not math.isfinite(u.sum()):
             raise ValueError(f"theta_d must be {self.m} finite numbers, got {theta_d}")
         cfg, body, cables, drives, pb, cid = self.config, self._body, self.cables, self.drives, self._pb, self._client
         dt = cfg.dt
@@ -359,31 +361,29 @@ class Simulator:
         r, R, v, omega = body.state()
         theta = drives.theta
         theta_u = theta + self.settlement.s                  # unstretched length incl. settlement
-        f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
-        phi = kardan_angles(R)
+        f, _, _, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
+        x = np.concatenate((r, kardan_angles(R)))
         if cables.needs_refresh():
-            cables.refresh(np.concatenate([r, phi]))
-            f, F, T, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
+            cables.refresh(x)
+            f, _, _, _ = cables.wrench(r, R, v, omega, theta_u, drives.thetadot)
         f = f.copy()
         self.settlement.update(f, cable.total_free_length(self.robot, theta_u))   # acts from the next step
         A, d = cables.linearisation()
         self._pending = (f, A.copy(), d.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity
-        thetadot = (theta - self._theta_prev) * (1.0 / period)
+        thetadot, theta_true, theta_enc, thetadot_enc = _winch_readings(
+            theta, self._theta_prev, self.encoder_offset, self.encoder.resolution, self._theta_enc_prev, 1.0 / period)
         self._theta_prev = theta
+        self._theta_enc_prev = theta_enc
         if self.config.friction:
             F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
         else:
             F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
-        theta_true = theta + self.encoder_offset
-        theta_enc = self.encoder.read(theta_true)
-        thetadot_enc = (theta_enc - self._theta_enc_prev) * (1.0 / period)
-        self._theta_enc_prev = theta_enc
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
         return SimOutput(
             t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=self.sensor.read(F_s_true),
-            x=np.concatenate([r, phi]), xdot=np.concatenate([v, omega]), f=f,
+            x=x, xdot=np.concatenate((v, omega)), f=f,
             F_s_true=F_s_true, theta_true=theta_true, beta=cables.beta, w_ext=w_ext,
             w_contact=self._w_contact,
         )
@@ -395,5 +395,21 @@ class Simulator:
             n, d1, d2 = np.array(c[7]), np.array(c[11]), np.array(c[13])
             F = c[9] * n + c[10] * d1 + c[12] * d2
             w[:3] += F
-            w[3:] += np.cross(np.array(c[5]) - r, F)
+            w[3:] += cross3(np.array(c[5]) - r, F)
         return w
+
+
+@numba.njit(cache=True)
+def _winch_readings(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
+    """The winch side of Simulator._measure in one pass over the cables (once per control period;
+    as numpy expressions on m values they cost several times more): the period's mean velocity
+    (theta - theta_prev) rate, the drive position in encoder coordinates theta_true = theta +
+    encoder_offset, the encoder reading of it (Encoder.read) and that reading's difference quotient."""
+    m = theta.shape[0]
+    thetadot, theta_true, theta_enc, thetadot_enc = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):
+        thetadot[i] = (theta[i] - theta_prev[i]) * rate
+        theta_true[i] = theta[i] + encoder_offset[i]
+        theta_enc[i] = encoder_count(theta_true[i], resolution)
+        thetadot_enc[i] = (theta_enc[i] - theta_enc_prev[i]) * rate
+    return thetadot, theta_true, theta_enc, thetadot_enc

@@ -30,6 +30,7 @@ unstretched cable length.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -212,11 +213,13 @@ class WinchPlatformSimNode(CdprNode):
     # --- inputs ----------------------------------------------------------------------------
 
     def _on_command(self, msg: JointState) -> None:
-        theta_d = np.asarray(msg.position, dtype=float)
-        if theta_d.shape != (self.robot.m,) or not np.all(np.isfinite(theta_d)):
+        position = msg.position
+        # finite as cdpr_control.nodes.sync checks it: one sum, which a NaN or inf makes non-finite
+        if len(position) != self.robot.m or not math.isfinite(sum(position)):
             self.invalid_commands += 1
-            self.input_fault("winch/command", f"{len(msg.position)} positions (need {self.robot.m} finite values)")
+            self.input_fault("winch/command", f"{len(position)} positions (need {self.robot.m} finite values)")
             return
+        theta_d = np.asarray(position, dtype=float)
         stamp = stamp_ns(msg)
         t_ns = self.sim.steps * self.period_ns
         if stamp > t_ns:
@@ -320,9 +323,7 @@ class WinchPlatformSimNode(CdprNode):
         out = self.sim.output
         t_ns = self.sim.steps * self.period_ns
         header = self.header(t_ns)
-        clock = Clock()
-        clock.clock = header.stamp
-        self.clock_pub.publish(clock)
+        self.clock_pub.publish(Clock(clock=header.stamp))
         if not self.lockstep:
             self._states_sent[t_ns] = time.perf_counter()
             if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
