@@ -55,7 +55,7 @@ class FrictionCompensationNode(CdprNode):
         self.sync = StampSync(self, {
             "state": (JointState, "winch/state"),
             "setpoint": (OperationalSetpoint, "setpoint"),
-        }, primary="state", callback=self._cycle, mode=self.sync_mode)
+        }, primary="state", callback=self._cycle, mode=self.sync_mode, urgent=("state",))   # the command path
 
     @staticmethod
     def _stage_params(v: dict) -> FrictionCompensationParams:

@@ -147,7 +147,8 @@ class WinchPlatformSimNode(CdprNode):
         }
         if self.sim.config.obstacles:
             self.truth_pubs["contact"] = self.create_publisher(WrenchStamped, "ground_truth/contact_wrench", CONTROL)
-        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL)
+        # on the command path: in-process, delivered before the rest of the graph's period (intraprocess.py)
+        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL, urgent=True)
         self.create_subscription(WrenchStamped, "sim/wrench", self._on_wrench, CONTROL)
         self.create_service(SetPayload, "sim/set_payload", self._on_set_payload)
         self.create_service(ApplyWrench, "sim/apply_wrench", self._on_apply_wrench)
