@@ -50,8 +50,11 @@ _U32 = struct.Struct("<I").pack
 # per start position modulo 4: the padding to a uint32 and the uint32 (string and sequence lengths)
 _COUNT = tuple(struct.Struct("<" + "x" * ((-r) % 4) + "I").pack for r in range(4))
 _COUNT_SIZE = tuple((-r) % 4 + 4 for r in range(4))
-_ZEROS = tuple(b"\0" * ((-r) % 8) for r in range(8))   # padding to 8 from start position r
 _PAD4 = tuple(b"\0" * ((-r) % 4) for r in range(4))
+# per start position modulo 8: the count of a non-empty sequence of 8-byte elements, padded before
+# (to 4) and after (to 8, where the first element starts)
+_COUNT8 = tuple(struct.Struct("<" + "x" * ((-r) % 4) + "I" + "x" * ((-(r + (-r) % 4 + 4)) % 8)).pack for r in range(8))
+_COUNT8_SIZE = tuple((-r) % 4 + 4 + (-(r + (-r) % 4 + 4)) % 8 for r in range(8))
 
 
 class Unsupported(TypeError):
@@ -94,7 +97,8 @@ class _Generator:
     def __init__(self):
         self.lines: list[str] = []
         self.env: dict = {"_array": array, "_utf8": _utf8, "_strseq": _string_sequence, "_raw": _raw_sequence,
-                          "_COUNT": _COUNT, "_COUNT_SIZE": _COUNT_SIZE, "_ZEROS": _ZEROS, "_PAD4": _PAD4}
+                          "_COUNT": _COUNT, "_COUNT_SIZE": _COUNT_SIZE, "_COUNT8": _COUNT8,
+                          "_COUNT8_SIZE": _COUNT8_SIZE, "_PAD4": _PAD4}
         self.indent = 1
         self.names = 0
         self.run: list[tuple[str, int, str]] = []   # pending fixed-size fields: code, size, expression
@@ -125,6 +129,11 @@ class _Generator:
             self.known = (self.known + size) % 8
             return
         align = max(min(size, 8) for _, size, _ in run)  # paddings depend on the start modulo this
+        if align == 1:
+            fmt, size = _run_format(run, 0)
+            self.emit(f"out.append({self.const(struct.Struct(fmt).pack)}({args}))")
+            self.emit(f"pos += {size}")
+            return
         formats = [_run_format(run, r) for r in range(align)]
         packs = self.const(tuple(struct.Struct(fmt).pack for fmt, _ in formats))
         sizes = self.const(tuple(size for _, size in formats))
@@ -132,16 +141,21 @@ class _Generator:
         self.emit(f"out.append({packs}[_r]({args}))")
         self.emit(f"pos += {sizes}[_r]")
 
-    def count(self, n: str) -> None:
-        """A uint32 count or string length, aligned to 4."""
+    def count(self, n: str, then: str = "") -> None:
+        """A uint32 count or string length, aligned to 4, and ``then`` bytes of that many bytes."""
+        more = f" + len({then})" if then else ""
         if self.known is not None:
             pad = (-self.known) % 4
             self.emit(f"out.append({self.const(_COUNT[self.known % 4])}({n}))")
-            self.emit(f"pos += {pad + 4}")
+            self.emit(f"pos += {pad + 4}{more}")
             self.known = (self.known + pad + 4) % 8
         else:
-            self.emit(f"out.append(_COUNT[pos & 3]({n}))")
-            self.emit("pos += _COUNT_SIZE[pos & 3]")
+            self.emit("_r = pos & 3")
+            self.emit(f"out.append(_COUNT[_r]({n}))")
+            self.emit(f"pos += _COUNT_SIZE[_r]{more}")
+        if then:
+            self.emit(f"out.append({then})")
+            self.known = None
 
     # -- fields ------------------------------------------------------------------------------------
     def message(self, cls, expr: str) -> None:
@@ -171,12 +185,9 @@ class _Generator:
         elif isinstance(slot_type, AbstractString):
             self.flush()
             b = self.name("_b")
-            self.emit(f"{b} = _utf8({expr})")
-            self.count(f"len({b}) + 1")
-            self.emit(f"out.append({b})")
-            self.emit("out.append(b'\\0')")
-            self.emit(f"pos += len({b}) + 1")
-            self.known = None
+            self.emit(f"{b} = {expr}.encode() + b'\\0'")
+            self.emit(f"if {b}.index(0) < len({b}) - 1: {b} = _utf8({expr}) + b'\\0'")
+            self.count(f"len({b})", then=b)
         elif isinstance(slot_type, Array):
             self.array(slot_type, expr)
         elif isinstance(slot_type, AbstractSequence):
@@ -211,13 +222,18 @@ class _Generator:
             else:
                 self.emit(f"{b} = {var}.tobytes() if type({var}) is _array and {var}.typecode == '{code}' "
                           f"else _raw({var}, '{code}', {size})")
-            self.count(f"len({b}) // {size}" if size > 1 else f"len({b})")
-            if size == 8:                             # elements after the count: 8-aligned if any
+            if size == 8:                             # the elements start 8-aligned, if there are any
                 self.emit(f"if {b}:")
-                self.emit(f"    out.append(_ZEROS[pos & 7])")
-                self.emit(f"    pos += len(_ZEROS[pos & 7])")
-            self.emit(f"out.append({b})")
-            self.emit(f"pos += len({b})")
+                self.emit("    _r = pos & 7")
+                self.emit(f"    out.append(_COUNT8[_r](len({b}) >> 3))")
+                self.emit(f"    out.append({b})")
+                self.emit(f"    pos += _COUNT8_SIZE[_r] + len({b})")
+                self.emit("else:")
+                self.indent += 1
+                self.count("0")
+                self.indent -= 1
+            else:
+                self.count(f"len({b}) // {size}" if size > 1 else f"len({b})", then=b)
         elif isinstance(value, AbstractString) and not isinstance(value, BoundedString):
             cache = self.const([(None, b"")])        # the last list encoded, and its bytes
             b = self.name("_b")
@@ -229,9 +245,8 @@ class _Generator:
             self.emit(f"    {cache}[0] = (list({var}), {b})")
             self.emit("_p = _PAD4[pos & 3]")
             self.emit("out.append(_p)")
-            self.emit("pos += len(_p)")
             self.emit(f"out.append({b})")
-            self.emit(f"pos += len({b})")
+            self.emit(f"pos += len(_p) + len({b})")
         elif isinstance(value, (NamespacedType, Array, AbstractSequence)) or isinstance(value, AbstractString):
             if isinstance(value, BoundedString):
                 raise Unsupported(repr(value))

@@ -25,9 +25,9 @@ from typing import Any, Iterable
 import yaml
 from mcap.writer import CompressionType, IndexType, Writer
 from rclpy.qos import QoSProfile
-from rclpy.serialization import serialize_message
 
 from cdpr_tools.bag.cdr import trimmed
+from cdpr_tools.bag.encode import serialize
 from cdpr_tools.bag.qos import dump_profiles, qos_to_dict
 from cdpr_tools.bag.schema import ENCODING, message_definition, type_hash
 from cdpr_tools.message_convert import type_name_of
@@ -139,23 +139,25 @@ class BagWriter:
 
     # -- messages ----------------------------------------------------------------------------
     def write(self, topic: str, type_name: str | None, data: Any, log_time_ns: int,
-              qos: Any = None, publish_time_ns: int | None = None) -> None:
+              qos: Any = None, publish_time_ns: int | None = None, exact: bool = False) -> None:
         """Write one message: ``data`` is a message instance or its CDR bytes.
 
         ``log_time_ns`` is the receive time (sim time when the graph runs on /clock), which orders
         the bag; ``type_name`` may be None for a message instance; ``qos`` is used on the topic's
-        first message only (see :meth:`add_topic`).
+        first message only (see :meth:`add_topic`); ``exact``: the bytes hold the encoding and
+        nothing after it (as :mod:`.encode` makes them), so they need no cut.
         """
         if not isinstance(data, (bytes, bytearray, memoryview)):
             type_name = type_name or type_name_of(data)
-            data = serialize_message(data)
+            data, exact = serialize(data, type_name), True
         with self._lock:
             channel = self._channels.get(topic)
             if channel is None or (type_name is not None and type_name != channel.type):
                 if type_name is None:
                     raise ValueError(f"first message on {topic}: give its type name")
                 channel = self._add_topic(topic, type_name, qos, None)
-            data = trimmed(channel.type, data)
+            if not exact:
+                data = trimmed(channel.type, data)
             channel.count += 1
             self._times.add(log_time_ns)
             self._mcap.add_message(channel.id, log_time_ns, bytes(data),
@@ -167,6 +169,13 @@ class BagWriter:
         """End the chunk in progress and put it on disk with an updated metadata.yaml."""
         with self._lock:
             if not self._closed:
+                self._flush()
+
+    def flush_due(self) -> None:
+        """Flush if the chunk in progress is older than ``flush_interval`` (chunks are otherwise
+        cut by :meth:`write`: a writer whose messages stop calls this now and then)."""
+        with self._lock:
+            if not self._closed and self._pending_bytes and time.monotonic() - self._last_flush >= self.flush_interval:
                 self._flush()
 
     def _maybe_flush(self) -> None:
