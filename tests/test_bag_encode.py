@@ -114,7 +114,7 @@ def test_values_as_rclpy_takes_them():
     joints._velocity = np.array([3.0, 4.0])                 # a buffer in a slot: its bytes
     joints._effort = [5.0, 6.5]                             # a list: element by element
     check_same_encoding(joints, serialize(joints))
-    for _ in range(2):                                      # the names reused while they stay equal
-        joints.name[1] = "c"
+    for name in ("c", "dd", "c"):                           # names found by content: a changed list anew
+        joints.name[1] = name
         check_same_encoding(joints, serialize(joints))
     check_same_encoding(String(data="cut\0here"), serialize(String(data="cut\0here")))  # C string: up to NUL

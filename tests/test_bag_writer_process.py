@@ -86,7 +86,7 @@ PARENT = textwrap.dedent("""
     from cdpr_tools.bag.encode import serialize
     from cdpr_tools.bag.writer_process import BagWriterProcess
     bag = BagWriterProcess(sys.argv[1], batch=50)
-    print(bag._proc.pid, flush=True)
+    print(bag.pid, flush=True)
     topic = bag.add_topic("/winch/state", "sensor_msgs/msg/JointState")
     k = 0
     while True:

@@ -8,7 +8,7 @@ and allocation per field, nested messages through their own converters), then Fa
 (``SLOT_TYPES``), which reads the fields from their slots and packs each run of fixed-size fields
 with one precompiled ``struct`` call, picked by the run's start position modulo 8 where that is
 only known at run time (after a string or sequence). Lists of strings (joint and axis names) are
-encoded once and reused while they stay equal.
+encoded once and looked up by their content afterwards.
 
 The bytes are XCDR1 little endian as ROS 2 uses it (see :mod:`.cdr`): what FastDDS writes, cut to
 the encoding, except that the alignment padding is zero, where FastCDR leaves whatever its buffer
@@ -42,6 +42,7 @@ from cdpr_tools.bag.cdr import trimmed
 from cdpr_tools.message_convert import message_class, type_name_of
 
 HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0 (as FastDDS writes it)
+NAMES_CACHE = 64  # encoded lists of strings kept per field (the graph has a few: joint and axis names)
 _CODES = {"boolean": "?", "int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i",
           "uint32": "I", "int64": "q", "uint64": "Q", "float": "f", "double": "d"}
 _ARRAY_CODES = {"int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I",
@@ -235,14 +236,14 @@ class _Generator:
             else:
                 self.count(f"len({b}) // {size}" if size > 1 else f"len({b})", then=b)
         elif isinstance(value, AbstractString) and not isinstance(value, BoundedString):
-            cache = self.const([(None, b"")])        # the last list encoded, and its bytes
+            cache = self.const({})                   # lists encoded lately (names of joints, axes)
             b = self.name("_b")
-            self.emit(f"_c = {cache}[0]")
-            self.emit(f"if {var} == _c[0]:")
-            self.emit(f"    {b} = _c[1]")
-            self.emit("else:")
+            self.emit(f"_key = tuple({var})")
+            self.emit(f"{b} = {cache}.get(_key)")
+            self.emit(f"if {b} is None:")
             self.emit(f"    {b} = _strseq({var})")
-            self.emit(f"    {cache}[0] = (list({var}), {b})")
+            self.emit(f"    if len({cache}) >= {NAMES_CACHE}: {cache}.clear()")
+            self.emit(f"    {cache}[_key] = {b}")
             self.emit("_p = _PAD4[pos & 3]")
             self.emit("out.append(_p)")
             self.emit(f"out.append({b})")

@@ -127,6 +127,11 @@ class BagWriterProcess:
             self._frame(b"F", b"")
 
     @property
+    def pid(self) -> int:
+        """Process id of the writer child (to account for its CPU time)."""
+        return self._proc.pid
+
+    @property
     def message_count(self) -> int:
         """Messages taken so far (sent to the child or queued)."""
         return self._sent + len(self._queue)
