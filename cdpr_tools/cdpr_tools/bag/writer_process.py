@@ -40,7 +40,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-BATCH = 128            # messages per pipe write (about 6 periods of the closed loop)
+BATCH = 256            # messages per pipe write (about 12 periods of the closed loop)
 PIPE_SIZE = 1 << 20    # bytes the pipe buffers before a write blocks (Linux's default limit)
 _F_SETPIPE_SZ = 1031   # fcntl command (Linux)
 _FRAME = struct.Struct("<cI")
