@@ -201,7 +201,7 @@ def main() -> int:
     from cdpr_tools.bag.writer import BagWriter
     fd = sys.stdin.fileno()
     writer = None
-    channels: list[tuple[str, str]] = []
+    topics: list[str] = []                         # by index
     try:
         while True:
             if writer is not None and not select.select([fd], [], [], writer.flush_interval)[0]:
@@ -215,14 +215,11 @@ def main() -> int:
             if payload is None:
                 break
             if kind == b"M":
-                write = writer.write
-                for index, log_time, data, exact in pickle.loads(payload):
-                    topic, type_name = channels[index]
-                    write(topic, type_name, data, log_time, exact=exact)
+                writer.write_serialized([(topics[i], t, data, exact) for i, t, data, exact in pickle.loads(payload)])
             elif kind == b"T":
                 topic, type_name, profiles, digest = pickle.loads(payload)
                 writer.add_topic(topic, type_name, profiles, digest)
-                channels.append((topic, type_name))
+                topics.append(topic)
             elif kind == b"O":
                 args = pickle.loads(payload)
                 try:
