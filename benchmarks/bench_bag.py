@@ -7,7 +7,8 @@ states, FK diagnostics and /clock (10 messages). Measured in the same run:
 - baseline: ``rclpy.serialization.serialize_message`` of each message;
 - ``bag.encode``: the generated encoder of each message's type (what the composed recorder runs);
 - ``BagWriter.write(msg)``: encode, write to MCAP (the in-process path);
-- ``BagWriter.write(cdr)``: cut and write already serialized data (what the writer child does);
+- ``BagWriter.write(cdr)``: cut and write already serialized data;
+- ``BagWriter.write_serialized``: write encoded data of declared topics (what the writer child does);
 - the composed recorder: the set published by an ``IntraProcessNode`` with a ``BagRecorder`` in
   the same context, as a composed graph runs it: CPU time of the publishing (loop) thread per
   message above publishing without the recorder, and of the writer child process;
@@ -139,14 +140,23 @@ def in_process(tmp: Path) -> dict:
             for i, (t, name, data) in enumerate(serialized):
                 bag.write(t, name, data, i * 100_000)
 
+    encoded = [(t, encode_one(m), name) for (t, name, _), (encode_one, m) in zip(serialized, encoders)]
+
+    def write_serialized():
+        with BagWriter(tmp / f"ser{next(runs)}") as bag:
+            for t, _, name in encoded[:len(cycles[0])]:
+                bag.add_topic(t, name)
+            bag.write_serialized((t, i * 100_000, data, True) for i, (t, data, _) in enumerate(encoded))
+
     results = {
         "baseline_serialize_message": summary(per_message_us(baseline, len(flat))),
         "bag_encode": summary(per_message_us(encode, len(flat))),
         "bag_writer_write_message": summary(per_message_us(write_messages, len(flat))),
         "bag_writer_write_cdr": summary(per_message_us(write_cdr, len(flat))),
+        "bag_writer_write_serialized": summary(per_message_us(write_serialized, len(flat))),
     }
     base = results["baseline_serialize_message"]["median_us_per_message"]
-    for key in ("bag_encode", "bag_writer_write_message", "bag_writer_write_cdr"):
+    for key in ("bag_encode", "bag_writer_write_message", "bag_writer_write_cdr", "bag_writer_write_serialized"):
         results[key]["ratio_to_baseline"] = round(results[key]["median_us_per_message"] / base, 2)
     results["bytes_per_cycle"] = sum(len(d) for _, _, d in serialized[:len(cycles[0])])
     return results

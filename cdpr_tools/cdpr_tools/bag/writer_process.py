@@ -4,10 +4,11 @@ The bag recorder composed with a control loop receives its messages on the loop'
 them there (MCAP records, chunk buffer, message indexes, statistics, compression, file IO: about
 11 us a message, 20 messages a 1 ms period) doubled the loop's CPU time; that work holds the GIL, so
 a thread would not help either. So the recorder only encodes each message (:mod:`.encode`) and
-appends ``(topic index, log time, bytes)`` to a queue, and every ``batch`` messages (or
-``send_interval`` seconds, see :meth:`BagWriterProcess.send`) the queue goes to a child process
-as one pickled list in one pipe write. The child (``python -m cdpr_tools.bag.writer_process``)
-writes them with a BagWriter, the project's one bag writer, on the other core.
+appends ``(topic index, log time, bytes)`` to a queue, and every ``batch`` messages (and when
+the recorder's timer calls :meth:`BagWriterProcess.send`) the queue goes to a child process as
+one pickled list in one pipe write. The child (``python -m cdpr_tools.bag.writer_process``)
+writes them with a BagWriter (:meth:`~cdpr_tools.bag.writer.BagWriter.write_serialized`), the
+project's one bag writer, on the other core.
 
 Closing sends what is queued, asks the child to close the bag (summary, metadata.yaml) and waits for
 it. If the parent dies without closing (SIGKILL, a crash), the child reads end-of-file and closes
@@ -107,7 +108,7 @@ class BagWriterProcess:
             self.send()
 
     def send(self) -> None:
-        """Hand what is queued to the child now (the recorder calls this every ``send_interval``)."""
+        """Hand what is queued to the child now (the recorder's timer calls this every 0.1 s)."""
         with self._lock:
             self._send_locked()
 
