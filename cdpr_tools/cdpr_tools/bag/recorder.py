@@ -71,7 +71,9 @@ class BagRecorder(IntraProcessNode):
         except (LookupError, ValueError) as exc:
             self.get_logger().warning(f"not recording {topic}: {exc}")
             return False
-        put, now = self.writer.put, self.get_clock().handle.get_now   # (Clock.now() builds a Time: 2 us)
+        # what BagWriterProcess.put does, inlined (these run on the loop's thread, 20 times a period)
+        queue, batch, send = self.writer.queue, self.writer.batch, self.writer.send
+        append, now = queue.append, self.get_clock().handle.get_now   # (Clock.now() builds a Time: 2 us)
         encode = encoder(type_name)
         if encode is not None and self._published_here(topic):
             def on_message(msg) -> None:  # the publisher's object (or rclpy's, from another process)
@@ -79,11 +81,15 @@ class BagRecorder(IntraProcessNode):
                     data = encode(msg)
                 except Exception:  # noqa: BLE001 - a value the encoder cannot pack: rclpy decides
                     data = serialize(msg, type_name)
-                put((index, now().nanoseconds, data, True))
+                append((index, now().nanoseconds, data, True))
+                if len(queue) >= batch:
+                    send()
             raw = False
         else:
             def on_message(data: bytes) -> None:  # (the EventsExecutor cannot pass message info)
-                put((index, now().nanoseconds, data, False))
+                append((index, now().nanoseconds, data, False))
+                if len(queue) >= batch:
+                    send()
             raw = True
         self._recording[topic] = self.create_subscription(
             msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw)

@@ -67,7 +67,7 @@ class BagWriterProcess:
         except OSError:
             pass                                  # a smaller pipe only means earlier blocking
         self._lock = threading.Lock()
-        self._queue: deque = deque()
+        self.queue: deque = deque()             # what put() appends and send() hands over
         self._sent = 0
         self._closed = False
         self.failed: str | None = None            # why the child stopped taking messages, if it did
@@ -102,7 +102,7 @@ class BagWriterProcess:
     def put(self, item: tuple[int, int, bytes, bool]) -> None:
         """Queue ``(topic index, log time [ns], CDR bytes, exact)``; sends every ``batch`` items.
         Safe from any thread (deque appends are atomic; sending takes the lock)."""
-        queue = self._queue
+        queue = self.queue
         queue.append(item)
         if len(queue) >= self.batch:
             self.send()
@@ -113,7 +113,7 @@ class BagWriterProcess:
             self._send_locked()
 
     def _send_locked(self) -> None:
-        queue = self._queue
+        queue = self.queue
         n = len(queue)
         if not n or self._closed:
             return
@@ -135,7 +135,7 @@ class BagWriterProcess:
     @property
     def message_count(self) -> int:
         """Messages taken so far (sent to the child or queued)."""
-        return self._sent + len(self._queue)
+        return self._sent + len(self.queue)
 
     def close(self) -> None:
         """Send the queue, have the child finish the bag, wait for it; safe to call twice."""
