@@ -59,8 +59,10 @@ class BagWriterProcess:
     def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20,
                  flush_interval: float = 1.0, batch: int = BATCH):
         self.batch = batch
+        # the parent's sys.path: the child imports the same cdpr_tools, however the parent found it
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
         self._proc = subprocess.Popen([sys.executable, "-m", "cdpr_tools.bag.writer_process"],
-                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0)
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0, env=env)
         self._pipe = self._proc.stdin
         try:
             fcntl.fcntl(self._pipe.fileno(), _F_SETPIPE_SZ, PIPE_SIZE)
