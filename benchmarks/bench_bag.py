@@ -5,8 +5,13 @@ cable forces, the force distribution, the set-point, the pose and wrench estimat
 states, FK diagnostics and /clock (10 messages). Measured in the same run:
 
 - baseline: ``rclpy.serialization.serialize_message`` of each message;
-- ``BagWriter.write(msg)``: serialize, cut to the encoding, write to MCAP (the in-process path);
-- ``BagWriter.write(cdr)``: cut and write already serialized data (what the recorder does);
+- ``bag.encode``: the generated encoder of each message's type (what the composed recorder runs);
+- ``BagWriter.write(msg)``: encode, write to MCAP (the in-process path);
+- ``BagWriter.write(cdr)``: cut and write already serialized data;
+- ``BagWriter.write_serialized``: write encoded data of declared topics (what the writer child does);
+- the composed recorder: the set published by an ``IntraProcessNode`` with a ``BagRecorder`` in
+  the same context, as a composed graph runs it: CPU time of the publishing (loop) thread per
+  message above publishing without the recorder, and of the writer child process;
 - the live recorder: the set published at 1 kHz for a few seconds through DDS, recorded by a
   ``BagRecorder`` on an EventsExecutor; messages recorded and the recorder thread's CPU time.
 
@@ -18,6 +23,7 @@ import gc
 import json
 import os
 import platform
+import resource
 import tempfile
 import threading
 import time
@@ -41,7 +47,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from cdpr_tools.bag import BagWriter
+from cdpr_tools.bag.encode import encoder
 from cdpr_tools.bag.recorder import BagRecorder
+from cdpr_control.nodes.intraprocess import IntraProcessNode
 from cdpr_tools.message_convert import type_name_of
 from cdpr_control.nodes.runner import spin
 from cdpr_tools.ros_graph import new_context
@@ -50,6 +58,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CYCLES = 2000  # per timing repeat of the in-process paths
 REPEATS = 5
 LIVE_SECONDS = 3.0
+COMPOSED_CYCLES = 5000
 RATE_HZ = 1000.0
 M, N = 8, 6  # cables, degrees of freedom
 
@@ -115,6 +124,12 @@ def in_process(tmp: Path) -> dict:
         for _, m in flat:
             serialize_message(m)
 
+    encoders = [(encoder(type_name_of(m)), m) for _, m in flat]
+
+    def encode():
+        for encode_one, m in encoders:
+            encode_one(m)
+
     def write_messages():
         with BagWriter(tmp / f"msg{next(runs)}") as bag:
             for i, (t, m) in enumerate(flat):
@@ -125,16 +140,75 @@ def in_process(tmp: Path) -> dict:
             for i, (t, name, data) in enumerate(serialized):
                 bag.write(t, name, data, i * 100_000)
 
+    encoded = [(t, encode_one(m), name) for (t, name, _), (encode_one, m) in zip(serialized, encoders)]
+
+    def write_serialized():
+        with BagWriter(tmp / f"ser{next(runs)}") as bag:
+            for t, _, name in encoded[:len(cycles[0])]:
+                bag.add_topic(t, name)
+            bag.write_serialized((t, i * 100_000, data, True) for i, (t, data, _) in enumerate(encoded))
+
     results = {
         "baseline_serialize_message": summary(per_message_us(baseline, len(flat))),
+        "bag_encode": summary(per_message_us(encode, len(flat))),
         "bag_writer_write_message": summary(per_message_us(write_messages, len(flat))),
         "bag_writer_write_cdr": summary(per_message_us(write_cdr, len(flat))),
+        "bag_writer_write_serialized": summary(per_message_us(write_serialized, len(flat))),
     }
     base = results["baseline_serialize_message"]["median_us_per_message"]
-    for key in ("bag_writer_write_message", "bag_writer_write_cdr"):
+    for key in ("bag_encode", "bag_writer_write_message", "bag_writer_write_cdr", "bag_writer_write_serialized"):
         results[key]["ratio_to_baseline"] = round(results[key]["median_us_per_message"] / base, 2)
     results["bytes_per_cycle"] = sum(len(d) for _, _, d in serialized[:len(cycles[0])])
     return results
+
+
+def composed_recorder(tmp: Path) -> dict:
+    """The set published in-process to a BagRecorder of the same context (a composed graph): CPU
+    time per message of the publishing thread, without and with the recorder, and of the writer child."""
+    context = new_context()
+    try:
+        node = IntraProcessNode("bench_bag_publisher", context=context)
+        first = cycle_messages(0)
+        publishers = {t: node.create_publisher(type(m), t, 1000) for t, m in first}
+        cycles = [[(publishers[t], m) for t, m in cycle_messages(k)] for k in range(COMPOSED_CYCLES)]
+        count = COMPOSED_CYCLES * len(first)
+
+        def publish_all():
+            for cycle in cycles:
+                for publisher, msg in cycle:
+                    publisher.publish(msg)
+
+        def thread_us_per_message() -> list[float]:
+            out = []
+            for _ in range(REPEATS):
+                t0 = time.thread_time_ns()
+                publish_all()
+                out.append((time.thread_time_ns() - t0) / 1e3 / count)
+            return out
+
+        plain = thread_us_per_message()
+        recorder = BagRecorder(context=context, parameter_overrides=[
+            Parameter("output", value=str(tmp / "composed")), Parameter("topics", value=[t for t, _ in first])])
+        deadline = time.monotonic() + 30
+        while len(recorder.recorded_topics) < len(first):
+            if time.monotonic() > deadline:
+                raise RuntimeError("recorder did not subscribe to every topic within 30 s")
+            recorder.selection.discover()
+            time.sleep(0.01)
+        children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        recording = thread_us_per_message()
+        recorded = recorder.writer.message_count
+        recorder.destroy_node()                     # waits for the writer child: its CPU time is in
+        children1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        node.destroy_node()
+        child_s = (children1.ru_utime + children1.ru_stime) - (children0.ru_utime + children0.ru_stime)
+        return {"messages_per_repeat": count, "recorded_messages": recorded,
+                "loop_thread_us_per_message_plain": round(float(np.median(plain)), 3),
+                "loop_thread_us_per_message_recording": round(float(np.median(recording)), 3),
+                "recording_us_per_message_on_loop_thread": round(float(np.median(recording) - np.median(plain)), 3),
+                "writer_process_us_per_message": round(child_s * 1e6 / recorded, 3)}
+    finally:
+        context.try_shutdown()
 
 
 def live_recorder(tmp: Path) -> dict:
@@ -196,6 +270,7 @@ def main() -> None:
             "message_set": [type_name_of(m) for _, m in cycle_messages(0)],
             "messages_per_cycle": len(cycle_messages(0)),
             "in_process": in_process(tmp),
+            "composed_recorder": composed_recorder(tmp),
             "live_recorder_1khz": live_recorder(tmp),
         }
     out = ROOT / "bench" / "bag.json"

@@ -45,6 +45,8 @@ def _killed_recording(path, at_least=3000):
     while written < at_least and time.monotonic() < deadline:
         written = int(proc.stdout.readline())
     proc.send_signal(signal.SIGKILL)
+    for line in proc.stdout:        # what it printed before it died (a loaded machine reads late)
+        written = int(line)
     proc.wait()
     assert written >= at_least, "the writer did not get going"
     return written

@@ -233,3 +233,32 @@ def test_qos_round_trip_and_playback_choice():
     assert play.durability == DurabilityPolicy.TRANSIENT_LOCAL and play.history == HistoryPolicy.KEEP_LAST
     mixed = playback_qos([latched, qos_to_dict(QoSProfile(depth=1))])
     assert mixed.durability != DurabilityPolicy.TRANSIENT_LOCAL
+
+
+def test_write_serialized_makes_the_file_write_makes(tmp_path):
+    """BagWriter.write_serialized (the recorder's writer process) builds MCAP records itself: the
+    same bytes as write() through mcap's Writer, over several chunks, exact and cut CDR."""
+    from cdpr_tools.bag.encode import serialize
+    messages = []
+    for i in range(300):
+        messages.append(("/joint_states", T0 + i * 1_000_000, serialize(joint_state(i)), True))
+        if i % 3 == 0:
+            messages.append(("/cable_forces", T0 + i * 1_000_000 - 5, serialize_message(CableForces(f=[1.0 * i])), False))
+    files = []
+    for how in ("write", "write_serialized"):
+        path = tmp_path / how / "run.mcap"     # (the file name is in the rosbag2 metadata record)
+        with BagWriter(path, chunk_size=4096, flush_interval=1e9) as bag:
+            bag.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+            bag.add_topic("/cable_forces", "cdpr_msgs/msg/CableForces")
+            if how == "write":
+                for topic, t, data, exact in messages:
+                    bag.write(topic, None, data, t, exact=exact)
+            else:
+                bag.write_serialized(messages[:77])
+                bag.write_serialized(messages[77:])
+        files.append(path.read_bytes())
+    assert files[0] == files[1]
+    bag = BagReader(tmp_path / "write_serialized" / "run.mcap")
+    assert not bag.problems and bag.message_count == len(messages)
+    with open(tmp_path / "write_serialized" / "run.mcap", "rb") as f:
+        assert len(make_reader(f).get_summary().chunk_indexes) > 5

@@ -1,26 +1,35 @@
 """BagRecorder node: subscribes to topics as they appear and writes them to a bag.
 
-Like ``ros2 bag record``: serialized (raw) subscriptions, the QoS adapted to the publishers'
-offers, those offers stored per topic, the receive time on the node's clock as log time (sim time
-with ``use_sim_time``; also the publish time, since the EventsExecutor passes no message info).
-Hidden topics are left out unless asked for. Follows the node convention of docs/tools.md, so the launcher can compose it;
-composed with the graph's nodes (one context), it gets their messages in-process, serialized once
-for the bag (cdpr_control.nodes.intraprocess), and the nodes need not publish over DDS for it.
+Like ``ros2 bag record``: the QoS adapted to the publishers' offers, those offers stored per topic,
+the receive time on the node's clock as log time (sim time with ``use_sim_time``; also the publish
+time, since the EventsExecutor passes no message info). Hidden topics are left out unless asked
+for. Follows the node convention of docs/tools.md, so the launcher can compose it.
+
+Composed with the graph's nodes (one context), the recorder gets their messages in-process
+(cdpr_control.nodes.intraprocess), on the thread that runs the control loop, and the nodes need
+not publish over DDS for it. So it does as little as it can there: a topic with a publisher in the
+process is subscribed to as message objects, each encoded once by the generated encoder of its type
+(:mod:`.encode`, a few us where rclpy's serialization takes 3-11), and the bytes are queued for the
+writer child process (:mod:`.writer_process`), which writes the bag on the other core. Topics
+published elsewhere only are subscribed to serialized (``raw``), as ``ros2 bag record`` does.
 """
 from __future__ import annotations
 
 from datetime import datetime
 
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
 
-from cdpr_tools.bag.writer import BagWriter
+from cdpr_tools.bag.encode import encoder, serialize
+from cdpr_tools.bag.writer_process import BagWriterProcess
 from cdpr_tools.message_convert import message_class
-from cdpr_control.nodes.intraprocess import IntraProcessNode
+from cdpr_control.nodes.intraprocess import IntraProcess, IntraProcessNode
 from cdpr_control.nodes.runner import run_node
 from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 
 DEFAULT_QUEUE_DEPTH = 1000  # messages held per topic while the recorder is busy (1 s at 1 kHz)
 DISCOVERY_PERIOD = 0.1      # s between looks for new topics (default of ``discovery_period``)
+SEND_PERIOD = 0.1           # s: the longest a message waits in the queue for the writer process
 
 
 def default_bag_name() -> str:
@@ -42,9 +51,12 @@ class BagRecorder(IntraProcessNode):
             read_only=True))
         output = self.get_parameter("output").value or default_bag_name()
         self.depth = self.get_parameter("queue_depth").value
-        self.writer = BagWriter(output, compression=self.get_parameter("compression").value)
+        self.writer = BagWriterProcess(output, compression=self.get_parameter("compression").value)
         self._recording: dict[str, object] = {}  # topic -> subscription
+        self._failure_logged = False
         self.selection = TopicSelection(self, "record", DISCOVERY_PERIOD, self._subscribe)
+        # (steady clock: with use_sim_time the node's clock stands while the graph does)
+        self.create_timer(SEND_PERIOD, self._send, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"recording to {self.writer.path}")
 
     def _subscribe(self, topic: str, type_name: str) -> bool | None:
@@ -53,27 +65,55 @@ class BagRecorder(IntraProcessNode):
             return None  # the publisher went again: the offered QoS decides how to subscribe
         try:
             msg_class = message_class(type_name)
-            self.writer.add_topic(topic, type_name, [o.qos_profile for o in offers],
-                                  str(offers[0].topic_type_hash) if offers[0].topic_type_hash.version > 0 else None)
+            index = self.writer.add_topic(
+                topic, type_name, [o.qos_profile for o in offers],
+                str(offers[0].topic_type_hash) if offers[0].topic_type_hash.version > 0 else None)
         except (LookupError, ValueError) as exc:
             self.get_logger().warning(f"not recording {topic}: {exc}")
             return False
-        write, clock = self.writer.write, self.get_clock()
-
-        def on_message(data: bytes) -> None:  # (the EventsExecutor cannot pass message info)
-            write(topic, type_name, data, clock.now().nanoseconds)
-
+        # what BagWriterProcess.put does, inlined (these run on the loop's thread, 20 times a period)
+        queue, batch, send = self.writer.queue, self.writer.batch, self.writer.send
+        append, now = queue.append, self.get_clock().handle.get_now   # (Clock.now() builds a Time: 2 us)
+        encode = encoder(type_name)
+        if encode is not None and self._published_here(topic):
+            def on_message(msg) -> None:  # the publisher's object (or rclpy's, from another process)
+                try:
+                    data = encode(msg)
+                except Exception:  # noqa: BLE001 - a value the encoder cannot pack: rclpy decides
+                    data = serialize(msg, type_name)
+                append((index, now().nanoseconds, data, True))
+                if len(queue) >= batch:
+                    send()
+            raw = False
+        else:
+            def on_message(data: bytes) -> None:  # (the EventsExecutor cannot pass message info)
+                append((index, now().nanoseconds, data, False))
+                if len(queue) >= batch:
+                    send()
+            raw = True
         self._recording[topic] = self.create_subscription(
-            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=True)
+            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw)
         self.get_logger().info(f"subscribed to {topic} [{type_name}]")
         return True
+
+    def _published_here(self, topic: str) -> bool:
+        """Whether a node of this process publishes ``topic`` (then its messages come as objects)."""
+        registry = IntraProcess.of(self.context)
+        entry = registry.topics.get(topic) if registry.enabled else None
+        return bool(entry and entry.publishers)
+
+    def _send(self) -> None:
+        self.writer.send()
+        if self.writer.failed and not self._failure_logged:
+            self._failure_logged = True
+            self.get_logger().error(self.writer.failed)
 
     @property
     def recorded_topics(self) -> list[str]:
         return sorted(self._recording)
 
     def destroy_node(self) -> None:
-        """Stop subscribing, then close the bag (summary, metadata.yaml)."""
+        """Stop subscribing, then close the bag (summary, metadata.yaml) and wait for the writer."""
         for subscription in self._recording.values():
             self.destroy_subscription(subscription)
         self._recording.clear()
