@@ -18,7 +18,8 @@ A probe node in a context of its own subscribes to /clock; after a warm-up the r
 is the simulated time advanced over the wall time between two /clock receptions a fixed window
 apart. Per period: wall time, CPU time of the processes involved, and the CPU time of each node
 (composed: thread CPU time inside its callbacks, exclusive of the callbacks its publications run
-in-process; processes: the child's CPU time from /proc). ``baseline_in_process``: the same
+in-process; processes: the child's CPU time from /proc; recording: the bag writer child process
+as ``bag_writer_process``, its CPU on the other core counted in the period's CPU). ``baseline_in_process``: the same
 control stages and simulator in one Python loop without ROS (cdpr_sim.closed_loop.run holding
 home). ``sim_missed_deadlines`` is the simulator's count from its last /diagnostics status.
 
@@ -224,6 +225,9 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
                 registry = IntraProcess.of(launch.nodes[0].context) if mode == "composed" and intra_process else None
                 callbacks = CallbackCpu(composed, registry) if mode == "composed" else None
                 children = {label: p.pid for label, p in launch.processes.items()}
+                writer = getattr(getattr(launch.recorder, "writer", None), "pid", None) if record else None
+                if writer is not None:          # the recorder's writer child (cdpr_tools.bag.writer_process)
+                    children["bag_writer_process"] = writer
                 if part is not None:
                     children["winch_platform_sim"] = part.pid
                 sim = sim_node(launch) if mode == "composed" and not split else None
