@@ -82,7 +82,8 @@ class CableForceControllerNode(CdprNode):
             inputs["setpoint"] = (OperationalSetpoint, "setpoint")
             self.hand_over = self.create_publisher(ControllerState, "cable_force_controller/hand_over", CONTROL)
         self.sync = StampSync(self, inputs, primary="f", callback=self._cycle, mode=self.sync_mode,
-                              optional=("hpfc", "setpoint") if self.force_controller else ())
+                              optional=("hpfc", "setpoint") if self.force_controller else (),
+                              urgent=("f",))     # the command path (intraprocess.py)
 
     @staticmethod
     def _cfc_params(v: dict) -> CFCParams:

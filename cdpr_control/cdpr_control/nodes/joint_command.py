@@ -115,6 +115,7 @@ class JointCommandNode(CdprNode):
                   "cfc": (ControllerState, "cable_force_controller/state")}
         inputs.update({f"offset:{name}": (ControllerState, f"{name}/state") for name in names})
         self.sync = StampSync(self, inputs, primary="cfc", callback=self._cycle, mode=self.sync_mode,
+                              urgent=("cfc",),   # the command path (intraprocess.py)
                               optional=tuple(f"offset:{name}" for name in names),
                               sizes={"cfc": self.robot.m, **{f"offset:{name}": 6 for name in names}},
                               on_stale=self._hold_cycle)
