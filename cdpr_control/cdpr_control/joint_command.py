@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
+from .safety import all_finite
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
 
@@ -56,7 +57,7 @@ class JointCommand:
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
         target = None if hold else self.target(x_d, offsets, dq_cfc)
-        self.held = target is None or not np.isfinite(target).all()
+        self.held = target is None or not all_finite(target.tolist())
         if not self.held:
             step = self.v_max * self.dt
             # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
