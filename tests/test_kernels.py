@@ -10,7 +10,7 @@ import pytest
 from poses import random_poses
 
 from cdpr_control import cable, dynamics, kernels, kinematics
-from cdpr_control.cable_force_control import CFCParams, widened_saturation
+from cdpr_control.cable_force_control import CableForceControl, CFCParams, widened_saturation
 from cdpr_control.control_loop import ControlLoop
 from cdpr_control.forward_kinematics import CONVERGED, NON_FINITE, ForwardKinematics
 from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
@@ -231,6 +231,37 @@ def test_widened_saturation_kernel_equals_the_reference(robot):
     for ref, fast in zip(widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max),
                          kernels.widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max)):
         np.testing.assert_allclose(fast, ref, rtol=1e-14)
+
+
+@pytest.mark.parametrize("model", ["nonlinear", "linear"])
+def test_cfc_period_kernel_equals_the_reference(robot, model):
+    """CableForceControl's compiled period (kernels.cfc_period) against the numpy stages: the PT1,
+    widened saturation near both limits, PI through saturation and release, a feed-forward other
+    than f_d, a held integrator now and then, both stiffness models; equal to rounding."""
+    rng = np.random.default_rng(19)
+    f_min, f_max = robot.cable.f_min, robot.cable.f_max
+    span = float(np.min(f_max - f_min))
+    params = CFCParams(stiffness_model=model, F_sat_n=0.2 * span, F_sat_p=0.2 * span, widen_band=0.2 * span)
+    fast, ref = CableForceControl(robot, 1e-3, params), CableForceControl(robot, 1e-3, params)
+    theta = kinematics.inverse_kinematics(robot, robot.home).q
+    seen = np.zeros(2, dtype=int)
+    for k in range(2000):
+        f_d = f_min + (f_max - f_min) * (0.5 + 0.5 * np.sin(k / 150.0 + np.arange(robot.m)))
+        f = f_d + 0.2 * span * np.sin(k / 40.0) + rng.normal(0.0, 0.02 * span, robot.m)
+        f_ff = f_d + 3.0 if k % 3 else None
+        for stage in (fast, ref):
+            stage.controller.pi.hold = 700 <= k < 800
+        dq = fast.update(f_d, f, theta, f_min, f_max, f_ff)
+        with kernels.numpy_reference():
+            dq_ref = ref.update(f_d, f, theta, f_min, f_max, f_ff)
+        np.testing.assert_allclose(dq, dq_ref, rtol=1e-12, atol=1e-15)
+        for name in ("f_out",):
+            np.testing.assert_allclose(getattr(fast.controller, name), getattr(ref.controller, name), rtol=1e-12)
+        np.testing.assert_allclose(fast.controller.pi.integrator, ref.controller.pi.integrator, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(fast.controller.pi.saturated, ref.controller.pi.saturated)
+        np.testing.assert_allclose(fast.controller.f_filtered, ref.controller.f_filtered, rtol=1e-12)
+        seen += ref.controller.pi.saturated.sum(), (~ref.controller.pi.saturated).sum()
+    assert seen.min() > 1000                         # both regimes, many times
 
 
 def test_friction_compiled_with_changing_wrap_angles_equals_numpy(robot):

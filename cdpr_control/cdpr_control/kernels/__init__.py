@@ -31,6 +31,7 @@ import numpy as np
 from .. import cable as np_cable
 from .. import dynamics as np_dynamics
 from .. import kinematics as np_kinematics
+from .control import cfc_period as _cfc_period
 from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
 from .friction import friction_platform_force
@@ -43,7 +44,7 @@ from .robot_data import RobotData, robot_data, vector
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cfc_period", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
            "friction_platform_force", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
@@ -117,6 +118,16 @@ def widened_saturation(params, f, f_min, f_max):
     return sat
 
 
+def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
+    """One compiled CFC period (see :mod:`.control`; the caller checks ENABLED) -> new arrays
+    (integrator, saturated, u, f_out, dq); the PT1 state y (a float64 C-contiguous array) is updated in place."""
+    m = f.shape[0]
+    saturated, out = np.empty(m, dtype=bool), np.empty((4, m))
+    _cfc_period(vector(f_d), vector(f_ff), vector(f), vector(f_min), vector(f_max), vector(l_t), vector(dq_0), y,
+                vector(integrator), K_p, T_i, constants, saturated, out)
+    return out[0], saturated, out[1], out[2], out[3]
+
+
 _warm = {"robot_free": False, "robot": False}
 
 
@@ -137,6 +148,7 @@ def warm_up(robot=None) -> None:
         pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
         widened_saturation(CFCParams(), f, f, f)
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
+        cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, np.ones(11))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return
