@@ -205,6 +205,7 @@ class HybridForceControl:
         self.enabled = enabled
         self.state = IDLE
         self.z_t = np.array([0.0, 0.0, 1.0])
+        self._z_t_of: bytes | None = None      # F_d,0 (its bytes) whose axis z_t is
         self.x_t = 0.0
         self.v_t = 0.0
         self.integrator = 0.0
@@ -255,7 +256,9 @@ class HybridForceControl:
         w = np.asarray(w, dtype=float)
         if F_d0.shape != (3,) or not all_finite(F_d0.tolist()):
             F_d0 = np.zeros(3)                                   # no valid demand: release
-        self.z_t = task_axis(F_d0, self.z_t)
+        key = F_d0.tobytes()
+        if key != self._z_t_of:                                  # (the same F_d,0 has the same axis)
+            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
         F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
         if w.shape == (6,) and all_finite(w.tolist()):
             F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))

@@ -213,7 +213,10 @@ class JointCommandNode(CdprNode):
 
     @staticmethod
     def _offset_sample(msg) -> OffsetSample | None:
-        return None if msg is None else OffsetSample(stamp_ns(msg) * 1e-9, msg.enabled, np.asarray(msg.output))
+        """None for no message or an inactive one: OffsetInputs takes both alike (they add nothing)."""
+        if msg is None or not msg.enabled:
+            return None
+        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg.output))
 
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
