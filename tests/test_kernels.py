@@ -14,6 +14,7 @@ from cdpr_control.cable_force_control import CableForceControl, CFCParams, widen
 from cdpr_control.control_loop import ControlLoop
 from cdpr_control.forward_kinematics import CONVERGED, NON_FINITE, ForwardKinematics
 from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
+from cdpr_control.joint_command import JointCommand
 from cdpr_control.kernels import model as fk_kernels
 from cdpr_control.pi_control import PIController
 from cdpr_control.robot import load_robot
@@ -262,6 +263,33 @@ def test_cfc_period_kernel_equals_the_reference(robot, model):
         np.testing.assert_allclose(fast.controller.f_filtered, ref.controller.f_filtered, rtol=1e-12)
         seen += ref.controller.pi.saturated.sum(), (~ref.controller.pi.saturated).sum()
     assert seen.min() > 1000                         # both regimes, many times
+
+
+def test_joint_command_kernel_equals_the_reference(robot):
+    """JointCommand.update compiled (kernels.joint_command_step) against the numpy reference:
+    following, rate-limited after a jump, offsets and Δq_CFC, a non-finite target and holds
+    (braking)."""
+    fast, ref = JointCommand(robot, 1e-3), JointCommand(robot, 1e-3)
+    theta = kinematics.inverse_kinematics(robot, robot.home).q
+    fast.reset(theta), ref.reset(theta)
+    counts = np.zeros(3, dtype=int)                  # held, rate-limited, free periods
+    for k in range(800):
+        x_d = robot.home + 0.02 * np.sin(k / 50.0) * np.array([1.0, 0.5, 0.3, 0.05, 0.02, 0.01])
+        x_d[2] += 0.05 * (k >= 100)                  # a jump: rate-limited for a while
+        dq = np.full(robot.m, 1e-4 * np.cos(k / 30.0))
+        if 400 <= k < 420:
+            dq[k % robot.m] = np.nan                 # a target outside the model: held
+        offsets = [np.full(6, 1e-4)] if k % 2 else []
+        hold = 600 <= k < 650
+        theta_d = fast.update(x_d, offsets, dq if k % 5 else None, hold=hold)
+        with kernels.numpy_reference():
+            theta_ref = ref.update(x_d, offsets, dq if k % 5 else None, hold=hold)
+        np.testing.assert_allclose(theta_d, theta_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fast.velocity, ref.velocity, rtol=0, atol=1e-9)
+        assert fast.held == ref.held
+        limited = np.abs(ref.velocity).max() >= ref.v_max * (1 - 1e-12)
+        counts += ref.held, not ref.held and limited, not ref.held and not limited
+    assert counts.min() >= 10
 
 
 def test_friction_compiled_with_changing_wrap_angles_equals_numpy(robot):

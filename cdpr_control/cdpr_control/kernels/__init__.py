@@ -38,14 +38,15 @@ from .friction import friction_platform_force
 from .model import cable_lengths as _cable_lengths
 from .model import elastic_cable_state, elastic_frozen, secant_stiffness
 from .model import inverse_kinematics as _inverse_kinematics
+from .model import joint_command_step
 from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "cfc_period", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
-           "friction_platform_force", "inverse_kinematics", "measured_wrench", "numpy_reference", "pi_update",
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period", "elastic_cable_state", "elastic_frozen",
+           "friction_platform_force", "inverse_kinematics", "joint_command_step", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
@@ -158,6 +159,7 @@ def warm_up(robot=None) -> None:
     x, zero, f = vector(robot.home), np.zeros(6), np.full(robot.m, float(np.mean(robot.cable.f_min)))
     ik = _inverse_kinematics(robot, x)
     _cable_lengths(robot, x)
+    joint_command_step(robot, x, f, f, 1e-3)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,

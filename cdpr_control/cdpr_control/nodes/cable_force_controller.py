@@ -23,8 +23,6 @@ not applied and the integrator is held (the filter and the calibration stay curr
 """
 from __future__ import annotations
 
-from math import isfinite
-
 import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -33,6 +31,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control import kernels
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
+from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
@@ -154,13 +153,14 @@ class CableForceControllerNode(CdprNode):
         a = self.a_zero
         if hpfc is not None and sp is not None:
             F_d0 = hpfc.reference[:3]
-            x_d = pose_from_msg(sp.pose)
-            if _finite(F_d0) and _finite(x_d.tolist()):
+            # idle with the set-point's ramp-out done, the coupling passes f_d through whatever a
+            # is (CFCCoupling.contact_update): no IK then, the most frequent case by far (nor x_d,
+            # whose pose StampSync found finite)
+            x_d = pose_from_msg(sp.pose) if state != "I" or self.coupling.weight > 0.0 else None
+            if all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist())):
                 if F_d0 != self.F_d0:        # the same F_d,0 has the same axis (task_axis)
                     self.z_t, self.F_d0 = task_axis(F_d0, self.z_t), F_d0
-                # idle with the set-point's ramp-out done, the coupling passes f_d through whatever a
-                # is (CFCCoupling.contact_update): no IK then, the most frequent case by far
-                if state != "I" or self.coupling.weight > 0.0:
+                if x_d is not None:
                     a = task_force_direction(kernels.inverse_kinematics(self.robot, x_d).AT, self.z_t)
             else:
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
@@ -179,14 +179,8 @@ class CableForceControllerNode(CdprNode):
         return f_set, f_ff, paused
 
 
-def _finite(values) -> bool:
-    """All finite; one sum first (inf or NaN make it non-finite), element-wise only when it is not
-    (a sum of finite values may overflow)."""
-    return isfinite(sum(values)) or all(map(isfinite, values))
-
-
 def _valid(m: int, *inputs) -> bool:
-    return all(len(v) == m and _finite(v) for v in inputs)
+    return all(len(v) == m and all_finite(v) for v in inputs)
 
 
 def main(args=None):
