@@ -223,6 +223,7 @@ class HybridForceControl:
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
         self.mass = self.robot.platform.mass + params.payload
+        self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
 
     def _enter(self, state: str) -> None:
         """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
@@ -261,7 +262,7 @@ class HybridForceControl:
             self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
         F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
         if w.shape == (6,) and all_finite(w.tolist()):
-            F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
+            F_vec = self.force_filter.update(-(w[:3] - self.weight))    # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
