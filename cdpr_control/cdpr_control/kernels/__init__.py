@@ -4,9 +4,10 @@ The controller's stages (friction compensation, forward kinematics, force set-po
 joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cost mostly call
 overhead. This package holds the numeric cores of one period compiled with numba: the inverse
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
-(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44) and the PI
-arithmetic (3.16)/(3.19). The control flow and the state stay in the stage classes, which call the
-functions below at their call sites.
+(3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the PI
+arithmetic (3.16)/(3.19), the whole CFC period (3.19)-(3.23) and the joint command's period (5.10).
+The control flow and the state stay in the stage classes, which call the functions below at their
+call sites.
 
 The numpy modules (kinematics, forward_kinematics, dynamics, friction, pi_control) stay the readable
 reference: each function below is the same computation, and the tests compare the two on random
