@@ -96,7 +96,8 @@ class OffsetInputs:
                     active = False
                 else:
                     self.last[name] = x
-            alpha = self.alpha[name] = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
+            alpha = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
+            self.alpha[name] = alpha
             if alpha:                    # (an input switched off adds nothing: spare the array operations)
                 total += alpha * self.last[name]
         return total, faults

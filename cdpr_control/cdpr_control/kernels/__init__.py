@@ -46,9 +46,9 @@ from .robot_data import RobotData, robot_data, vector
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period", "elastic_cable_state", "elastic_frozen",
-           "friction_platform_force", "inverse_kinematics", "joint_command_step", "measured_wrench", "numpy_reference", "pi_update",
-           "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period", "elastic_cable_state",
+           "elastic_frozen", "friction_platform_force", "inverse_kinematics", "joint_command_step", "measured_wrench",
+           "numpy_reference", "pi_update", "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
 @contextlib.contextmanager
