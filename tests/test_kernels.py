@@ -11,10 +11,11 @@ import pytest
 from poses import random_poses
 
 from cdpr_control import cable, dynamics, kernels, kinematics
-from cdpr_control.cable_force_control import CFCParams, widened_saturation
+from cdpr_control.cable_force_control import CableForceControl, CFCParams, widened_saturation
 from cdpr_control.control_loop import ControlLoop
 from cdpr_control.forward_kinematics import CONVERGED, NON_FINITE, ForwardKinematics
 from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
+from cdpr_control.joint_command import JointCommand
 from cdpr_control.kernels import model as fk_kernels
 from cdpr_control.pi_control import PIController
 from cdpr_control.robot import load_robot
@@ -262,6 +263,64 @@ def test_widened_saturation_kernel_equals_the_reference(robot):
     for ref, fast in zip(widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max),
                          kernels.widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max)):
         np.testing.assert_allclose(fast, ref, rtol=1e-14)
+
+
+@pytest.mark.parametrize("model", ["nonlinear", "linear"])
+def test_cfc_period_kernel_equals_the_reference(robot, model):
+    """CableForceControl's compiled period (kernels.cfc_period) against the numpy stages: the PT1,
+    widened saturation near both limits, PI through saturation and release, a feed-forward other
+    than f_d, a held integrator now and then, both stiffness models; equal to rounding."""
+    rng = np.random.default_rng(19)
+    f_min, f_max = robot.cable.f_min, robot.cable.f_max
+    span = float(np.min(f_max - f_min))
+    params = CFCParams(stiffness_model=model, F_sat_n=0.2 * span, F_sat_p=0.2 * span, widen_band=0.2 * span)
+    fast, ref = CableForceControl(robot, 1e-3, params), CableForceControl(robot, 1e-3, params)
+    theta = kinematics.inverse_kinematics(robot, robot.home).q
+    seen = np.zeros(2, dtype=int)
+    for k in range(2000):
+        f_d = f_min + (f_max - f_min) * (0.5 + 0.5 * np.sin(k / 150.0 + np.arange(robot.m)))
+        f = f_d + 0.2 * span * np.sin(k / 40.0) + rng.normal(0.0, 0.02 * span, robot.m)
+        f_ff = f_d + 3.0 if k % 3 else None
+        for stage in (fast, ref):
+            stage.controller.pi.hold = 700 <= k < 800
+        dq = fast.update(f_d, f, theta, f_min, f_max, f_ff)
+        with kernels.numpy_reference():
+            dq_ref = ref.update(f_d, f, theta, f_min, f_max, f_ff)
+        np.testing.assert_allclose(dq, dq_ref, rtol=1e-12, atol=1e-15)
+        for name in ("f_out",):
+            np.testing.assert_allclose(getattr(fast.controller, name), getattr(ref.controller, name), rtol=1e-12)
+        np.testing.assert_allclose(fast.controller.pi.integrator, ref.controller.pi.integrator, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(fast.controller.pi.saturated, ref.controller.pi.saturated)
+        np.testing.assert_allclose(fast.controller.f_filtered, ref.controller.f_filtered, rtol=1e-12)
+        seen += ref.controller.pi.saturated.sum(), (~ref.controller.pi.saturated).sum()
+    assert seen.min() > 1000                         # both regimes, many times
+
+
+def test_joint_command_kernel_equals_the_reference(robot):
+    """JointCommand.update compiled (kernels.joint_command_step) against the numpy reference:
+    following, rate-limited after a jump, offsets and Δq_CFC, a non-finite target and holds
+    (braking)."""
+    fast, ref = JointCommand(robot, 1e-3), JointCommand(robot, 1e-3)
+    theta = kinematics.inverse_kinematics(robot, robot.home).q
+    fast.reset(theta), ref.reset(theta)
+    counts = np.zeros(3, dtype=int)                  # held, rate-limited, free periods
+    for k in range(800):
+        x_d = robot.home + 0.02 * np.sin(k / 50.0) * np.array([1.0, 0.5, 0.3, 0.05, 0.02, 0.01])
+        x_d[2] += 0.05 * (k >= 100)                  # a jump: rate-limited for a while
+        dq = np.full(robot.m, 1e-4 * np.cos(k / 30.0))
+        if 400 <= k < 420:
+            dq[k % robot.m] = np.nan                 # a target outside the model: held
+        offsets = [np.full(6, 1e-4)] if k % 2 else []
+        hold = 600 <= k < 650
+        theta_d = fast.update(x_d, offsets, dq if k % 5 else None, hold=hold)
+        with kernels.numpy_reference():
+            theta_ref = ref.update(x_d, offsets, dq if k % 5 else None, hold=hold)
+        np.testing.assert_allclose(theta_d, theta_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fast.velocity, ref.velocity, rtol=0, atol=1e-9)
+        assert fast.held == ref.held
+        limited = np.abs(ref.velocity).max() >= ref.v_max * (1 - 1e-12)
+        counts += ref.held, not ref.held and limited, not ref.held and not limited
+    assert counts.min() >= 10
 
 
 def test_friction_compiled_with_changing_wrap_angles_equals_numpy(robot):

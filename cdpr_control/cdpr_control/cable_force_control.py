@@ -118,6 +118,19 @@ class CableForceController:
         return self.dq_cfc
 
 
+    def update_compiled(self, f_d, f, l_t, stiffness: tuple, f_min, f_max, f_ff=None) -> np.ndarray:
+        """:meth:`update` as one compiled call (kernels.cfc_period, the same arithmetic), once the
+        feedback filter has its first sample and while the PI integrates (not held); ``stiffness``
+        the model's constants (CableForceControl._stiffness_constants) instead of K_l."""
+        p, pi = self.params, self.pi
+        constants = np.array((self.feedback_filter.alpha, pi.dt, p.F_sat_n, p.F_sat_p, p.widen_band, p.widen_factor)
+                             + stiffness, dtype=float)
+        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = kernels.cfc_period(
+            f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
+            pi.integrator, pi.K_p, pi.T_i, constants)
+        return self.dq_cfc
+
+
 class CableForceControl:
     """The CFC stage of the control loop for one robot: the controller plus its stiffness model.
 
@@ -175,4 +188,13 @@ class CableForceControl:
                 c.reset(self._calibrated_dq_0(), f=f)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
+        if kernels.ENABLED and c.feedback_filter.y is not None and not c.pi.hold:
+            return c.update_compiled(f_d, f, l_t, self._stiffness_constants(), f_min, f_max, f_ff)
         return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff)
+
+    def _stiffness_constants(self) -> tuple[float, float, float, float, float]:
+        """The stiffness model of :meth:`_stiffness` for the compiled period: (linear 1/0, k_spec
+        nominal, k0, k1, k2)."""
+        c = self.robot.cable
+        return (float(self.params.stiffness_model == "linear"), float(c.k_spec_nominal), float(c.k0), float(c.k1),
+                float(c.k2))

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .filters import LowPass
+from .safety import all_finite
 
 IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
 STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
@@ -204,6 +205,7 @@ class HybridForceControl:
         self.enabled = enabled
         self.state = IDLE
         self.z_t = np.array([0.0, 0.0, 1.0])
+        self._z_t_of: bytes | None = None      # F_d,0 (its bytes) whose axis z_t is
         self.x_t = 0.0
         self.v_t = 0.0
         self.integrator = 0.0
@@ -221,6 +223,7 @@ class HybridForceControl:
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
         self.mass = self.robot.platform.mass + params.payload
+        self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
 
     def _enter(self, state: str) -> None:
         """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
@@ -252,12 +255,14 @@ class HybridForceControl:
         p, dt = self.params, self.dt
         F_d0 = np.asarray(F_d0, dtype=float)
         w = np.asarray(w, dtype=float)
-        if F_d0.shape != (3,) or not np.all(np.isfinite(F_d0)):
+        if F_d0.shape != (3,) or not all_finite(F_d0.tolist()):
             F_d0 = np.zeros(3)                                   # no valid demand: release
-        self.z_t = task_axis(F_d0, self.z_t)
+        key = F_d0.tobytes()
+        if key != self._z_t_of:                                  # (the same F_d,0 has the same axis)
+            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
         F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
-        if w.shape == (6,) and np.all(np.isfinite(w)):
-            F_vec = self.force_filter.update(contact_force(w, self.mass, self.robot.gravity))
+        if w.shape == (6,) and all_finite(w.tolist()):
+            F_vec = self.force_filter.update(-(w[:3] - self.weight))    # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
@@ -435,6 +440,9 @@ class CFCCoupling:
           :meth:`update`, again live along a.
         """
         f_d = np.asarray(f_d, dtype=float)
+        if state == IDLE and self.weight == 0.0:     # idle, ramped out: f_d passes, whatever a is
+            self.average.reset(None)
+            return f_d, f_d, False, float(F_c)
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
 
@@ -489,9 +497,9 @@ class CFCCoupling:
             c.feedback_filter.reset(f)
             c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
         self.paused = paused
-        aa = float(a @ a)
         F_a = 0.0
-        if not paused and state in (CONTACT, RELEASE) and aa > 0.0:
+        aa = float(a @ a) if not paused and state in (CONTACT, RELEASE) else 0.0
+        if aa > 0.0:
             share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
             c.pi.integrator = c.pi.integrator - share * a
             F_a = share * aa                            # the cables press with a . f along z_t
@@ -519,9 +527,15 @@ class ContactHandOver:
     def set_time_constant(self, T_c: float) -> None:
         self.filter.set_time_constant(T_c)
 
+    def _filter(self, u: float) -> float:
+        """The PT1 self.filter of a scalar, without its arrays (the same arithmetic, a fraction of the cost)."""
+        y = self.filter.y
+        self.filter.y = y = float(u) if y is None else float(y + self.filter.alpha * (u - y))
+        return y
+
     def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
         """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]."""
-        F_c = float(self.filter.update(state.F_d if state.state in FORCE_CONTROLLED else 0.0))
+        F_c = self._filter(state.F_d if state.state in FORCE_CONTROLLED else 0.0)
         if state.state in CFC_PAUSED:
             self.share = 0.0
         elif state.state in (CONTACT, RELEASE):

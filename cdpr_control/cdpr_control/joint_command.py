@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
+from .safety import all_finite
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
 
@@ -32,6 +33,7 @@ class JointCommand:
         self.a_brake = a_brake
         self.theta_d: np.ndarray | None = None
         self.velocity = np.zeros(robot.m)      # θ̇_d of the last period [m/s]
+        self.no_dq = np.zeros(robot.m)         # Δq_CFC when none is given (q - 0 = q)
         self.held = False
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
 
@@ -45,27 +47,40 @@ class JointCommand:
 
     def target(self, x_d, offsets=(), dq_cfc=None) -> np.ndarray:
         """θ_d before rate limiting: IK of the offset set-point minus Δq_CFC (5.10)."""
+        q = kernels.cable_lengths(self.robot, self._offset_pose(x_d, offsets))
+        return q if dq_cfc is None else q - dq_cfc
+
+    @staticmethod
+    def _offset_pose(x_d, offsets) -> np.ndarray:
+        """x_d + Σ offsets, the argument of the IK in (5.10)."""
         x = np.array(x_d, dtype=float)
         for offset in offsets:
             x += offset
-        q = kernels.cable_lengths(self.robot, x)
-        return q if dq_cfc is None else q - dq_cfc
+        return x
 
     def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False) -> np.ndarray:
         """One period: the rate-limited θ_d, or braking to a stand when holding or the target is invalid."""
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
-        target = None if hold else self.target(x_d, offsets, dq_cfc)
-        self.held = target is None or not np.isfinite(target).all()
-        if not self.held:
-            step = self.v_max * self.dt
-            # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
-            delta = np.minimum(np.maximum(target - self.theta_d, -step), step)
-        else:
+        delta = None if hold else self._step(x_d, offsets, dq_cfc)
+        self.held = delta is None
+        if self.held:
             delta = self.brake() * self.dt
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()
+
+    def _step(self, x_d, offsets, dq_cfc) -> np.ndarray | None:
+        """The change of θ_d towards the target, at most v_max dt per cable; None if the target is not finite."""
+        step = self.v_max * self.dt
+        if kernels.ENABLED:           # the same in one compiled call
+            return kernels.joint_command_step(self.robot, self._offset_pose(x_d, offsets),
+                                              self.no_dq if dq_cfc is None else dq_cfc, self.theta_d, step)
+        target = self.target(x_d, offsets, dq_cfc)
+        if not all_finite(target.tolist()):
+            return None
+        # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
+        return np.minimum(np.maximum(target - self.theta_d, -step), step)
 
     def brake(self) -> np.ndarray:
         """θ̇_d of a braking period: the last one scaled so its largest entry drops by a_brake dt."""

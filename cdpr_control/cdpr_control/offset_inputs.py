@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .safety import NON_FINITE, STALE_INPUT, Fault
+from .safety import NON_FINITE, STALE_INPUT, Fault, all_finite
 
 
 @dataclass
@@ -91,11 +91,13 @@ class OffsetInputs:
                     faults.append(Fault(STALE_INPUT, f"stale input offset {name}: older than its deadline "
                                         f"{1e3 * self.configs[name].deadline:.0f} ms", True))
                     active = False
-                elif x.shape != (6,) or not np.all(np.isfinite(x)):
+                elif x.shape != (6,) or not all_finite(x.tolist()):
                     faults.append(Fault(NON_FINITE, f"offset {name} is not 6 finite values: {x}", True))
                     active = False
                 else:
                     self.last[name] = x
-            self.alpha[name] = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
-            total += self.alpha[name] * self.last[name]
+            alpha = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
+            self.alpha[name] = alpha
+            if alpha:                    # (an input switched off adds nothing: spare the array operations)
+                total += alpha * self.last[name]
         return total, faults

@@ -8,6 +8,7 @@ converged, a stale input, and non-finite input values.
 from __future__ import annotations
 
 import math
+from math import isfinite
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,34 @@ FK_NOT_CONVERGED = "fk_not_converged"
 STALE_INPUT = "stale_input"
 NON_FINITE = "non_finite"
 WORKSPACE = "workspace"          # the set-point left the wrench-feasible workspace (joint command)
+
+
+def all_finite(values) -> bool:
+    """Whether every value of a sequence of floats is finite: one sum (a NaN or inf makes it
+    non-finite), element by element only when the sum is not finite (finite values may overflow).
+    At 1 kHz this costs a fraction of np.isfinite(v).all() on a short vector."""
+    return isfinite(sum(values)) or all(map(isfinite, values))
+
+
+def _floats(value) -> list:
+    return (value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)).ravel().tolist()
+
+
+def _finite_floats(name: str, value, faults: list) -> list | None:
+    """value's entries as floats when it is given and finite; None otherwise (a fault when not finite)."""
+    if value is None:
+        return None
+    values = _floats(value)
+    if all_finite(values):
+        return values
+    faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
+    return None
+
+
+def _inside(f: list, f_min, f_max, tolerance: float) -> bool:
+    """Whether every force is within the tightest limits (so within its own: rounding is monotonic,
+    f_i >= min f >= max f_min - tol >= f_min,i - tol); False asks for the element-wise check."""
+    return not f or (min(f) >= max(_floats(f_min)) - tolerance and max(f) <= min(_floats(f_max)) + tolerance)
 
 
 @dataclass
@@ -50,24 +79,20 @@ class SafetyMonitor:
         """Faults of one period; inputs that are None are not checked."""
         c = self.config
         faults: list[Fault] = []
-        # each input's finiteness once (at 1 kHz the numpy calls cost more than the checks)
-        finite = {name: value is not None and bool(np.isfinite(value).all())
-                  for name, value in (("f", f), ("x_d", x_d), ("x", x))}
-        for name, value in (("f", f), ("x_d", x_d), ("x", x)):
-            if value is not None and not finite[name]:
-                faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
-        low = high = ()
-        if finite["f"]:
+        # as Python floats, each input's finiteness once: at 1 kHz numpy's per-call cost on these
+        # short vectors is more than the checks
+        f_values = _finite_floats("f", f, faults)
+        x_d_values = _finite_floats("x_d", x_d, faults)
+        x_values = _finite_floats("x", x, faults)
+        if f_values is not None and not _inside(f_values, f_min, f_max, c.force_tolerance):
             below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
-            if below.any() or above.any():      # (the common case needs no indices)
-                low, high = np.flatnonzero(below), np.flatnonzero(above)
-            for i in low:
+            for i in np.flatnonzero(below):
                 faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N below f_min {f_min[i]:.1f} N", c.hold_on_force_limit))
-            for i in high:
+            for i in np.flatnonzero(above):
                 faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N above f_max {f_max[i]:.1f} N", c.hold_on_force_limit))
-        if finite["x_d"] and finite["x"]:
-            dr = math.dist(x_d[:3], x[:3])
-            dphi = math.dist(x_d[3:], x[3:])
+        if x_d_values is not None and x_values is not None:
+            dr = math.dist(x_d_values[:3], x_values[:3])
+            dphi = math.dist(x_d_values[3:], x_values[3:])
             if dr > c.max_position_lag:
                 faults.append(Fault(POSITION_LAG, f"position lag {dr * 1e3:.1f} mm > {c.max_position_lag * 1e3:.1f} mm", True))
             if dphi > c.max_orientation_lag:

@@ -5,8 +5,9 @@ joint command) run at 1 kHz; as numpy calls on arrays of 6 or 8 numbers they cos
 overhead. This package holds the numeric cores of one period compiled with numba: the inverse
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
 (3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
-predictor of the wrench set-point (3.24)-(3.26) and the PI arithmetic (3.16)/(3.19). The control
-flow and the state stay in the stage classes, which call the functions below at their call sites.
+predictor of the wrench set-point (3.24)-(3.26), the PI arithmetic (3.16)/(3.19), the whole CFC
+period (3.19)-(3.23) and the joint command's period (5.10). The control flow and the state stay in
+the stage classes, which call the functions below at their call sites.
 
 The numpy modules (kinematics, forward_kinematics, dynamics, friction, wrench_setpoint, pi_control)
 stay the readable reference: each function below is the same computation, and the tests compare the
@@ -32,6 +33,7 @@ import numpy as np
 from .. import cable as np_cable
 from .. import dynamics as np_dynamics
 from .. import kinematics as np_kinematics
+from .control import cfc_period as _cfc_period
 from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
 from .friction import friction_platform_force
@@ -39,6 +41,7 @@ from .model import cable_lengths as _cable_lengths
 from .model import _AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q, _ROWS, elastic_cable_state, elastic_frozen, ik_packed
 from .model import secant_stiffness
 from .model import inverse_kinematics as _inverse_kinematics
+from .model import joint_command_step
 from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
@@ -46,8 +49,9 @@ from .setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "all_finite", "cable_lengths", "cable_stiffness", "elastic_cable_state", "elastic_frozen",
-           "friction_platform_force", "inverse_kinematics", "inverse_kinematics_fields", "measured_wrench", "numpy_reference", "pi_update",
+__all__ = ["ENABLED", "RobotData", "all_finite", "cable_lengths", "cable_stiffness", "cfc_period",
+           "elastic_cable_state", "elastic_frozen", "friction_platform_force", "inverse_kinematics",
+           "inverse_kinematics_fields", "joint_command_step", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
 
 
@@ -168,6 +172,16 @@ def widened_saturation(params, f, f_min, f_max):
     return sat
 
 
+def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
+    """One compiled CFC period (see :mod:`.control`; the caller checks ENABLED) -> new arrays
+    (integrator, saturated, u, f_out, dq); the PT1 state y (a float64 C-contiguous array) is updated in place."""
+    m = f.shape[0]
+    saturated, out = np.empty(m, dtype=bool), np.empty((4, m))
+    _cfc_period(vector(f_d), vector(f_ff), vector(f), vector(f_min), vector(f_max), vector(l_t), vector(dq_0), y,
+                vector(integrator), K_p, T_i, constants, saturated, out)
+    return out[0], saturated, out[1], out[2], out[3]
+
+
 _warm = {"robot_free": False, "robot": False}
 
 
@@ -189,6 +203,7 @@ def warm_up(robot=None) -> None:
         widened_saturation(CFCParams(), f, f, f)
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
+        cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, np.ones(11))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return
@@ -198,6 +213,7 @@ def warm_up(robot=None) -> None:
     x, zero, f = vector(robot.home), np.zeros(6), np.full(robot.m, float(np.mean(robot.cable.f_min)))
     ik = _inverse_kinematics(robot, x)
     _cable_lengths(robot, x)
+    joint_command_step(robot, x, f, f, 1e-3)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,

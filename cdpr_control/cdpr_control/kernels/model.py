@@ -117,6 +117,19 @@ def cable_lengths_kernel(x, a, b, R_A, r_p, pulleys, q):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def joint_command_kernel(x, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, delta):
+    """The rate-limited step of JointCommand.update into delta (m,): the target θ = q(x) - Δq_CFC
+    ((2.7), (5.10)) less θ_d, limited to ±step; False (delta not set) when the target is not finite."""
+    q = ik(x, a, b, R_A, r_p, pulleys)[0]
+    for i in range(q.shape[0]):
+        if not np.isfinite(q[i] - dq_cfc[i]):
+            return False
+    for i in range(q.shape[0]):
+        delta[i] = min(max((q[i] - dq_cfc[i]) - theta_d[i], -step), step)
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy")
 def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys, w):
     """w = -A^T(x) f (2.11) into w (6,)."""
     AT = ik(x, a, b, R_A, r_p, pulleys)[3]
@@ -147,6 +160,17 @@ def cable_lengths(robot, x) -> np.ndarray:
     q = np.empty(d.a.shape[0])
     cable_lengths_kernel(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys, q)
     return q
+
+
+def joint_command_step(robot, x, dq_cfc, theta_d, step: float) -> np.ndarray | None:
+    """:func:`joint_command_kernel` of pose x (6,): the change of θ_d (m,), None for a target that is not finite."""
+    d = robot_data(robot)
+    delta = np.empty(d.a.shape[0])
+    dq_cfc, theta_d = vector(dq_cfc), vector(theta_d)
+    if dq_cfc.shape != delta.shape or theta_d.shape != delta.shape:   # (broadcast, or raise, as numpy would)
+        dq_cfc, theta_d = (vector(np.broadcast_to(v, delta.shape)) for v in (dq_cfc, theta_d))
+    finite = joint_command_kernel(vector(x), d.a, d.b, d.R_A, d.r_p, d.pulleys, dq_cfc, theta_d, float(step), delta)
+    return delta if finite else None
 
 
 def measured_wrench(robot, x, f) -> np.ndarray:

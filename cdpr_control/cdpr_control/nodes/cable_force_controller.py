@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control import kernels
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
+from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
@@ -54,6 +55,7 @@ PARAMS = [
     ParamSpec("T_MA", HPFCParams().T_MA, "moving average T_MA,HPFC of the set-point after a contact [s], "
               "table 5.1 (section 5.1.2)", range=(0.0, 60.0)),
 ]
+HAND_OVER_NAMES = ["x", "y", "z", "a", "b", "c"]
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose <name>/state pauses this "
                              "controller in contact (5.1.2); empty: none", read_only=True)
 
@@ -77,6 +79,8 @@ class CableForceControllerNode(CdprNode):
             "theta": (JointState, "winch/state"),
         }
         self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
+        self.F_d0 = None                            # F_d,0 of z_t
+        self.a_zero = np.zeros(self.robot.m)        # a of a period without a set-point (never modified)
         if self.force_controller:
             inputs["hpfc"] = (ControllerState, f"{self.force_controller}/state")
             inputs["setpoint"] = (OperationalSetpoint, "setpoint")
@@ -112,47 +116,53 @@ class CableForceControllerNode(CdprNode):
         fd_msg = msgs["f_d"]
         f_d, f = np.asarray(fd_msg.f_d), np.asarray(msgs["f"].f)
         theta = np.asarray(msgs["theta"].position)
-        m = self.robot.m
         stage = self.stage
-        state = ControllerState(header=self.header(t_ns), controller="cable_force_controller",
+        header = self.header(t_ns)          # (shared with the hand-over: messages are not modified)
+        state = ControllerState(header=header, controller="cable_force_controller",
                                 enabled=stage.enabled, names=self.names, reference=f_d.tolist(), feedback=f.tolist())
-        if not (f_d.shape == f.shape == theta.shape == (m,) and np.isfinite(np.concatenate((f_d, f, theta))).all()):
+        if not _valid(self.robot.m, fd_msg.f_d, msgs["f"].f, msgs["theta"].position):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            state.output = [0.0] * m
+            state.output = [0.0] * self.robot.m
             self.publisher.publish(state)
             return
-        f_ff = None
+        f_ref, f_fb, f_ff = f_d, f, None
         if self.force_controller:           # section 5.1.2: paused in A-C, running in D and R
-            f_d, f_ff, paused = self._contact(msgs, f_d, f, t_ns)
+            f_d, f_ff, paused = self._contact(msgs, f_d, f, t_ns, header)
         else:
             paused = False
         if not paused:
             self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max), f_ff)
-        dq = self.dq_held
         c = stage.controller
         if stage.enabled and c.f_filtered is not None:
-            state.feedback = c.f_filtered.tolist()
+            f_fb = c.f_filtered
+            state.feedback = f_fb.tolist()
             state.integrator = c.pi.integrator.tolist()
             state.feedforward = (f_d if f_ff is None else f_ff).tolist()
-            state.saturated = c.pi.saturated.tolist()
-            self.report(DiagnosticStatus.WARN if c.pi.saturated.any() else DiagnosticStatus.OK,
-                        "saturated" if c.pi.saturated.any() else "ok", stamp_ns=t_ns)
-        state.error = (np.asarray(state.reference) - np.asarray(state.feedback)).tolist()
-        state.output = dq.tolist()
+            saturated = c.pi.saturated.tolist()
+            state.saturated = saturated
+            self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
+                        "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
+        state.error = (f_ref - f_fb).tolist()
+        state.output = self.dq_held.tolist()
         self.publisher.publish(state)
 
-    def _contact(self, msgs: dict, f_d, f, t_ns: int):
+    def _contact(self, msgs: dict, f_d, f, t_ns: int, header):
         """CFCCoupling.run with the state of the hybrid force controller and a = (A^T(x_d))_F^T z_t
         -> (set-point, feed-forward, paused); publishes the hand-over of the integral part."""
         hpfc, sp = msgs.get("hpfc"), msgs.get("setpoint")
         state = (parse_state(hpfc.controller) if hpfc is not None else None) or "I"
-        a = np.zeros(self.robot.m)
+        a = self.a_zero
         if hpfc is not None and sp is not None:
-            F_d0 = np.asarray(hpfc.reference[:3], dtype=float)
-            x_d = pose_from_msg(sp.pose)
-            if np.all(np.isfinite(F_d0)) and np.all(np.isfinite(x_d)):
-                self.z_t = task_axis(F_d0, self.z_t)
-                a = task_force_direction(kernels.inverse_kinematics(self.robot, x_d).AT, self.z_t)
+            F_d0 = hpfc.reference[:3]
+            # idle with the set-point's ramp-out done, the coupling passes f_d through whatever a
+            # is (CFCCoupling.contact_update): no IK then, the most frequent case by far (nor x_d,
+            # whose pose StampSync found finite)
+            x_d = pose_from_msg(sp.pose) if state != "I" or self.coupling.weight > 0.0 else None
+            if all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist())):
+                if F_d0 != self.F_d0:        # the same F_d,0 has the same axis (task_axis)
+                    self.z_t, self.F_d0 = task_axis(F_d0, self.z_t), F_d0
+                if x_d is not None:
+                    a = task_force_direction(kernels.inverse_kinematics(self.robot, x_d).AT, self.z_t)
             else:
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
                             "no hand-over this period", stamp_ns=t_ns)
@@ -162,11 +172,16 @@ class CableForceControllerNode(CdprNode):
         f_set, f_ff, paused, _, F_a = self.coupling.run(state, f_d, 0.0, a, stage.controller, f)
         if not stage.enabled or stage.controller.dq_0 is None:
             F_a = 0.0
+        z = self.z_t
         self.hand_over.publish(ControllerState(
-            header=self.header(t_ns), controller="cable_force_controller:hand_over",
-            enabled=bool(stage.enabled and not stage.controller.pi.hold), names=["x", "y", "z", "a", "b", "c"],
-            output=(F_a * self.z_t).tolist() + [0.0, 0.0, 0.0]))
+            header=header, controller="cable_force_controller:hand_over",
+            enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
+            output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))
         return f_set, f_ff, paused
+
+
+def _valid(m: int, *inputs) -> bool:
+    return all(len(v) == m and all_finite(v) for v in inputs)
 
 
 def main(args=None):

@@ -216,6 +216,7 @@ class GCodeInterpreterNode(CdprNode):
         self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
         self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
         self._last_setpoint: OperationalSetpoint | None = None
+        self._setpoint_key, self._setpoint_body = None, {}    # see _setpoint_fields
         if self.source:
             for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
                 self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
@@ -462,12 +463,22 @@ class GCodeInterpreterNode(CdprNode):
                 header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
                 acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
         else:
-            twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
-            msg = OperationalSetpoint(
-                header=self.header(stamp, self.frame_id), pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
-                acceleration=accel_to_msg(accel), force=vector3(self.q[6:]), line=int(self.line))
+            msg = OperationalSetpoint(header=self.header(stamp, self.frame_id), **self._setpoint_fields())
         self._last_setpoint = msg
         self.setpoint_pub.publish(msg)
+
+    def _setpoint_fields(self) -> dict:
+        """The set-point's pose, twist, acceleration, force and line. While they do not change
+        (holding a pose, a dwell) the messages of the last period are used again (subscribers do not
+        modify what they receive), which spares the conversions."""
+        key = (self.q.tobytes(), self.xd.tobytes(), self.xdd.tobytes(), self.line)
+        if key != self._setpoint_key:
+            twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
+            self._setpoint_key = key
+            self._setpoint_body = dict(pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
+                                       acceleration=accel_to_msg(accel), force=vector3(self.q[6:]),
+                                       line=int(self.line))
+        return self._setpoint_body
 
     def _publish_status(self, stamp: int, force: bool = False) -> None:
         active = self.active

@@ -37,7 +37,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from cdpr_control.force_setpoint import ForceSetpointParams
-from cdpr_control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, ContactHandOver, HPFCParams,
+from cdpr_control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver, HPFCParams,
                                                HybridForceControl, format_state)
 from cdpr_control.ospc import AXES
 
@@ -48,6 +48,7 @@ from .qos import CONTROL
 from .sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
+ABSORBING = (CONTACT, RELEASE)      # the states in which HybridForceControl.absorb takes a hand-over
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
     ParamSpec("enabled", False, "hybrid position/force control on (M103) or off (M104; releases the contact)"),
@@ -117,7 +118,8 @@ class HybridForceControllerNode(CdprNode):
         later = []
         for msg in self.hand_overs:        # in lockstep the one of period k - 1; each taken once
             if stamp_ns(msg) < t_ns:
-                stage.absorb(float(stage.z_t @ np.asarray(msg.output[:3], dtype=float)) / k_t)
+                if stage.state in ABSORBING:     # (absorb takes nothing in the other states)
+                    stage.absorb(float(stage.z_t @ np.asarray(msg.output[:3], dtype=float)) / k_t)
             else:
                 later.append(msg)
         self.hand_overs = later

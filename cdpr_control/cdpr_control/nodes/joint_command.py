@@ -95,6 +95,7 @@ class JointCommandNode(CdprNode):
         self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
         names = list(self.get_parameter(OFFSET_INPUTS.name).value)
         self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
+        self.offset_keys = [(name, f"offset:{name}") for name in names]     # (their input names)
         specs = PARAMS + [spec for name in names for spec in offset_params(name)]
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, specs, self._validate, self._apply)
@@ -169,7 +170,7 @@ class JointCommandNode(CdprNode):
             self.command.reset(np.asarray(theta_msg.position))
         x_d = pose_from_msg(msgs["setpoint"].pose)
         force_control = self.mode == "force_control"
-        samples = {name: self._offset_sample(msgs.get(f"offset:{name}")) for name in self.offsets.names} \
+        samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
@@ -213,7 +214,10 @@ class JointCommandNode(CdprNode):
 
     @staticmethod
     def _offset_sample(msg) -> OffsetSample | None:
-        return None if msg is None else OffsetSample(stamp_ns(msg) * 1e-9, msg.enabled, np.asarray(msg.output))
+        """None for no message or an inactive one: OffsetInputs takes both alike (they add nothing)."""
+        if msg is None or not msg.enabled:
+            return None
+        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg.output))
 
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")

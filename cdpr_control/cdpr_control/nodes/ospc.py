@@ -17,6 +17,7 @@ from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
 from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+from cdpr_control.safety import all_finite
 from cdpr_control.stability import check_force_control, planned_home_forces
 
 from .base import CdprNode, spin_node
@@ -89,12 +90,13 @@ class OSPCNode(CdprNode):
                          if np.any(a != 0.0)), None)
             if axis is not None:
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
+        reference, feedback = x_d.tolist(), x.tolist()
         state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                names=list(AXES), reference=x_d.tolist(), feedback=x.tolist(),
+                                names=list(AXES), reference=reference, feedback=feedback,
                                 error=(x_d - x).tolist())
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
-        if self.enabled and np.all(np.isfinite(x)) and np.all(np.isfinite(x_d)):
+        if self.enabled and all_finite(feedback) and all_finite(reference):
             out = self.controller.update(x_d, x)
             state.integrator = self.controller.pi.integrator.tolist()
             state.saturated = self.controller.pi.saturated.tolist()

@@ -10,7 +10,7 @@ remap to ``ground_truth/pose`` to see the simulator's), ``cable_forces``, ``setp
 The inputs are only kept (the newest of each, keep-last 1): composed with the loop they arrive as
 in-process objects, about a microsecond a message; a timer at ``rate`` [Hz] (steady clock, so also
 in a lockstep simulation running slower than real time) draws them into one MarkerArray (frame and
-anchors included every time, so a viewer that joins late has them). The figure is in
+anchors included every time, so a viewer that joins late has them) while anything subscribes. The figure is in
 docs/visualization.md (benchmarks/bench_visualization.py).
 
 tf2_msgs is not among the ROS 2 wheels on PyPI, so there is no ``/tf``: every marker is in ``base``
@@ -31,6 +31,7 @@ from cdpr_control import scene as sc
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg, wrench_from_msg
+from .intraprocess import has_subscribers
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 
@@ -67,8 +68,8 @@ class VisualizationNode(CdprNode):
 
     def publish_markers(self) -> None:
         pose = self.latest.get("pose")
-        if pose is None:
-            return
+        if pose is None or not has_subscribers(self.marker_pub):
+            return          # (a scene costs milliseconds: none for nobody; a viewer that joins gets the next)
         x = pose_from_msg(pose.pose)
         forces, setpoint, wrench = (self.latest.get(k) for k in ("forces", "setpoint", "wrench"))
         f = np.asarray(forces.f, float) if forces is not None and len(forces.f) == self.robot.m else None
