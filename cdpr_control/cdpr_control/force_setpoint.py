@@ -15,6 +15,7 @@ import numpy as np
 
 from . import kernels
 from .filters import LowPass
+from .safety import all_finite
 from .force_distribution import BACKENDS, METHODS, BorderPolicy, DistributionResult, ForceDistributor
 from .wrench_setpoint import WrenchSetpoint
 
@@ -125,7 +126,7 @@ class ForceSetpoint:
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
-        if self.params.wrench_source == "measured" and kernels.all_finite(w):
+        if self.params.wrench_source == "measured" and all_finite(w):
             self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
                                                   self.wrench_filter, w_model)  # filtered, saturated
         else:

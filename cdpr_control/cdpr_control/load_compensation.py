@@ -45,6 +45,7 @@ import numpy as np
 
 from . import cable, kernels
 from .filters import LowPass
+from .safety import all_finite
 from .kinematics import cross, kardan_rate_matrix, rotation_matrix
 from .stiffness import operational_stiffness
 
@@ -453,7 +454,7 @@ class LoadCompensation:
         w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
         if self.m_hat is None:
             self.m_hat = self.m_p
-        if not kernels.all_finite(w):
+        if not all_finite(w):
             self.guarded = True
             return                                                           # hold the estimate
         w_z, a = self.wrench_filter.update([w[2], xddots[2]])               # means over the window
@@ -505,7 +506,7 @@ class LoadCompensation:
                 and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
-        finite = kernels.all_finite(f)
+        finite = all_finite(f)
         if finite:
             f = self.force_filter.update(f)                       # the forces of the window of (4.4)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:

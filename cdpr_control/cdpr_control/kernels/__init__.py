@@ -23,7 +23,6 @@ period, not in it. See docs/kernels.md.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 
 import numpy as np
@@ -49,7 +48,7 @@ from .setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "all_finite", "cable_lengths", "cable_stiffness", "cfc_period",
+__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period",
            "elastic_cable_state", "elastic_frozen", "friction_platform_force", "inverse_kinematics",
            "inverse_kinematics_fields", "joint_command_step", "measured_wrench", "numpy_reference", "pi_update",
            "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
@@ -64,12 +63,6 @@ def numpy_reference():
         yield
     finally:
         ENABLED = before
-
-
-def all_finite(v) -> bool:
-    """np.isfinite(v).all() of a short vector, cheaper: one sum first (a NaN or inf makes it
-    non-finite); only a sum that overflowed (values near 1e308) needs the test per element."""
-    return math.isfinite(sum(np.asarray(v, dtype=float).ravel().tolist())) or bool(np.isfinite(v).all())
 
 
 def inverse_kinematics(robot, x) -> np_kinematics.InverseKinematics:

@@ -13,7 +13,6 @@ then carries the last converged estimate. The computation is
 from __future__ import annotations
 
 import inspect
-import math
 import time
 
 import numpy as np
@@ -23,6 +22,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from sensor_msgs.msg import JointState
 
 from cdpr_control import forward_kinematics as fk
+from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg, pose_to_msg, wrench_to_msg
@@ -74,8 +74,8 @@ class ForwardKinematicsNode(CdprNode):
         header = self.header(t_ns)
         diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
         m = self.robot.m
-        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
-        if len(position) != m or len(forces) != m or not math.isfinite(sum(position) + sum(forces) + sum(x_d.tolist())):
+        if len(position) != m or len(forces) != m or not (all_finite(position) and all_finite(forces)
+                                                          and all_finite(x_d)):
             diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
             self.diag_pub.publish(diag)
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)

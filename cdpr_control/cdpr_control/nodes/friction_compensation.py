@@ -14,7 +14,6 @@ friction`` writes a parameter file with identified ones. The computation is
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
@@ -23,6 +22,7 @@ from sensor_msgs.msg import JointState
 
 from cdpr_control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control import kernels
+from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
 from .conversions import pose_from_msg
@@ -82,8 +82,7 @@ class FrictionCompensationNode(CdprNode):
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]
         effort = state.effort
-        # as StampSync's check (sync._finite): one sum, which a NaN or inf makes non-finite
-        if len(effort) != self.robot.m or not math.isfinite(sum(effort)):
+        if len(effort) != self.robot.m or not all_finite(effort):
             self.report(DiagnosticStatus.ERROR, "sensor forces missing or non-finite", stamp_ns=t_ns)
             return
         F_s = np.asarray(effort, dtype=float)

@@ -29,7 +29,7 @@ from std_srvs.srv import Trigger
 
 from cdpr_control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
                                             LoadCompensationParams)
-from cdpr_control.kernels import all_finite
+from cdpr_control.safety import all_finite
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
@@ -113,7 +113,7 @@ class LoadCompensationNode(CdprNode):
         x = pose_from_msg(msgs["pose"].pose) if "pose" in msgs else None
         header = self.header(t_ns)
         lc = self.stage
-        valid = f.shape == (self.robot.m,) and all_finite((x_d, xdot_d, xddot_d))
+        valid = f.shape == (self.robot.m,) and all_finite(x_d) and all_finite(xdot_d) and all_finite(xddot_d)
         if valid:
             x_lc = lc.update(x_d, xdot_d, xddot_d, f, x)
         else:

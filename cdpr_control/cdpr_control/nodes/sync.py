@@ -26,9 +26,10 @@ from math import isfinite
 from typing import Callable
 
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint
-from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import InertiaStamped, PoseStamped, WrenchStamped
 from sensor_msgs.msg import JointState
+
+from cdpr_control.safety import all_finite
 
 from .qos import CONTROL
 
@@ -38,12 +39,6 @@ BASE_FRAMES = ("", "base", "world")     # frame_id accepted for poses, wrenches 
 def stamp_ns(msg) -> int:
     s = msg._header._stamp      # the slots (this runs for every message of the loop)
     return s._sec * 1_000_000_000 + s._nanosec
-
-
-def _finite(values) -> bool:
-    """All finite (one sum, no allocation: a NaN or inf, or inf - inf, makes it non-finite; so would
-    values near 1e308, which no input of a cable robot has)."""
-    return isfinite(sum(values))
 
 
 def _vector3_sum(v) -> float:
@@ -60,7 +55,7 @@ def _cables(name: str, values, m: int, required: bool = True) -> str | None:
         return None
     if len(values) != m:
         return f"{name} has {len(values)} values, the robot has {m} cables"
-    return None if _finite(values) else f"{name} has non-finite values"
+    return None if all_finite(values) else f"{name} has non-finite values"
 
 
 def _frame(msg) -> str | None:
@@ -94,7 +89,7 @@ def _controller_state(msg, m):
     n = len(msg.output)
     if n not in (6, m):
         return f"output has {n} values, need 6 (pose) or {m} (cables)"
-    return None if _finite(msg.output) else "output has non-finite values"
+    return None if all_finite(msg.output) else "output has non-finite values"
 
 
 def _pose_stamped(msg, m):

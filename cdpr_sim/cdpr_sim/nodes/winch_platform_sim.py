@@ -30,7 +30,6 @@ unstretched cable length.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -50,6 +49,7 @@ from cdpr_control.nodes.parameters import ParameterSet, ParamSpec
 from cdpr_control.nodes.qos import CONTROL
 from cdpr_control.nodes.sync import stamp_ns
 from cdpr_control.nodes.timing import DurationStats
+from cdpr_control.safety import all_finite
 
 from ..contacts import ContactMaterial, Cylinder, Plane, PlatformShape, default_tool
 from ..simulator import SimConfig, Simulator
@@ -215,8 +215,7 @@ class WinchPlatformSimNode(CdprNode):
 
     def _on_command(self, msg: JointState) -> None:
         position = msg.position
-        # finite as cdpr_control.nodes.sync checks it: one sum, which a NaN or inf makes non-finite
-        if len(position) != self.robot.m or not math.isfinite(sum(position)):
+        if len(position) != self.robot.m or not all_finite(position):
             self.invalid_commands += 1
             self.input_fault("winch/command", f"{len(position)} positions (need {self.robot.m} finite values)")
             return
