@@ -41,7 +41,7 @@ import numba
 import numpy as np
 import pybullet
 
-from cdpr_control import cable
+from cdpr_control import cable, kernels
 from cdpr_control.drive_models import DriveModel
 from cdpr_control.friction import PulleyFriction, sensor_from_winch_force
 from cdpr_control.kinematics import inverse_kinematics
@@ -334,7 +334,10 @@ class Simulator:
             w_load = w + self._w_contact if self._obstacles else w
             thetadot_0 = self._thetadot_0
             thetadot_0[:] = drives.thetadot
-            drives.step(u)                               # the drives do not feel the cable forces
+            if kernels.ENABLED:                          # the drives do not feel the cable forces
+                kernels.drive_step(drives, u)
+            else:
+                drives.step(u)
             F, T = cables.implicit_wrench(f, A, d, thetadot_0, drives.thetadot, body.mass, body.c, body.inertia, R,
                                           self._gravity, w_load)
             if self._external:
@@ -377,7 +380,10 @@ class Simulator:
         self._theta_prev = theta
         self._theta_enc_prev = theta_enc
         if self.config.friction:
-            F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
+            if kernels.ENABLED:
+                F_s_true = kernels.friction_sensor_force(self.friction, f, theta, thetadot, cables.beta)
+            else:
+                F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
         else:
             F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
