@@ -148,6 +148,21 @@ def test_drive_step_without_limit_and_with_a_non_finite_command():
         np.testing.assert_array_equal(fast.thetadot, jitted.thetadot)
 
 
+def test_the_wrappers_refuse_arrays_of_another_length():
+    """The compiled loops index without bounds checks: a wrong length is refused before them."""
+    robot = load_robot("ipanema3")
+    q = kinematics.inverse_kinematics(robot, robot.home).q
+    friction, drive = PulleyFriction.from_robot(robot, q, 1e-7), DriveModel.from_robot(robot, 1e-3)
+    state = friction.dahl.state.copy()
+    short, ones, zeros = np.ones(robot.m - 1), np.ones(robot.m), np.zeros(robot.m)
+    for args in ((short, q, zeros), (ones, short, zeros), (ones, q, short)):
+        with pytest.raises(ValueError):
+            kernels.friction_sensor_force(friction, *args, ones)
+    np.testing.assert_array_equal(friction.dahl.state, state)
+    with pytest.raises(ValueError):
+        kernels.drive_step(drive, np.ones(robot.m + 1))
+
+
 def test_the_simulator_runs_the_kernels_and_the_reference_gives_the_same_bits(monkeypatch):
     """Simulator.step: the kernels when ENABLED, the models' own methods under numpy_reference();
     the outputs of the two runs are identical."""
@@ -155,7 +170,8 @@ def test_the_simulator_runs_the_kernels_and_the_reference_gives_the_same_bits(mo
     calls = []
     for cls, name in ((DriveModel, "step"), (PulleyFriction, "sensor_force")):
         original = getattr(cls, name)
-        monkeypatch.setattr(cls, name, lambda self, *a, _f=original, _n=name, **kw: calls.append(_n) or _f(self, *a, **kw))
+        monkeypatch.setattr(cls, name,
+                            lambda self, *a, _f=original, _n=name, **kw: calls.append(_n) or _f(self, *a, **kw))
     runs = []
     for enabled in (True, False):
         calls.clear()

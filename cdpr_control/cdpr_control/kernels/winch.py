@@ -96,9 +96,12 @@ def friction_sensor_force(model, f, theta, thetadot, beta_last, tol: float = 1e-
     alpha, gamma = model.series.tables(beta_last)
     dahl = model.dahl
     m = dahl.state.shape[1]
+    f, theta, thetadot = vector(f), vector(theta), vector(thetadot)
+    if f.shape != (m,) or theta.shape != (m,) or thetadot.shape != (m,):     # the loops do not check bounds
+        raise ValueError(f"f, theta, thetadot must have shape ({m},), got {f.shape}, {theta.shape}, {thetadot.shape}")
     F_s = np.empty(m)
-    sensor_force_kernel(vector(f), vector(theta), vector(thetadot), alpha, gamma, dahl.sigma, dahl.v_eps, dahl.state,
-                        tol, max_iterations, _sensor_gain(model.beta_1), F_s)
+    sensor_force_kernel(f, theta, thetadot, alpha, gamma, dahl.sigma, dahl.v_eps, dahl.state, tol, max_iterations,
+                        _sensor_gain(model.beta_1), F_s)
     return F_s
 
 
@@ -155,8 +158,11 @@ def drive_step_kernel(theta_d, Phi, G_new, G_old, x, buffer, head, delay, v_max,
 def drive_step(model, theta_d) -> np.ndarray:
     """DriveModel.step of ``model`` compiled: advances the drives by dt with theta_d (m,) held and
     returns theta (m,) at the end of the step (a new array, also ``model.theta``)."""
+    theta_d = vector(theta_d)
+    if theta_d.shape != (model.m,):                           # the loops do not check bounds
+        raise ValueError(f"theta_d must have shape ({model.m},), got {theta_d.shape}")
     theta = np.empty(model.m)
-    model.head = drive_step_kernel(vector(theta_d), model.Phi, model.G_new, model.G_old, model.x, model.buffer,
-                                   model.head, model.delay_steps, model.v_max, model.dt, model.thetadot, theta)
+    model.head = drive_step_kernel(theta_d, model.Phi, model.G_new, model.G_old, model.x, model.buffer, model.head,
+                                   model.delay_steps, model.v_max, model.dt, model.thetadot, theta)
     model.theta = theta
     return theta
