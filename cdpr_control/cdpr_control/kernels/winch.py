@@ -6,8 +6,9 @@ from the platform to the force sensor (3.30)-(3.44), once per physics step or co
 here are the same arithmetic as loops over the m cables, in one compiled call each. As whole-array
 expressions (even compiled by numba) they allocate a temporary per operation, which costs several
 times the arithmetic on 8 numbers; the loops do the same operations in the same order on each
-element, so the results are the same numbers. The model objects keep their state; the wrappers
-pass it in.
+element, so the results are the same numbers as the reference compiled by numba (plain numpy's
+vectorised exp may round the last bit differently). The model objects keep their state; the
+wrappers pass it in.
 """
 from __future__ import annotations
 
@@ -32,10 +33,10 @@ def sensor_force_kernel(f, theta, thetadot, alpha_table, gamma_table, sigma, v_e
                         sensor_gain, F_s):
     """friction.sensor_force_step followed by friction.sensor_from_winch_force, per cable.
 
-    Arguments as sensor_force_step; sensor_gain = 1 - cos(beta_1) (3.36); writes the
-    sensor forces F_s (m,) and advances ``state``. The fixed-point iteration runs on all cables
-    together and stops on the largest change, as the reference does (the iteration count is shared).
-    Maxima propagate NaN as numpy's max does (a NaN never satisfies the stopping test).
+    Arguments as sensor_force_step; sensor_gain = 1 - cos(beta_1) (3.36); writes the sensor forces
+    F_s (m,) and advances ``state``. The fixed-point iteration runs on all cables together and stops
+    on the largest change, as the reference does (the iteration count is shared). Maxima propagate
+    NaN as numpy's max does (a NaN never satisfies the stopping test).
     """
     m = f.shape[0]
     c1, c0, neg_decay, s, f_w = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
