@@ -90,10 +90,7 @@ def parts(sim: Simulator, theta_d: np.ndarray) -> dict:
     out = sim.output
     thetadot = np.zeros(sim.m)
 
-    def drive_step():                   # what Simulator.step runs: the kernels unless they are off
-        return kernels.drive_step(drives, theta_d) if kernels.ENABLED else drives.step(theta_d)
-
-    def sensor_force():
+    def sensor_force():                 # what Simulator.step runs: the kernel unless the kernels are off
         if kernels.ENABLED:
             return kernels.friction_sensor_force(sim.friction, out.f, drives.theta, thetadot, cables.beta)
         return sim.friction.sensor_force(out.f, drives.theta, thetadot, cables.beta)
@@ -103,7 +100,7 @@ def parts(sim: Simulator, theta_d: np.ndarray) -> dict:
     return {
         "physics_us": physics,
         "cable_model_us": time_call(lambda: cables.wrench(r, R, v, omega, drives.theta, drives.thetadot)),
-        "drives_us": time_call(drive_step),
+        "drives_us": time_call(lambda: drives.step(theta_d)),
         "friction_us": time_call(sensor_force),
         "sensors_us": time_call(lambda: sim.sensor.read(out.F_s_true)) + time_call(lambda: sim.encoder.read(out.theta_true)),
     }

@@ -18,10 +18,8 @@ the change of theta per step to v_max dt (and, for the second-order model, the v
 +-v_max): a saturated servo, outside the linear models of the thesis.
 
 All drives of a robot share one model; the state is vectorised over the m cables. The step,
-:func:`drive_step`, is written in the array subset numba compiles: a caller needing speed passes
-``jit=numba.njit``; this module imports only numpy/scipy. The simulator (once per physics step)
-runs :meth:`DriveModel.step` as :func:`cdpr_control.kernels.drive_step` (the same operations as a
-loop over the cables) while the kernels are enabled.
+:func:`drive_step`, is written in the array subset numba compiles: a caller needing speed (the
+simulator, once per physics step) passes ``jit=numba.njit``; this module imports only numpy/scipy.
 """
 from __future__ import annotations
 
@@ -75,8 +73,6 @@ class DriveModel:
     ``theta`` (m,) is the cable length at the end of the step and ``thetadot`` (m,) the mean cable
     velocity over the step, (theta[k+1] - theta[k]) / dt, as a drive differentiating its encoder
     reports it. jit: compiler for :func:`drive_step` (e.g. numba.njit), None runs it as numpy.
-    The discretisation (``Phi``, ``G_new``, ``G_old``), the state ``x`` (n, m) and the command ring
-    buffer (``buffer``, ``head``) are the arguments of :func:`drive_step`.
     """
 
     def __init__(self, kind: str, A: np.ndarray, B: np.ndarray, T_d: float, dt: float, m: int,
@@ -100,15 +96,15 @@ class DriveModel:
             nu = 0.0
         self.delay_steps, self.delay_fraction = d, nu
         if A.shape[0] == 0:           # pure dead time (PT1 with T_1 = 0): theta = theta_d[k-d] at the step end
-            self.Phi, self.G_new, self.G_old = np.zeros((1, 1)), np.ones(1), np.zeros(1)
+            self._Phi, self._G_new, self._G_old = np.zeros((1, 1)), np.ones(1), np.zeros(1)
         else:
-            self.Phi, _ = _zoh_integral(A, B, dt)
-            Phi_late, self.G_new = _zoh_integral(A, B, (1.0 - nu) * dt)
+            self._Phi, _ = _zoh_integral(A, B, dt)
+            Phi_late, self._G_new = _zoh_integral(A, B, (1.0 - nu) * dt)
             _, G_early = _zoh_integral(A, B, nu * dt)
-            self.G_old = Phi_late @ G_early
-        self.buffer = np.zeros((d + 2, self.m))   # ring buffer of the last d + 2 commands
-        self.head = 0
-        self.x = np.zeros((self.Phi.shape[0], self.m))    # state, row 0 is theta
+            self._G_old = Phi_late @ G_early
+        self._buffer = np.zeros((d + 2, self.m))   # ring buffer of the last d + 2 commands
+        self._head = 0
+        self._x = np.zeros((self._Phi.shape[0], self.m))    # state, row 0 is theta
         self._step = drive_step if jit is None else jit(drive_step)
         self.theta = np.zeros(self.m)
         self.thetadot = np.zeros(self.m)
@@ -149,18 +145,18 @@ class DriveModel:
     def reset(self, theta) -> None:
         """Standstill at theta (m,): the state and every buffered command equal theta."""
         theta = np.broadcast_to(np.asarray(theta, dtype=float), (self.m,))
-        self.buffer[:] = theta
-        self.x[:] = 0.0
-        self.x[0] = theta
-        self.head = 0
+        self._buffer[:] = theta
+        self._x[:] = 0.0
+        self._x[0] = theta
+        self._head = 0
         self.theta = theta.copy()
         self.thetadot = np.zeros(self.m)
 
     def step(self, theta_d) -> np.ndarray:
         """Advance one dt with theta_d (m,) held; returns theta (m,) at the end of the step."""
-        self.head = self._step(np.asarray(theta_d, dtype=float), self.Phi, self.G_new, self.G_old, self.x,
-                               self.buffer, self.head, self.delay_steps, self.v_max, self.dt, self.thetadot)
-        self.theta = self.x[0].copy()
+        self._head = self._step(np.asarray(theta_d, dtype=float), self._Phi, self._G_new, self._G_old, self._x,
+                                self._buffer, self._head, self.delay_steps, self.v_max, self.dt, self.thetadot)
+        self.theta = self._x[0].copy()
         return self.theta
 
     # --- continuous model ------------------------------------------------------------------

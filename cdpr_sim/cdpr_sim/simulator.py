@@ -334,10 +334,7 @@ class Simulator:
             w_load = w + self._w_contact if self._obstacles else w
             thetadot_0 = self._thetadot_0
             thetadot_0[:] = drives.thetadot
-            if kernels.ENABLED:                          # the drives do not feel the cable forces
-                kernels.drive_step(drives, u)
-            else:
-                drives.step(u)
+            drives.step(u)                               # the drives do not feel the cable forces
             F, T = cables.implicit_wrench(f, A, d, thetadot_0, drives.thetadot, body.mass, body.c, body.inertia, R,
                                           self._gravity, w_load)
             if self._external:

@@ -1,14 +1,13 @@
-"""Compiled winch side of the simulated plant: the drives (3.10)/(5.11) and the pulley friction
-from the platform to the force sensor (3.30)-(3.44), once per physics step or control period.
+"""Compiled sensor side of the simulated plant: the pulley friction from the platform to the winch
+force sensor (3.30)-(3.44) and the sensor pulley (3.36), once per control period.
 
-:meth:`cdpr_control.drive_models.DriveModel.step` and
-:meth:`cdpr_control.friction.PulleyFriction.sensor_force` are the numpy reference; the functions
-here are the same arithmetic as loops over the m cables, in one compiled call each. As whole-array
-expressions (even compiled by numba) they allocate a temporary per operation, which costs several
+:meth:`cdpr_control.friction.PulleyFriction.sensor_force` is the numpy reference; the function here
+is the same arithmetic as loops over the m cables, in one compiled call. As whole-array
+expressions (even compiled by numba) it allocates a temporary per operation, which costs several
 times the arithmetic on 8 numbers; the loops do the same operations in the same order on each
 element, so the results are the same numbers as the reference compiled by numba (plain numpy's
-vectorised exp may round the last bit differently). The model objects keep their state; the
-wrappers pass it in.
+vectorised exp may round the last bit differently). The model keeps its state; the wrapper passes
+it in.
 """
 from __future__ import annotations
 
@@ -25,7 +24,7 @@ from .robot_data import vector
 _DIRECTION, _THETA_0, _F_0, _THETA, _F_D = 0, 1, 2, 3, 4
 if (_DIRECTION, _THETA_0, _F_0, _THETA, _F_D) != (np_friction.ROW_DIRECTION, np_friction.ROW_THETA_0,
                                                    np_friction.ROW_F_0, np_friction.ROW_THETA, np_friction.ROW_F_D):
-    raise ImportError("kernels.winch: the Dahl state rows differ from cdpr_control.friction.ROW_*")
+    raise ImportError("kernels.sensors: the Dahl state rows differ from cdpr_control.friction.ROW_*")
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -38,7 +37,9 @@ def sensor_force_kernel(f, theta, thetadot, alpha_table, gamma_table, sigma, v_e
     on the largest change, as the reference does (the iteration count is shared). Maxima propagate
     NaN as numpy's max does (a NaN never satisfies the stopping test).
     """
-    m = f.shape[0]
+    m = state.shape[1]
+    if f.shape[0] != m or theta.shape[0] != m or thetadot.shape[0] != m:     # the loops do not check bounds
+        raise ValueError("f, theta and thetadot must have one value per cable")
     c1, c0, neg_decay, s, f_w = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
     f_max = 0.0
     for i in range(m):
@@ -96,74 +97,7 @@ def friction_sensor_force(model, f, theta, thetadot, beta_last, tol: float = 1e-
     at the platform f (m,) show (3.44), (3.36); advances the model's Dahl state like the reference."""
     alpha, gamma = model.series.tables(beta_last)
     dahl = model.dahl
-    m = dahl.state.shape[1]
-    f, theta, thetadot = vector(f), vector(theta), vector(thetadot)
-    if f.shape != (m,) or theta.shape != (m,) or thetadot.shape != (m,):     # the loops do not check bounds
-        raise ValueError(f"f, theta, thetadot must have shape ({m},), got {f.shape}, {theta.shape}, {thetadot.shape}")
-    F_s = np.empty(m)
-    sensor_force_kernel(f, theta, thetadot, alpha, gamma, dahl.sigma, dahl.v_eps, dahl.state, tol, max_iterations,
-                        _sensor_gain(model.beta_1), F_s)
+    F_s = np.empty(dahl.state.shape[1])
+    sensor_force_kernel(vector(f), vector(theta), vector(thetadot), alpha, gamma, dahl.sigma, dahl.v_eps, dahl.state,
+                        tol, max_iterations, _sensor_gain(model.beta_1), F_s)
     return F_s
-
-
-@numba.njit(cache=True, error_model="numpy")
-def drive_step_kernel(theta_d, Phi, G_new, G_old, x, buffer, head, delay, v_max, dt, thetadot, theta):
-    """drive_models.drive_step per cable; also writes theta = x[0] (m,) at the end of the step.
-
-    Phi x stays one BLAS product as in the reference: written out as sums it would save about
-    0.2 us but round differently where BLAS fuses a multiply and an add (the second-order drive's
-    theta in the last bit). The rest is elementwise. The speed limit applies to every cable once
-    any cable exceeds it, as the reference's test on the largest step (NaN: no limit) does.
-    """
-    n, m = x.shape
-    L = buffer.shape[0]
-    for j in range(m):
-        buffer[head, j] = theta_d[j]
-    new = (head - delay) % L
-    old = (head - delay - 1) % L
-    x_new = Phi @ x
-    step = np.empty(m)
-    largest = 0.0
-    for j in range(m):
-        for i in range(n):
-            x_new[i, j] = x_new[i, j] + G_new[i] * buffer[new, j] + G_old[i] * buffer[old, j]
-        step[j] = x_new[0, j] - x[0, j]
-        a = abs(step[j])
-        if a > largest or a != a:
-            largest = a
-    limit = v_max * dt
-    clip = largest > limit                                    # speed limit of the servo
-    for j in range(m):
-        if clip:
-            s = step[j]
-            if s < -limit:
-                s = -limit
-            if s > limit:
-                s = limit
-            step[j] = s
-            x_new[0, j] = x[0, j] + s
-            if n == 2:
-                v = x_new[1, j]
-                if v < -v_max:
-                    v = -v_max
-                if v > v_max:
-                    v = v_max
-                x_new[1, j] = v
-        for i in range(n):
-            x[i, j] = x_new[i, j]
-        thetadot[j] = step[j] / dt
-        theta[j] = x_new[0, j]
-    return (head + 1) % L
-
-
-def drive_step(model, theta_d) -> np.ndarray:
-    """DriveModel.step of ``model`` compiled: advances the drives by dt with theta_d (m,) held and
-    returns theta (m,) at the end of the step (a new array, also ``model.theta``)."""
-    theta_d = vector(theta_d)
-    if theta_d.shape != (model.m,):                           # the loops do not check bounds
-        raise ValueError(f"theta_d must have shape ({model.m},), got {theta_d.shape}")
-    theta = np.empty(model.m)
-    model.head = drive_step_kernel(theta_d, model.Phi, model.G_new, model.G_old, model.x, model.buffer, model.head,
-                                   model.delay_steps, model.v_max, model.dt, model.thetadot, theta)
-    model.theta = theta
-    return theta
