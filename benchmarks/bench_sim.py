@@ -21,6 +21,7 @@ import time
 import numpy as np
 import pybullet
 
+from cdpr_control import kernels
 from cdpr_control.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator, pretension_lengths
 from cdpr_sim.startup import startup_forces
@@ -88,13 +89,19 @@ def parts(sim: Simulator, theta_d: np.ndarray) -> dict:
     F, T = np.zeros(3), np.zeros(3)
     out = sim.output
     thetadot = np.zeros(sim.m)
+
+    def sensor_force():                 # what Simulator.step runs: the kernel unless the kernels are off
+        if kernels.ENABLED:
+            return kernels.friction_sensor_force(sim.friction, out.f, drives.theta, thetadot, cables.beta)
+        return sim.friction.sensor_force(out.f, drives.theta, thetadot, cables.beta)
+
     physics = (time_call(lambda: pybullet.stepSimulation(physicsClientId=client)) + time_call(body.state)
                + time_call(lambda: body.apply(F, T, r)))
     return {
         "physics_us": physics,
         "cable_model_us": time_call(lambda: cables.wrench(r, R, v, omega, drives.theta, drives.thetadot)),
         "drives_us": time_call(lambda: drives.step(theta_d)),
-        "friction_us": time_call(lambda: sim.friction.sensor_force(out.f, drives.theta, thetadot, cables.beta)),
+        "friction_us": time_call(sensor_force),
         "sensors_us": time_call(lambda: sim.sensor.read(out.F_s_true)) + time_call(lambda: sim.encoder.read(out.theta_true)),
     }
 

@@ -26,8 +26,10 @@ its exact inverse. Everything is vectorised over the m cables; pure numpy.
 
 The two per-sample steps, :func:`platform_force_step` and :func:`sensor_force_step`, are written in
 the array subset that numba compiles and take the Dahl state as an explicit array, so a caller that
-needs speed (the simulator) passes ``jit=numba.njit`` to :class:`PulleyFriction` and runs this same
-code compiled; this module itself imports nothing beyond numpy.
+needs speed passes ``jit=numba.njit`` to :class:`PulleyFriction` and runs this same code compiled;
+this module itself imports nothing beyond numpy. The simulator runs :meth:`PulleyFriction.sensor_force`
+as :func:`cdpr_control.kernels.friction_sensor_force` (the same operations as a loop over the
+cables) while the kernels are enabled.
 """
 from __future__ import annotations
 

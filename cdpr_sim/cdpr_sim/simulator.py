@@ -41,7 +41,7 @@ import numba
 import numpy as np
 import pybullet
 
-from cdpr_control import cable
+from cdpr_control import cable, kernels
 from cdpr_control.drive_models import DriveModel
 from cdpr_control.friction import PulleyFriction, sensor_from_winch_force
 from cdpr_control.kinematics import inverse_kinematics
@@ -376,7 +376,10 @@ class Simulator:
         self._theta_prev = theta
         self._theta_enc_prev = theta_enc
         if self.config.friction:
-            F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
+            if kernels.ENABLED:
+                F_s_true = kernels.friction_sensor_force(self.friction, f, theta, thetadot, cables.beta)
+            else:
+                F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
         else:
             F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6

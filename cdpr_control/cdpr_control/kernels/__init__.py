@@ -6,8 +6,9 @@ overhead. This package holds the numeric cores of one period compiled with numba
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
 (3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
 predictor of the wrench set-point (3.24)-(3.26), the PI arithmetic (3.16)/(3.19), the whole CFC
-period (3.19)-(3.23) and the joint command's period (5.10). The control flow and the state stay in
-the stage classes, which call the functions below at their call sites.
+period (3.19)-(3.23) and the joint command's period (5.10); for the simulator, the pulley friction to
+the force sensors (3.43)-(3.44) (:mod:`.sensors`). The control flow and the state stay in the stage
+classes (and the simulator's models), which call the functions below at their call sites.
 
 The numpy modules (kinematics, forward_kinematics, dynamics, friction, wrench_setpoint, pi_control)
 stay the readable reference: each function below is the same computation, and the tests compare the
@@ -45,13 +46,15 @@ from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
 from .setpoint import smith_step
+from .sensors import friction_sensor_force
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period",
-           "elastic_cable_state", "elastic_frozen", "friction_platform_force", "inverse_kinematics",
-           "inverse_kinematics_fields", "joint_command_step", "measured_wrench", "numpy_reference", "pi_update",
-           "platform_wrench", "robot_data", "vector", "warm_up", "widened_saturation"]
+           "elastic_cable_state", "elastic_frozen", "friction_platform_force", "friction_sensor_force",
+           "inverse_kinematics", "inverse_kinematics_fields", "joint_command_step", "measured_wrench",
+           "numpy_reference", "pi_update", "platform_wrench", "robot_data", "vector", "warm_up",
+           "widened_saturation"]
 
 
 @contextlib.contextmanager
@@ -212,4 +215,6 @@ def warm_up(robot=None) -> None:
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,
                    d.l_0, d.k0, d.k1, d.k2, 1e-9, 30, np.empty(6))
     friction_platform_force(PulleyFriction.from_robot(robot, ik.q), f, vector(ik.q), np.zeros(robot.m), ik.beta)
+    # the simulator's
+    friction_sensor_force(PulleyFriction.from_robot(robot, ik.q), f, vector(ik.q), np.zeros(robot.m), ik.beta)
     _warm["robot"] = True
