@@ -97,9 +97,9 @@ def test_the_graph_types_have_an_encoder(type_name):
 @pytest.mark.parametrize("type_name", all_types())
 def test_encoding_is_rclpys_for_random_messages(type_name):
     cls, encode = message_class(type_name), encoder(type_name)
-    if encode is None:
-        check_same_encoding(cls(), serialize(cls()), zero_padding=False)   # rclpy's bytes, cut
-        pytest.skip("no encoder for this type: rclpy serializes it")
+    if encode is None:          # no encoder for this type (wide strings, bounded fields): rclpy's bytes, cut
+        check_same_encoding(cls(), serialize(cls()), zero_padding=False)
+        return
     rng = random.Random(type_name)
     check_same_encoding(cls(), encode(cls()))
     for _ in range(40):
