@@ -14,9 +14,11 @@ so only figures of one run compare):
   receiving the winch/command of that stamp (p50/p99/max), and missed periods (a step without a
   fresh command, or skipped because the loop fell behind).
 
-A probe node in a context of its own subscribes to /clock; after a warm-up the real-time factor
-is the simulated time advanced over the wall time between two /clock receptions a fixed window
-apart. Per period: wall time, CPU time of the processes involved, and the CPU time of each node
+After a warm-up the real-time factor is the simulated time advanced over the wall time of a
+fixed window: composed, read from the simulator node in the process; otherwise a probe node in a
+context of its own subscribes to /clock. (Before this session's issue 11 work the probe took
+/clock in the composed configurations too, which made the simulator publish /clock over DDS every
+period, about 100 us: earlier composed figures carry that.) Per period: wall time, CPU time of the processes involved, and the CPU time of each node
 (composed: thread CPU time inside its callbacks, exclusive of the callbacks its publications run
 in-process; processes: the child's CPU time from /proc; recording: the bag writer child process
 as ``bag_writer_process``, its CPU on the other core counted in the period's CPU). ``baseline_in_process``: the same
@@ -68,6 +70,7 @@ from cdpr_tools.ros_graph import new_context  # noqa: E402
 
 ROBOT = "ipanema3_mini"
 PERIOD_S = 1e-3
+PERIOD_NS = 1_000_000
 WARMUP_S = 5.0           # wall time after the loop runs, before the window
 WINDOW_S = 15.0          # wall time measured (lockstep)
 FREE_WINDOW_S = 60.0     # wall time measured free-running (the issue's 60 s)
@@ -87,13 +90,17 @@ TARGETS = {"composed_rtf_min": 3.0, "processes_rtf_min": 1.0, "recording_slowdow
 class ClockProbe:
     """/clock (and the simulator's /diagnostics) seen from a context and thread of its own."""
 
-    def __init__(self):
+    def __init__(self, clock: bool = True):
+        """``clock``: subscribe to /clock; otherwise :attr:`sim` (the simulator node in this process,
+        set once the graph runs) gives the simulated time."""
         self.context = new_context()
         self.node = Node(f"_bench_graph_probe_{os.getpid()}", context=self.context, start_parameter_services=False)
-        self.latest: tuple[float, int] | None = None  # (perf_counter at reception, sim time [ns])
+        self._latest: tuple[float, int] | None = None  # (perf_counter at reception, sim time [ns])
+        self.sim = None
         self.missed_deadlines: int | None = None      # the simulator's count, when it reported one
         clock_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Clock, "/clock", self._on_clock, clock_qos)
+        if clock:
+            self.node.create_subscription(Clock, "/clock", self._on_clock, clock_qos)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, DIAGNOSTICS)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -102,7 +109,14 @@ class ClockProbe:
         self._thread.start()
 
     def _on_clock(self, msg: Clock) -> None:
-        self.latest = (time.perf_counter(), msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
+        self._latest = (time.perf_counter(), msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
+
+    @property
+    def latest(self) -> tuple[float, int] | None:
+        """(wall time [perf_counter s], simulated time [ns]) of the newest step."""
+        if self.sim is not None:
+            return time.perf_counter(), self.sim.sim.steps * PERIOD_NS
+        return self._latest
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
@@ -205,13 +219,18 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
     if split:                               # the simulator in a process of its own
         description = select_nodes(description, exclude=["winch_platform_sim"])
         part = start_part(["--only", "winch_platform_sim"], arguments)
-    probe = ClockProbe()
+    # composed, the simulator's steps are read in-process: a /clock subscriber in another context
+    # would have the simulator publish /clock over DDS every period (about 100 us of its period)
+    in_process_clock = mode == "composed" and not split
+    probe = ClockProbe(clock=not in_process_clock)
     try:
         with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
             bag = pathlib.Path(tmp) / "bag"
             description.record = RecordSpec(output=str(bag)) if record else None
             wall_launch = time.perf_counter()
             with Launcher(description, mode=mode, intra_process=intra_process) as launch:
+                if in_process_clock:
+                    probe.sim = sim_node(launch)
                 probe.wait_running(START_TIMEOUT_S)
                 startup_s = time.perf_counter() - wall_launch
                 time.sleep(WARMUP_S)
