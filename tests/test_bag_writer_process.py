@@ -130,7 +130,9 @@ def test_parent_killed_the_child_closes_the_bag(tmp_path):
 
 # A composed graph in one process (publisher and recorder share a context) stopped by Ctrl-C.
 RECORDING = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    # Ctrl-C as in a terminal, also where the test runs in a background job (SIGINT inherited ignored)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
     from cdpr_control.nodes.intraprocess import IntraProcessNode
@@ -164,8 +166,13 @@ def test_ctrl_c_on_the_process_group_closes_the_bag_with_every_message(tmp_path)
     while int(proc.stdout.readline()) < 1000:
         pass
     os.killpg(proc.pid, signal.SIGINT)          # as a terminal does: the writer child gets it too
-    last = proc.stdout.readlines()[-1].split()
-    assert proc.wait(30) == 0 and last[0] == "published"
+    try:
+        out, _ = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("the recording did not stop on SIGINT within 60 s")
+    last = out.splitlines()[-1].split()
+    assert proc.returncode == 0 and last[0] == "published"
     bag = BagReader(path)
     assert not bag.problems
     assert [m.msg.position[0] for m in bag.messages()] == [float(k) for k in range(int(last[1]))]
