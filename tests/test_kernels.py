@@ -18,16 +18,8 @@ from cdpr_control.friction import PulleyFriction, winch_force_from_sensor
 from cdpr_control.joint_command import JointCommand
 from cdpr_control.kernels import model as fk_kernels
 from cdpr_control.pi_control import PIController
-from cdpr_control.robot import load_robot
+from warm_robots import robot  # noqa: F401  (the fixture)
 
-ROBOTS = ("ipanema3_mini", "ipanema3")
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    robot = load_robot(request.param)
-    kernels.warm_up(robot)
-    return robot
 
 
 def test_the_kernels_are_enabled_and_numpy_reference_switches_them_off():

@@ -14,15 +14,8 @@ from cdpr_control import kernels, kinematics
 from cdpr_control.friction import PulleyFriction
 from cdpr_control.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator, compiled
+from warm_robots import robot  # noqa: F401  (the fixture)
 
-ROBOTS = ("ipanema3_mini", "ipanema3")
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    robot = load_robot(request.param)
-    kernels.warm_up(robot)
-    return robot
 
 
 def _friction_inputs(robot, n=700, v_eps=1e-7):
