@@ -1,19 +1,20 @@
 """The simulator's per-period shortcuts give the numbers of the numpy expressions they replace, bit for bit."""
 import numpy as np
 
+from cdpr_control.kinematics import cross
 from cdpr_control.robot import load_robot
 from cdpr_sim.plant import Settlement
-from cdpr_sim.platform import cross3
 from cdpr_sim.sensors import Encoder, ForceSensor
 from cdpr_sim.simulator import _winch_readings
 
 RNG = np.random.default_rng(7)
 
 
-def test_cross3_is_np_cross():
+def test_cross_of_two_vectors_is_np_cross():
     a, b = RNG.normal(size=(2, 1000, 3))
     for x, y in zip(a, b):
-        assert np.array_equal(cross3(x, y), np.cross(x, y))
+        assert np.array_equal(cross(x, y), np.cross(x, y))
+    assert np.array_equal(cross(a, b), np.cross(a, b))          # the batched form: the same numbers
 
 
 def test_settlement_is_its_array_form():

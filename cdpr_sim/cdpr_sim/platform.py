@@ -13,20 +13,13 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cdpr_control.kinematics import rotation_matrix
+from cdpr_control.kinematics import cross, rotation_matrix
 
 
 def kardan_angles(R: np.ndarray) -> np.ndarray:
     """[a, b, c] with R = Rx(a) Ry(b) Rz(c) (section 2.1.1), b in [-pi/2, pi/2]."""
     (r00, r01, r02), (_, _, r12), (_, _, r22) = R.tolist()
     return np.array([math.atan2(-r12, r22), math.asin(max(-1.0, min(1.0, r02))), math.atan2(-r01, r00)])
-
-
-def cross3(a, b) -> np.ndarray:
-    """a x b of two 3-vectors: np.cross's arithmetic (the same numbers) in plain Python, since
-    np.cross costs about 10 us a call (several calls a period with a payload, contacts or a push)."""
-    (a0, a1, a2), (b0, b1, b2) = a, b
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -80,7 +73,7 @@ class PlatformBody:
         R = rotation_matrix(x[3:])
         Rc = R @ self.c
         r_I = x[:3] + Rc
-        v_I = xdot[:3] + cross3(xdot[3:], Rc)
+        v_I = xdot[:3] + cross(xdot[3:], Rc)
         quat = Rotation.from_matrix(R @ self.V).as_quat()
         self.pb.resetBasePositionAndOrientation(self.body, r_I.tolist(), list(quat), physicsClientId=self.client)
         self.pb.resetBaseVelocity(self.body, v_I.tolist(), xdot[3:].tolist(), physicsClientId=self.client)
@@ -96,7 +89,7 @@ class PlatformBody:
             R = R @ self.V.T
             Rc = R @ self.c
             r = r - Rc
-            v = v - cross3(omega, Rc)
+            v = v - cross(omega, Rc)
         return r, R, v, omega
 
     def pose_and_twist(self) -> tuple[np.ndarray, np.ndarray]:

@@ -44,13 +44,13 @@ import pybullet
 from cdpr_control import cable, kernels
 from cdpr_control.drive_models import DriveModel
 from cdpr_control.friction import PulleyFriction, sensor_from_winch_force
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.kinematics import cross, inverse_kinematics
 from cdpr_control.safety import all_finite
 
 from .cables import CableModel
 from .contacts import PlatformShape, add_obstacle, platform_collision_shape
 from .plant import KINDS, Settlement, build_plant
-from .platform import PlatformBody, cross3, kardan_angles
+from .platform import PlatformBody, kardan_angles
 from .sensors import Encoder, ForceSensor, encoder_count
 from .wrench import WrenchPulse
 
@@ -397,7 +397,7 @@ class Simulator:
             n, d1, d2 = np.array(c[7]), np.array(c[11]), np.array(c[13])
             F = c[9] * n + c[10] * d1 + c[12] * d2
             w[:3] += F
-            w[3:] += cross3(np.array(c[5]) - r, F)
+            w[3:] += cross(np.array(c[5]) - r, F)
         return w
 
 

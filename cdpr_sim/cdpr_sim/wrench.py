@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .platform import cross3
+from cdpr_control.kinematics import cross
 
 SHAPES = ("step", "rectangle", "ramp", "half_sine", "sine")
 
@@ -72,5 +72,5 @@ class WrenchPulse:
             return np.zeros(6)
         w = s * np.asarray(self.wrench, dtype=float)
         arm = R @ np.asarray(self.point, dtype=float)
-        w[3:] += cross3(arm, w[:3])
+        w[3:] += cross(arm, w[:3])
         return w
