@@ -162,7 +162,8 @@ class CableForceControllerNode(CdprNode):
                 if F_d0 != self.F_d0:        # the same F_d,0 has the same axis (task_axis)
                     self.z_t, self.F_d0 = task_axis(F_d0, self.z_t), F_d0
                 if x_d is not None:
-                    a = task_force_direction(kernels.inverse_kinematics(self.robot, x_d).AT, self.z_t)
+                    AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # the period's IK of x_d
+                    a = task_force_direction(AT, self.z_t)
             else:
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
                             "no hand-over this period", stamp_ns=t_ns)
