@@ -11,6 +11,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
@@ -195,6 +196,37 @@ def test_urgent_subscriptions_are_delivered_before_the_queue_in_their_own_order(
     node.create_subscription(Int64, "/ipc_urgent/go", burst, CONTROL)
     node.create_publisher(Int64, "/ipc_urgent/go", CONTROL).publish(Int64(data=0))
     assert order == [("fast", 1), ("fast", 2), ("slow", 1), ("slow", 2)]
+
+
+def test_a_tap_takes_each_message_inside_publish_and_dds_messages_through_the_executor(spaces):
+    """A tap gets in-process messages before ``publish`` returns (queued subscriptions later), as
+    objects or serialized for a raw tap; a publisher in another process still reaches it, once each."""
+    graph, outside = spaces(), spaces()
+    node = graph.node("ipc_tap")
+    tapped, raw, queued = [], [], []
+    node.create_subscription(Int64, "/ipc_tap/x", tapped.append, DEEP, tap=True)
+    node.create_subscription(Int64, "/ipc_tap/x", raw.append, DEEP, raw=True, tap=True)
+    node.create_subscription(Int64, "/ipc_tap/x", queued.append, DEEP)
+    publisher = node.create_publisher(Int64, "/ipc_tap/x", DEEP)
+    seen_inside = []
+
+    def burst(_):
+        for k in range(3):
+            msg = Int64(data=k)
+            publisher.publish(msg)
+            seen_inside.append((tapped[-1] is msg, raw[-1] == serialize_message(msg), len(queued)))
+    node.create_subscription(Int64, "/ipc_tap/go", burst, CONTROL)
+    node.create_publisher(Int64, "/ipc_tap/go", CONTROL).publish(Int64(data=0))
+    assert seen_inside == [(True, True, 0)] * 3     # inside publish; the queue delivers after the callback
+    assert [m.data for m in queued] == [0, 1, 2]
+    remote = outside.node("ipc_tap_remote", cls=Node).create_publisher(Int64, "/ipc_tap/x", DEEP)
+    graph.start(), outside.start()
+    wait_for(lambda: remote.get_subscription_count() == 3, "the remote publisher to match")
+    remote.publish(Int64(data=42))
+    wait_for(lambda: len(tapped) == 4 and len(raw) == 4 and len(queued) == 4, "the remote message at each")
+    time.sleep(0.3)                                 # and no DDS copy of the local ones on top
+    assert [m.data for m in tapped] == [m.data for m in queued] == [0, 1, 2, 42]
+    assert [deserialize_message(d, Int64).data for d in raw] == [0, 1, 2, 42]
 
 
 def test_transient_local_history_reaches_a_late_local_subscriber(spaces):

@@ -29,6 +29,10 @@ same to every tool, but the nodes of one rclpy ``Context`` also register them in
   goes out before the rest of the graph computes that period. Each subscription still receives its
   topic in publication order; in lockstep, where a node computes a period when all of its inputs are
   there, the order of deliveries changes nothing.
+- A ``tap`` subscription (``create_subscription(..., tap=True)``) is called inside ``publish``, not
+  through the queue: for a callback that only takes the message away (the bag recorder, 20 topics a
+  period), the queue's append, pop and executor dispatch would cost more than the callback itself.
+  A tap must be short, must not publish and must not raise.
 - The nodes' TimeSources (``use_sim_time``) take /clock as one delivery per message: the time is
   converted once and set on every node's clock (rather than one callback per node and period).
 - Transient-local publishers keep their last ``depth`` messages for local subscriptions that
@@ -77,8 +81,8 @@ def compatible(pub_qos, sub_qos) -> bool:
 class LocalSubscription:
     """The in-process side of one subscription: its callback and the DDS subscription beside it."""
 
-    def __init__(self, registry: "IntraProcess", callback, raw: bool, urgent: bool = False):
-        self.registry, self.callback, self.raw, self.urgent = registry, callback, raw, urgent
+    def __init__(self, registry: "IntraProcess", callback, raw: bool, urgent: bool = False, tap: bool = False):
+        self.registry, self.callback, self.raw, self.urgent, self.tap = registry, callback, raw, urgent, tap
         self.topic: Topic | None = None
         self.qos = None
         self.dds = None   # the rclpy Subscription and its node, set once created
@@ -293,7 +297,8 @@ class IntraProcessPublisher(Publisher):
     _ipc_node: Node | None = None
     _ipc_version = -1
     _ipc_matched: list = []
-    _ipc_others: list = []          # matched, but for the TimeSources
+    _ipc_others: list = []          # matched, but for the TimeSources and the taps
+    _ipc_taps: list = []            # matched taps: called inside publish
     _ipc_clocks = None              # the matched TimeSources' callback (clock_fanout)
     history: deque | None = None
 
@@ -301,7 +306,9 @@ class IntraProcessPublisher(Publisher):
         self._ipc_version = topic.version
         self._ipc_matched = [s for s in topic.subscriptions if compatible(self.qos_profile, s.qos)]
         sources = [time_source_of(s.callback) for s in self._ipc_matched]
-        self._ipc_others = [s for s, source in zip(self._ipc_matched, sources) if source is None]
+        others = [s for s, source in zip(self._ipc_matched, sources) if source is None]
+        self._ipc_others = [s for s in others if not s.tap]
+        self._ipc_taps = [s for s in others if s.tap]
         sources = [source for source in sources if source is not None]
         self._ipc_clocks = clock_fanout(sources) if sources else None
 
@@ -337,7 +344,14 @@ class IntraProcessPublisher(Publisher):
         if self.history is not None or self._Publisher__publisher.get_subscription_count() > len(matched):
             super().publish(msg)    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
-            self._ipc_registry.post(items, urgent)
+            for s in self._ipc_taps:
+                if s.raw:
+                    data = serialize_message(obj) if data is None else data
+                    s.callback(data)
+                else:
+                    s.callback(obj)
+            if items or urgent:
+                self._ipc_registry.post(items, urgent)
 
 
 def has_subscribers(publisher) -> bool:
@@ -387,13 +401,15 @@ class IntraProcessNode(Node):
         return publisher
 
     def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False,
-                            urgent: bool = False, **kwargs):
+                            urgent: bool = False, tap: bool = False, **kwargs):
         """``urgent``: in-process deliveries to this subscription go before the others queued (the
-        robot's command path: a free-running period's command does not wait for the rest of the graph)."""
+        robot's command path: a free-running period's command does not wait for the rest of the graph).
+        ``tap``: they are made inside ``publish`` (see the module's docstring); DDS messages of other
+        processes come through the executor as usual."""
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
-        local = LocalSubscription(registry, callback, raw, urgent)
+        local = LocalSubscription(registry, callback, raw, urgent, tap)
         subscription = super().create_subscription(msg_type, topic, local.from_dds, qos_profile, raw=raw, **kwargs)
         local.dds, local.node, local.qos = subscription, self, subscription.qos_profile
         local.topic = registry.topic(subscription.topic_name)

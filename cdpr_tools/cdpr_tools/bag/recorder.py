@@ -71,7 +71,8 @@ class BagRecorder(IntraProcessNode):
         except (LookupError, ValueError) as exc:
             self.get_logger().warning(f"not recording {topic}: {exc}")
             return False
-        # what BagWriterProcess.put does, inlined (these run on the loop's thread, 20 times a period)
+        # what BagWriterProcess.put does, inlined (these run on the loop's thread, 20 times a period);
+        # in-process messages are taken inside their publish (a tap: intraprocess.py), not queued
         queue, batch, send = self.writer.queue, self.writer.batch, self.writer.send
         append, now = queue.append, self.get_clock().handle.get_now   # (Clock.now() builds a Time: 2 us)
         encode = encoder(type_name)
@@ -92,7 +93,7 @@ class BagRecorder(IntraProcessNode):
                     send()
             raw = True
         self._recording[topic] = self.create_subscription(
-            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw)
+            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw, tap=True)
         self.get_logger().info(f"subscribed to {topic} [{type_name}]")
         return True
 
