@@ -53,6 +53,7 @@ from collections import deque
 
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -66,6 +67,7 @@ BUDGET_S = 0.005        # longest time one drain keeps the executor from other e
 # for closed_loop.yaml's 14 nodes), so a turn every 5 ms cost a quarter of the loop; every 50 ms
 # (measured: 20 ms 131, 50 ms 64 us of turns a period) leaves timers and services at most 50 ms late.
 PUMP_SLICE_S = 0.05
+_rcl_time_point = _rclpy.rcl_time_point_t
 RECENT = 64             # local messages per topic remembered to recognise their DDS copies
 ENV = "CDPR_INTRA_PROCESS"  # "0": every node of the process uses DDS only (the baseline transport)
 
@@ -103,13 +105,18 @@ class LocalSubscription:
 
 def clock_fanout(sources: list[TimeSource]):
     """One callback for the /clock subscriptions of several TimeSources (rclpy 7.1
-    ``TimeSource.clock_callback``, with the conversion done once)."""
+    ``TimeSource.clock_callback``, with the conversion done once). The Time is built and set through
+    the handles directly, without the checks and handle guards of ``Time.from_msg`` and
+    ``set_ros_time_override`` (4 us instead of 10 for 11 nodes, every period; the clocks belong to
+    nodes this thread spins, and a removed node leaves the fan-out at the next publication)."""
     def deliver(msg) -> None:
-        t = Time.from_msg(msg.clock)
+        stamp = msg.clock
+        t = Time.__new__(Time)
+        t._time_handle = handle = _rcl_time_point(stamp.sec * 1_000_000_000 + stamp.nanosec, ClockType.ROS_TIME)
         for source in sources:
             source._last_time_set = t
             for clock in source._associated_clocks:
-                clock.set_ros_time_override(t)
+                clock.handle.set_ros_time_override(handle)
     return deliver
 
 
