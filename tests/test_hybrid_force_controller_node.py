@@ -1,8 +1,6 @@
 """Node hybrid_force_controller on typed topics (lockstep): state published every period enabled or
 not, M103-style enable, the ControllerState mapping, the OSPC's selection and the CFC's pause
 driven by that state, and live parameter validation."""
-import time
-
 import numpy as np
 import pytest
 
@@ -10,7 +8,6 @@ from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
 rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -24,33 +21,22 @@ from cdpr_control.nodes.hybrid_force_controller import HybridForceControllerNode
 from cdpr_control.nodes.ospc import OSPCNode  # noqa: E402
 from cdpr_control.nodes.qos import CONTROL  # noqa: E402
 from cdpr_control.robot import load_robot  # noqa: E402
+from node_harness import node_graph, spin_until  # noqa: E402
 
 ROBOT = load_robot("ipanema3_mini")
 
 
 @pytest.fixture(scope="module")
 def graph():
-    rclpy.init()
-    base = [Parameter("robot", value="ipanema3_mini")]
-    coupled = base + [Parameter("force_controller", value="hybrid_force_controller")]
-    nodes = [HybridForceControllerNode(parameter_overrides=base + [Parameter("F_th", value=1.0),
-                                                                   Parameter("v_max", value=0.002)]),
-             OSPCNode(parameter_overrides=coupled), CableForceControllerNode(parameter_overrides=coupled)]
-    probe = rclpy.create_node("probe")
-    executor = SingleThreadedExecutor()
-    for n in nodes + [probe]:
-        executor.add_node(n)
-    yield nodes, probe, executor
-    for n in nodes + [probe]:
-        n.destroy_node()
-    rclpy.shutdown()
-
-
-def _spin_until(executor, done, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.02)
-    return done()
+    def make_nodes():
+        base = [Parameter("robot", value="ipanema3_mini")]
+        coupled = base + [Parameter("force_controller", value="hybrid_force_controller")]
+        nodes = [HybridForceControllerNode(parameter_overrides=base + [Parameter("F_th", value=1.0),
+                                                                       Parameter("v_max", value=0.002)]),
+                 OSPCNode(parameter_overrides=coupled), CableForceControllerNode(parameter_overrides=coupled)]
+        return nodes
+    with node_graph(make_nodes) as graph:
+        yield graph
 
 
 def test_state_every_period_approach_and_the_coupled_controllers(graph):
@@ -67,7 +53,7 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
     probe.create_subscription(ControllerState, "cable_force_controller/state", cfc_states.append, CONTROL)
     hand_overs = []
     probe.create_subscription(ControllerState, "cable_force_controller/hand_over", hand_overs.append, CONTROL)
-    assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
     x_d = ROBOT.home.copy()
     x = x_d + [0.0, 0.0, -0.003, 0.0, 0.0, 0.0]                 # 3 mm below x_d
     w = np.r_[ROBOT.platform.mass * ROBOT.gravity, 0, 0, 0]        # free: no contact force
@@ -82,7 +68,7 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
         pubs["theta"].publish(JointState(header=header, position=q.tolist(), velocity=[0.0] * m, effort=f.tolist()))
         pubs["f"].publish(CableForces(header=header, f=f.tolist(), f_min=[5.0] * m, f_max=[40.0] * m))
         pubs["fd"].publish(ForceDistribution(header=header, f_d=f_d.tolist(), f_min=[5.0] * m, f_max=[40.0] * m))
-        assert _spin_until(executor, lambda: len(states) >= k and len(ospc_states) >= k and len(cfc_states) >= k)
+        assert spin_until(executor, lambda: len(states) >= k and len(ospc_states) >= k and len(cfc_states) >= k)
 
     for k in range(1, 3):                                          # disabled: published, idle, zero
         period(k)
@@ -104,7 +90,7 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
     assert max(z_integrator) - min(z_integrator) == 0.0
     np.testing.assert_array_equal(cfc_states[-1].output, dq_free)
     # the coupled CFC publishes its hand-over every period: applied, nothing handed over while paused
-    assert _spin_until(executor, lambda: len(hand_overs) >= 7)
+    assert spin_until(executor, lambda: len(hand_overs) >= 7)
     assert [h.header.stamp.nanosec for h in hand_overs[-7:]] == [k * 1_000_000 for k in range(1, 8)]
     assert hand_overs[-1].enabled and list(hand_overs[-1].output) == [0.0] * 6
 
@@ -132,7 +118,7 @@ def test_force_distribution_plans_for_the_expected_contact_force(graph):
             ("hpfc", ControllerState, "hybrid_force_controller/state"))}
         out = []
         probe.create_subscription(ForceDistribution, "force_distribution", out.append, CONTROL)
-        assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+        assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
         weight = ROBOT.platform.mass * ROBOT.gravity
         w = np.r_[weight + [0.0, 0.0, 3.0], 0, 0, 0]             # the floor pushes up with 3 N
 
@@ -145,7 +131,7 @@ def test_force_distribution_plans_for_the_expected_contact_force(graph):
             pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(ROBOT.home),
                                                    force=vector3([0, 0, -10.0])))
             pubs["w"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))
-            assert _spin_until(executor, lambda: len(out) >= k)
+            assert spin_until(executor, lambda: len(out) >= k)
             return out[-1].w_d.force.z
 
         assert period(1, "I") == pytest.approx(w[2], abs=1e-6)    # idle: the measured wrench

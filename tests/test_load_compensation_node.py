@@ -2,8 +2,6 @@
 payload (geometry_msgs/InertiaStamped) every period, enabled or not; a live disable zeroes the output;
 a rejected parameter keeps the old value; the force distribution takes the payload as the known part of its disturbance;
 the ~/tare service makes the estimate read the known payload."""
-import time
-
 import numpy as np
 import pytest
 
@@ -11,7 +9,6 @@ from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
 rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
 from geometry_msgs.msg import InertiaStamped, PoseStamped, WrenchStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -25,33 +22,22 @@ from cdpr_control.nodes.force_distribution import ForceDistributionNode  # noqa:
 from cdpr_control.nodes.load_compensation import LoadCompensationNode  # noqa: E402
 from cdpr_control.nodes.qos import CONTROL  # noqa: E402
 from cdpr_control.robot import load_robot  # noqa: E402
+from node_harness import node_graph, spin_until  # noqa: E402
 
 ROBOT = load_robot("ipanema3_mini")
 
 
 @pytest.fixture(scope="module")
 def graph():
-    rclpy.init()
-    overrides = [Parameter("robot", value="ipanema3_mini")]
-    nodes = [LoadCompensationNode(parameter_overrides=overrides + [Parameter("T_output", value=0.0),
-                                                                  Parameter("time_shift", value=0.0)]),
-             ForceDistributionNode(parameter_overrides=overrides + [Parameter("payload_input", value=True),
-                                                                    Parameter("wrench_source", value="model")])]
-    probe = rclpy.create_node("probe")
-    executor = SingleThreadedExecutor()
-    for n in nodes + [probe]:
-        executor.add_node(n)
-    yield nodes, probe, executor
-    for n in nodes + [probe]:
-        n.destroy_node()
-    rclpy.shutdown()
-
-
-def _spin_until(executor, done, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.02)
-    return done()
+    def make_nodes():
+        overrides = [Parameter("robot", value="ipanema3_mini")]
+        nodes = [LoadCompensationNode(parameter_overrides=overrides + [Parameter("T_output", value=0.0),
+                                                                      Parameter("time_shift", value=0.0)]),
+                 ForceDistributionNode(parameter_overrides=overrides + [Parameter("payload_input", value=True),
+                                                                        Parameter("wrench_source", value="model")])]
+        return nodes
+    with node_graph(make_nodes) as graph:
+        yield graph
 
 
 def test_state_and_payload_every_period_and_live_disable(graph):
@@ -69,7 +55,7 @@ def test_state_and_payload_every_period_and_live_disable(graph):
     probe.create_subscription(ControllerState, "load_compensation/state", got["state"].append, CONTROL)
     probe.create_subscription(InertiaStamped, "load_compensation/payload", got["payload"].append, CONTROL)
     probe.create_subscription(ForceDistribution, "force_distribution", got["fd"].append, CONTROL)
-    _spin_until(executor, lambda: pubs["sp"].get_subscription_count() >= 2 and pubs["f"].get_subscription_count() >= 1
+    spin_until(executor, lambda: pubs["sp"].get_subscription_count() >= 2 and pubs["f"].get_subscription_count() >= 1
                 and probe.count_publishers("load_compensation/payload") >= 1, 5.0)
 
     def period(k):
@@ -78,7 +64,7 @@ def test_state_and_payload_every_period_and_live_disable(graph):
         pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
         pubs["wrench"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(-AT @ f)))
         pubs["f"].publish(CableForces(header=header, f=f.tolist()))
-        assert _spin_until(executor, lambda: len(got["state"]) > k and len(got["payload"]) > k and len(got["fd"]) > k)
+        assert spin_until(executor, lambda: len(got["state"]) > k and len(got["payload"]) > k and len(got["fd"]) > k)
 
     for k in range(300):                                  # longer than the 240 ms window
         period(k)
@@ -103,6 +89,6 @@ def test_state_and_payload_every_period_and_live_disable(graph):
     client = probe.create_client(Trigger, "/load_compensation/tare")
     assert client.wait_for_service(timeout_sec=5.0)
     future = client.call_async(Trigger.Request())
-    assert _spin_until(executor, future.done) and future.result().success
+    assert spin_until(executor, future.done) and future.result().success
     period(301)
     assert got["payload"][-1].inertia.m == pytest.approx(0.1, abs=1e-6)

@@ -1,7 +1,5 @@
 """CFC, OSPC and joint-command nodes on typed topics: one lockstep period end to end with two offset
 inputs, live parameter changes, and rejected parameters leaving the node running with its old value."""
-import time
-
 import numpy as np
 import pytest
 
@@ -9,7 +7,6 @@ from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
 rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, OperationalSetpoint  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -22,34 +19,23 @@ from cdpr_control.nodes.joint_command import JointCommandNode  # noqa: E402
 from cdpr_control.nodes.ospc import OSPCNode  # noqa: E402
 from cdpr_control.nodes.qos import CONTROL  # noqa: E402
 from cdpr_control.robot import load_robot  # noqa: E402
+from node_harness import node_graph, spin_until  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def graph():
-    rclpy.init()
-    overrides = [Parameter("robot", value="ipanema3_mini")]
-    cfc_linear = overrides + [Parameter("stiffness_model", value="linear")]     # the thesis' K_l (2.15)
-    nodes = [CableForceControllerNode(parameter_overrides=cfc_linear), OSPCNode(parameter_overrides=overrides),
-             # a second offset input beside OSPC, published by the probe; no ramp, so that one period
-             # already shows the full sum of (5.10) (the ramp is tested in test_offset_inputs.py)
-             JointCommandNode(parameter_overrides=overrides + [
-                 Parameter("v_max", value=100.0), Parameter("transfer_time", value=0.0),
-                 Parameter("offset_inputs", value=["ospc", "probe_offset"])])]
-    probe = rclpy.create_node("probe")
-    executor = SingleThreadedExecutor()
-    for n in nodes + [probe]:
-        executor.add_node(n)
-    yield nodes, probe, executor
-    for n in nodes + [probe]:
-        n.destroy_node()
-    rclpy.shutdown()
-
-
-def _spin_until(executor, done, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.02)
-    return done()
+    def make_nodes():
+        overrides = [Parameter("robot", value="ipanema3_mini")]
+        cfc_linear = overrides + [Parameter("stiffness_model", value="linear")]     # the thesis' K_l (2.15)
+        nodes = [CableForceControllerNode(parameter_overrides=cfc_linear), OSPCNode(parameter_overrides=overrides),
+                 # a second offset input beside OSPC, published by the probe; no ramp, so that one period
+                 # already shows the full sum of (5.10) (the ramp is tested in test_offset_inputs.py)
+                 JointCommandNode(parameter_overrides=overrides + [
+                     Parameter("v_max", value=100.0), Parameter("transfer_time", value=0.0),
+                     Parameter("offset_inputs", value=["ospc", "probe_offset"])])]
+        return nodes
+    with node_graph(make_nodes) as graph:
+        yield graph
 
 
 def test_one_period_through_cfc_ospc_and_joint_command(graph):
@@ -63,7 +49,7 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
     commands, cfc_states = [], []
     probe.create_subscription(JointState, "winch/command", commands.append, CONTROL)
     probe.create_subscription(ControllerState, "cable_force_controller/state", cfc_states.append, CONTROL)
-    assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
 
     x_d = np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0])
     x = x_d + np.array([0.0, 0.0, -0.002, 0.0, 0.0, 0.0])      # sagged estimate
@@ -81,7 +67,7 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
         pubs["offset"].publish(ControllerState(header=header, controller="probe_offset", enabled=True,
                                                output=x_probe.tolist()))
         # (in-process, the command may reach the probe before the CFC state it was computed from)
-        assert _spin_until(executor, lambda: len(commands) >= k and len(cfc_states) >= k), f"no command for period {k}"
+        assert spin_until(executor, lambda: len(commands) >= k and len(cfc_states) >= k), f"no command for period {k}"
     last = commands[-1]
     assert last.header.stamp.nanosec == 3_000_000
     theta_d = np.asarray(last.position)
@@ -145,7 +131,7 @@ def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
     states = {"cfc": [], "ospc": []}
     probe.create_subscription(ControllerState, "cable_force_controller/state", states["cfc"].append, CONTROL)
     probe.create_subscription(ControllerState, "ospc/state", states["ospc"].append, CONTROL)
-    assert _spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
     x_d = np.zeros(6)
     x = x_d - np.array([0.0, 0.0, 0.002, 0.0, 0.0, 0.0])         # a sag: both integrators run
     q, f, f_d = inverse_kinematics(robot, x_d).q, np.full(m, 10.0), np.full(m, 12.0)
@@ -162,7 +148,7 @@ def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
         pubs["sp"].publish(OperationalSetpoint(header=header, pose=pose_to_msg(x_d)))
         pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(x)))
         pubs["offset"].publish(ControllerState(header=header, controller="probe_offset", enabled=True, output=[0.0] * 6))
-        assert _spin_until(executor, lambda: len(states["cfc"]) > n[0] and len(states["ospc"]) > n[1])
+        assert spin_until(executor, lambda: len(states["cfc"]) > n[0] and len(states["ospc"]) > n[1])
         return np.asarray(states["cfc"][-1].integrator), np.asarray(states["ospc"][-1].integrator)
 
     def integrating():
@@ -172,10 +158,10 @@ def test_ik_only_holds_the_integrators_of_ospc_and_cfc(graph):
 
     assert integrating() == (True, True)
     assert jc.set_parameters([Parameter("mode", value="ik_only")])[0].successful
-    assert _spin_until(executor, lambda: ospc.controller.pi.hold and cfc.stage.controller.pi.hold)
+    assert spin_until(executor, lambda: ospc.controller.pi.hold and cfc.stage.controller.pi.hold)
     assert integrating() == (False, False)                   # held: no wind-up while not applied
     assert jc.set_parameters([Parameter("mode", value="force_control")])[0].successful
-    assert _spin_until(executor, lambda: not (ospc.controller.pi.hold or cfc.stage.controller.pi.hold))
+    assert spin_until(executor, lambda: not (ospc.controller.pi.hold or cfc.stage.controller.pi.hold))
     assert integrating() == (True, True)
 
 

@@ -10,7 +10,6 @@ from cdpr_msgs.msg import CableForces  # noqa: E402
 from cdpr_msgs.srv import ApplyWrench, SetPayload  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -18,29 +17,16 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from cdpr_control.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.nodes.qos import CONTROL  # noqa: E402
 from cdpr_sim.nodes.winch_platform_sim import CLOCK_QOS, WinchPlatformSimNode  # noqa: E402
+from node_harness import node_graph, spin_until  # noqa: E402
 
 
 @pytest.fixture()
 def graph(request):
-    rclpy.init()
     extra = getattr(request, "param", [])
-    sim = WinchPlatformSimNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini"),
-                                                    Parameter("lockstep_timeout", value=0.2)] + extra)
-    probe = rclpy.create_node("probe")
-    executor = SingleThreadedExecutor()
-    executor.add_node(sim)
-    executor.add_node(probe)
-    yield sim, probe, executor
-    sim.destroy_node()
-    probe.destroy_node()
-    rclpy.shutdown()
-
-
-def _spin_until(executor, done, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.01)
-    return done()
+    with node_graph(lambda: [WinchPlatformSimNode(parameter_overrides=[
+            Parameter("robot", value="ipanema3_mini"), Parameter("lockstep_timeout", value=0.2)] + extra)]) \
+            as ((sim,), probe, executor):
+        yield sim, probe, executor
 
 
 def _ns(msg):
@@ -60,7 +46,7 @@ def test_lockstep_echo_loop_advances_one_period_per_command(graph):
     probe.create_subscription(Clock, "/clock", clocks.append, CLOCK_QOS)
     probe.create_subscription(PoseStamped, "ground_truth/pose", poses.append, CONTROL)
     probe.create_subscription(CableForces, "ground_truth/cable_forces", forces.append, CONTROL)
-    assert _spin_until(executor, lambda: len(states) >= 200)
+    assert spin_until(executor, lambda: len(states) >= 200)
     stamps = np.array([_ns(m) for m in states])
     assert stamps[0] == 0                                           # the start is announced at t = 0
     assert np.all(np.diff(stamps) == 1_000_000)                     # then one period per command
@@ -79,37 +65,37 @@ def test_missed_deadline_advances_after_the_timeout(graph):
     command = probe.create_publisher(JointState, "winch/command", CONTROL)
     states = []
     probe.create_subscription(JointState, "winch/state", states.append, CONTROL)
-    assert _spin_until(executor, lambda: len(states) >= 1)
+    assert spin_until(executor, lambda: len(states) >= 1)
     command.publish(JointState(header=states[-1].header, position=list(states[-1].position)))
-    assert _spin_until(executor, lambda: sim.sim.steps >= 1)
+    assert spin_until(executor, lambda: sim.sim.steps >= 1)
     # no further command: after 0.2 s the simulator advances anyway, holding the last command
-    assert _spin_until(executor, lambda: sim.missed_deadlines >= 2, timeout=5.0)
+    assert spin_until(executor, lambda: sim.missed_deadlines >= 2, timeout=5.0)
     assert sim.sim.steps == 1 + sim.missed_deadlines
     # a command answering an old state is late: counted, no step; it is held when newer than the
     # command held, and ignored when older (a second answer to a repeated start-up state must not
     # replace the newest command)
     steps = sim.sim.steps
     command.publish(JointState(header=states[0].header, position=[p + 0.01 for p in states[0].position]))
-    assert _spin_until(executor, lambda: sim.late_commands == 1)
+    assert spin_until(executor, lambda: sim.late_commands == 1)
     assert sim.sim.steps - steps <= 1                               # at most a timeout step
     np.testing.assert_allclose(sim.theta_d, np.asarray(states[0].position) + 0.01)  # as new as the held
     current = states[-1]
     command.publish(JointState(header=current.header, position=list(current.position)))
-    assert _spin_until(executor, lambda: sim.sim.steps * sim.period_ns > _ns(current))   # answered: a step
+    assert spin_until(executor, lambda: sim.sim.steps * sim.period_ns > _ns(current))   # answered: a step
     command.publish(JointState(header=states[0].header, position=[p + 0.02 for p in states[0].position]))
-    assert _spin_until(executor, lambda: sim.late_commands == 2)
+    assert spin_until(executor, lambda: sim.late_commands == 2)
     np.testing.assert_array_equal(sim.theta_d, np.asarray(current.position))  # older than the held one
     # a command of wrong length is refused and does not advance time
     steps = sim.sim.steps
     command.publish(JointState(position=[1.0, 2.0]))
-    assert _spin_until(executor, lambda: sim.invalid_commands == 1)
+    assert spin_until(executor, lambda: sim.invalid_commands == 1)
     # a command stamped after the newest state (no controller can answer a state not yet sent) is
     # refused: it neither drives the winches nor advances time
     held, steps = sim.theta_d.copy(), sim.sim.steps
     future = JointState(position=[p + 0.05 for p in states[-1].position])
     future.header.stamp.sec = 5000
     command.publish(future)
-    assert _spin_until(executor, lambda: sim.invalid_commands == 2)
+    assert spin_until(executor, lambda: sim.invalid_commands == 2)
     np.testing.assert_array_equal(sim.theta_d, held)
     assert sim.sim.steps - steps <= 1                               # at most a timeout step
     assert sim.sim.steps - steps <= 1                               # at most a timeout step
@@ -123,7 +109,7 @@ def test_payload_and_wrench_services(graph):
 
     def call(client, request):
         future = client.call_async(request)
-        assert _spin_until(executor, future.done)
+        assert spin_until(executor, future.done)
         return future.result()
 
     request = SetPayload.Request()
@@ -153,11 +139,11 @@ def test_payload_beyond_the_robot_is_accepted_with_a_warning(graph):
     probe.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10)
     assert payload.wait_for_service(timeout_sec=5.0)
     # a lockstep node reports on change only: the probe must hear the first report
-    assert _spin_until(executor, lambda: sim.diagnostics_pub.get_subscription_count() > 0)
+    assert spin_until(executor, lambda: sim.diagnostics_pub.get_subscription_count() > 0)
     request = SetPayload.Request()
     request.payload.m = 100.0
     future = payload.call_async(request)
-    assert _spin_until(executor, future.done)
+    assert spin_until(executor, future.done)
     response = future.result()
     assert response.success and response.total_mass == pytest.approx(101.0)
     assert "beyond what the robot can hold" in response.message and "[5, 40] N" in response.message
@@ -165,10 +151,10 @@ def test_payload_beyond_the_robot_is_accepted_with_a_warning(graph):
     def warned():
         return any(s.level == DiagnosticStatus.WARN and "beyond what the robot can hold" in s.message
                    for d in diagnostics for s in d.status if "winch_platform_sim" in s.name)
-    assert _spin_until(executor, warned, timeout=5.0)
+    assert spin_until(executor, warned, timeout=5.0)
     request.payload.m = 0.5
     future = payload.call_async(request)
-    assert _spin_until(executor, future.done)
+    assert spin_until(executor, future.done)
     assert future.result().success and future.result().message == ""
 
 
@@ -189,7 +175,7 @@ def test_free_running_keeps_pace_with_the_wall_clock(graph):
     states = []
     probe.create_subscription(JointState, "winch/state", states.append, CONTROL)
     start = time.monotonic()
-    _spin_until(executor, lambda: time.monotonic() - start > 1.0, timeout=1.5)
+    spin_until(executor, lambda: time.monotonic() - start > 1.0, timeout=1.5)
     expected = (time.monotonic() - sim._wall_start) * 0.5 / sim.dt
     assert 0.5 * expected < sim.sim.steps <= expected + 1
     stamps = np.array([_ns(m) for m in states])
