@@ -25,10 +25,16 @@ as ``bag_writer_process``, its CPU on the other core counted in the period's CPU
 control stages and simulator in one Python loop without ROS (cdpr_sim.closed_loop.run holding
 home). ``sim_missed_deadlines`` is the simulator's count from its last /diagnostics status.
 
+``transport_floor``: the ceiling the transport allows, the same graph with nodes that compute
+nothing (benchmarks/skeleton.py, derived from the running graph: same nodes, topics, message
+types, QoS, messages per period and lockstep dependencies, on the same node layer), measured
+composed, composed_dds and processes like the graph; the remainder of a target's period over the
+floor's is what the real computation may take.
+
 Targets of the issue: rtf >= 3 composed, >= 1 processes, recording slowing by <= 10 %,
 free-running <= 0.1 % missed periods and p99 latency <= 500 us.
 
-Writes bench/graph.json. Run: .venv/bin/python benchmarks/bench_graph.py [--quick]
+Writes bench/graph.json. Run: .venv/bin/python benchmarks/bench_graph.py [--quick] [--only CONFIG ...]
 """
 from __future__ import annotations
 
@@ -63,10 +69,12 @@ from cdpr_control.robot import load_robot  # noqa: E402
 from cdpr_sim.closed_loop import hold, run  # noqa: E402
 from cdpr_tools.bag import BagReader  # noqa: E402
 from cdpr_tools.demo_cmd import GRAPH  # noqa: E402
-from cdpr_tools.launch import Launcher, RecordSpec, select_nodes  # noqa: E402
+from cdpr_tools.launch import LaunchDescription, Launcher, RecordSpec, select_nodes  # noqa: E402
 from cdpr_tools.launch_file import load_launch_file  # noqa: E402
 from cdpr_tools.program_client import run_program  # noqa: E402
 from cdpr_tools.ros_graph import new_context  # noqa: E402
+
+import skeleton  # noqa: E402  (benchmarks/skeleton.py, as the launcher's children import it)
 
 ROBOT = "ipanema3_mini"
 PERIOD_S = 1e-3
@@ -211,10 +219,14 @@ def stop_part(process: subprocess.Popen) -> None:
 
 
 def measure(mode: str, record: bool = False, intra_process: bool = True, program: str | None = None,
-            sync_mode: str = "exact", split: bool = False, window_s: float = WINDOW_S) -> dict:
-    """One configuration: the window's RTF, CPU per period and node; free-running: timing too."""
+            sync_mode: str = "exact", split: bool = False, window_s: float = WINDOW_S,
+            description: LaunchDescription | None = None) -> dict:
+    """One configuration: the window's RTF, CPU per period and node; free-running: timing too.
+    ``description``: another graph than GRAPH (the skeleton of :func:`transport_floor`; lockstep,
+    its simulator node counting its steps in ``sim.steps``)."""
     arguments = {"robot": ROBOT, "sync_mode": sync_mode}
-    description = load_launch_file(GRAPH, arguments)
+    if description is None:
+        description = load_launch_file(GRAPH, arguments)
     part = None
     if split:                               # the simulator in a process of its own
         description = select_nodes(description, exclude=["winch_platform_sim"])
@@ -249,10 +261,12 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
                     children["bag_writer_process"] = writer
                 if part is not None:
                     children["winch_platform_sim"] = part.pid
-                sim = sim_node(launch) if mode == "composed" and not split else None
+                # free-running: the simulator's own timing figures
+                sim = sim_node(launch) if mode == "composed" and not split and sync_mode == "latest" else None
                 if sim is not None:
                     counts0 = sim.missed_deadlines, sim.overruns, sim.sim.steps
                     samples0 = len(sim.step_lateness.run), len(sim.command_latency.run)
+                deliveries0 = registry.deliveries if registry is not None else None
                 cpu0 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
                 loadavg = os.getloadavg()[0]
                 wall0, sim0 = probe.latest
@@ -265,6 +279,7 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
                 wall1, sim1 = probe.latest
                 cpu1 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
                 node_ns = dict(callbacks.ns) if callbacks else None
+                deliveries = registry.deliveries - deliveries0 if registry is not None else None
                 if sim is not None:
                     counts1 = sim.missed_deadlines, sim.overruns, sim.sim.steps
                     lateness = list(sim.step_lateness.run)[samples0[0]:]
@@ -303,11 +318,13 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
         "loadavg_1min": loadavg,
         "sim_missed_deadlines": missed,
     }
+    if deliveries is not None:     # in-process: messages handed to a subscription (each /clock once)
+        result["deliveries_per_period"] = deliveries / periods
     if record:
         result["recorded_messages_per_period"] = recorded / periods
     if program is not None:
         result["program"] = program
-    if sim is not None and sync_mode == "latest":
+    if sim is not None:
         missed_steps, overruns, steps = (b - a for a, b in zip(counts0, counts1))
         result["free_running"] = {
             "steps": steps,
@@ -318,6 +335,39 @@ def measure(mode: str, record: bool = False, intra_process: bool = True, program
             "step_lateness": DurationStats.summary(lateness),
             "latency_state_to_command": DurationStats.summary(latency),
         }
+    return result
+
+
+FLOOR_CONFIGS = {  # the skeleton's configurations: name -> measure() arguments, in the order run
+    "composed": dict(mode="composed"),
+    "composed_dds": dict(mode="composed", intra_process=False),
+    "processes": dict(mode="processes"),
+}
+FLOOR_LABEL = "same graph, nodes computing nothing (transport floor)"
+
+
+def transport_floor(window_s: float = WINDOW_S, configs: tuple[str, ...] = tuple(FLOOR_CONFIGS)) -> dict:
+    """The ceiling the transport allows: the graph's skeleton (benchmarks/skeleton.py, derived from the
+    running graph: same nodes, topics, types, QoS, messages per period and lockstep dependencies on
+    the same node layer, the nodes computing nothing) measured like the graph itself."""
+    result: dict = {"what": FLOOR_LABEL, "configs": {}, "failed": {}}
+    with tempfile.TemporaryDirectory(prefix="bench_graph_floor_") as tmp:
+        path = pathlib.Path(tmp) / "skeleton.json"   # the children of the processes configuration read it
+        spec = skeleton.derive(ROBOT)
+        skeleton.save(spec, path)
+        topics = skeleton.per_period_topics(spec)
+        result.update(nodes=len(spec["nodes"]), messages_per_period=sum(topics.values()),
+                      deliveries_per_period=spec["window"]["deliveries_per_period"], topics_per_period=topics)
+        for name in configs:
+            print(f"[bench_graph] transport floor {name} ...", flush=True)
+            try:
+                r = measure(**FLOOR_CONFIGS[name], window_s=window_s, description=skeleton.description(path, spec))
+            except (TimeoutError, RuntimeError) as exc:
+                result["failed"][name] = f"{type(exc).__name__}: {exc}"
+                print(f"[bench_graph] transport floor {name}: failed: {result['failed'][name]}", flush=True)
+                continue
+            result["configs"][name] = r
+            print(f"[bench_graph] transport floor {name}: rtf {r['rtf']:.3f}", flush=True)
     return result
 
 
@@ -337,13 +387,25 @@ def slowdown_pct(plain: dict, recording: dict) -> float:
 def table(result: dict) -> str:
     rows = [f"{'configuration':<28} {'rtf':>6} {'us_per_period':>14} {'cpu_us/period':>14} {'periods':>8} "
             f"{'wall_s':>7} {'cpu_cores':>9} {'msgs/period':>11}"]
-    for name, r in {**result["configs"], "baseline (no ROS)": result["baseline_in_process"]}.items():
+
+    def row(name: str, r: dict) -> str:
         recorded = r.get("recorded_messages_per_period")
-        rows.append(f"{name:<28} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r.get('cpu_us_per_period', float('nan')):14.0f} "
-                    f"{r['periods']:8d} {r['wall_s']:7.2f} "
-                    f"{r.get('cpu_cores_busy', float('nan')):9.2f} {'' if recorded is None else f'{recorded:.2f}':>11}")
-    slowdown = result["recording_slowdown_pct"]
-    rows.append("recording slowdown: " + ", ".join(f"{k} {v:+.1f} %" for k, v in slowdown.items()))
+        return (f"{name:<28} {r['rtf']:6.3f} {r['us_per_period']:14.0f} {r.get('cpu_us_per_period', float('nan')):14.0f} "
+                f"{r['periods']:8d} {r['wall_s']:7.2f} "
+                f"{r.get('cpu_cores_busy', float('nan')):9.2f} {'' if recorded is None else f'{recorded:.2f}':>11}")
+    for name, r in result["configs"].items():
+        rows.append(row(name, r))
+    if "baseline_in_process" in result:
+        rows.append(row("baseline (no ROS)", result["baseline_in_process"]))
+    floor = result.get("transport_floor")
+    floor_configs = {f"floor {name}": r for name, r in (floor or {}).get("configs", {}).items()}
+    if floor is not None:
+        rows.append(f"{floor['what']}: {floor['nodes']} nodes, {floor['messages_per_period']} messages and "
+                    f"{floor['deliveries_per_period']:.0f} in-process deliveries per period")
+        rows.extend(row(name, r) for name, r in floor_configs.items())
+    slowdown = result.get("recording_slowdown_pct", {})
+    if result["configs"]:
+        rows.append("recording slowdown: " + ", ".join(f"{k} {v:+.1f} %" for k, v in slowdown.items()))
     for name, r in result["configs"].items():
         if "free_running" in r:
             f = r["free_running"]
@@ -351,7 +413,7 @@ def table(result: dict) -> str:
             fmt = lambda s: "/".join("-" if s[k] is None else f"{s[k]:.0f}" for k in ("p50_us", "p99_us", "max_us"))  # noqa: E731
             rows.append(f"{name}: missed {f['missed_periods']} of {f['steps']} ({f['missed_pct']:.2f} %), "
                         f"latency state->command p50/p99/max {fmt(lat)} us, step lateness {fmt(late)} us")
-    for name, r in result["configs"].items():
+    for name, r in {**result["configs"], **floor_configs}.items():
         nodes = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r["node_cpu_us_per_period"].items(), key=lambda kv: -kv[1]))
         rows.append(f"{name} node CPU [us/period]: {nodes}")
     return "\n".join(rows)
@@ -378,7 +440,8 @@ RECORDING_PAIRS = {"composed": "composed_recording", "composed_dds": "composed_d
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter windows (free-running 15 s), for a check")
-    parser.add_argument("--only", nargs="+", choices=sorted(CONFIGS), help="run only these configurations")
+    parser.add_argument("--only", nargs="+", choices=sorted(CONFIGS) + ["transport_floor"],
+                        help="run only these configurations (transport_floor: the skeleton's, see transport_floor())")
     args = parser.parse_args()
     window = 5.0 if args.quick else WINDOW_S
     free_window = 15.0 if args.quick else FREE_WINDOW_S
@@ -395,7 +458,8 @@ def main() -> None:
             print(f"[bench_graph] {name}: failed: {failed[name]}", flush=True)
             continue
         print(f"[bench_graph] {name}: rtf {configs[name]['rtf']:.3f}", flush=True)
-    reference = configs.get("composed") or next(iter(configs.values()))
+    floor = transport_floor(window) if not args.only or "transport_floor" in args.only else None
+    reference = configs.get("composed") or next(iter(configs.values()), None)
     result = {
         "machine": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
@@ -406,7 +470,7 @@ def main() -> None:
         "window_s": window,
         "free_running_window_s": free_window,
         "configs": configs,
-        "baseline_in_process": baseline(reference["periods"]),
+        **({"baseline_in_process": baseline(reference["periods"])} if reference is not None else {}),
         "speedup_vs_dds": {name: configs[name]["rtf"] / configs[base]["rtf"]
                            for name, base in (("composed", "composed_dds"), ("composed_recording", "composed_dds_recording"),
                                               ("composed_cuboid", "composed_dds_cuboid"))
@@ -416,6 +480,8 @@ def main() -> None:
         "failed": failed,
         "targets": TARGETS,
     }
+    if floor is not None:
+        result["transport_floor"] = floor
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(result, indent=2))
     print(table(result))
