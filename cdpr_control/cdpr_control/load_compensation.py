@@ -494,8 +494,9 @@ class LoadCompensation:
         w_p = w - kernels.platform_wrench(self.robot, xs, xdots, xddots)
         RT = rotation_matrix(xs[3:]).T
         f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
-        S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
-        self.cog_filter.update(np.concatenate(((S.T @ S).ravel(), -S.T @ tau_p)))
+        fx, fy, fz = f_p.tolist()
+        S = np.array([[0.0, -fz, fy], [fz, 0.0, -fx], [-fy, fx, 0.0]])
+        self.cog_filter.push((S.T @ S).ravel().tolist() + (-S.T @ tau_p).tolist())
 
     def _centre_of_gravity(self) -> np.ndarray | None:
         if self.m_c <= self.params.cog_min_mass or self.cog_filter.mean is None:
