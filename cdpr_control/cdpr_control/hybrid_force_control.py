@@ -328,11 +328,11 @@ class HybridForceControl:
             if self.saturated:
                 self.x_t = _clip(self.x_t, p.x_max)
                 self.v_t = 0.0
-        x = np.zeros(6)
-        x[:3] = self.x_t * self.z_t                              # R_t [0 0 x_t]
+        x_t, (z_x, z_y, z_z) = self.x_t, self.z_t.tolist()
+        x = np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0])    # R_t [0 0 x_t]
+        # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, self.enabled or self.state != IDLE, self.z_t.copy(), F_d0.copy(),
-                         np.array(F_vec, dtype=float), F_d, F, e_F, self.x_t, self.v_t, self.integrator,
-                         self.saturated, x)
+                         F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
 
     def absorb(self, dx: float) -> None:
         """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
