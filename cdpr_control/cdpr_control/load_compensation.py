@@ -117,7 +117,8 @@ class MovingAverage:
         return self.mean
 
     def push(self, value: list[float]) -> list[float]:
-        """:meth:`update` of ``size`` floats -> the mean as floats."""
+        """:meth:`update` of ``size`` floats -> the mean as floats. The list itself goes into the
+        window: the caller passes one it does not change afterwards."""
         if self.buffer is None:
             self.reset(value)
         else:
