@@ -468,7 +468,8 @@ class LoadCompensation:
     def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
 
-        x: the estimated pose (forward kinematics), needed for acceleration_source = estimated.
+        x: the estimated pose (forward kinematics), needed for acceleration_source = estimated; only
+        its z enters, so its position (3,) will do.
         """
         shifted = self._shifted(x_d, xdot_d, xddot_d)
         w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
@@ -513,7 +514,7 @@ class LoadCompensation:
         [N] and the estimated pose x -> x_d,LC (6,) [m, m, m, rad, rad, rad] as a pose offset (zero
         when disabled).
 
-        ik_d: inverse_kinematics(robot, x_d) when the caller has it.
+        ik_d: inverse_kinematics(robot, x_d) when the caller has it. x: see :meth:`identify`.
         """
         x_d = np.asarray(x_d, dtype=float)
         ik = ik_d

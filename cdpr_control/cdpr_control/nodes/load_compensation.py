@@ -123,7 +123,10 @@ class LoadCompensationNode(CdprNode):
         sp = msgs["setpoint"]
         x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
         f = np.asarray(msgs["f"].f, dtype=float)
-        x = pose_from_msg(msgs["pose"].pose) if "pose" in msgs else None
+        x = None
+        if "pose" in msgs:        # the estimated position: (4.4) takes its z alone (LoadCompensation.identify)
+            p = msgs["pose"].pose.position
+            x = (p.x, p.y, p.z)
         header = self.header(t_ns)
         lc = self.stage
         reference = x_d.tolist()
