@@ -31,7 +31,7 @@ from cdpr_control.admittance import AdmittanceController, default_parameters, se
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
-from .conversions import (accel_from_msg, accel_to_msg, pose_from_msg, pose_to_msg, twist_from_msg,
+from .conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg, twist_from_msg,
                           twist_to_msg, wrench_from_msg)
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL, STATUS
@@ -152,8 +152,10 @@ class AdmittanceControllerNode(CdprNode):
         """Not guiding: the set-point passes through at rest (what the controller returns then), without
         the controller's work (this node runs every period of every graph, mostly idle)."""
         header = self.header(t_ns, sp.header.frame_id or "base")
-        self.setpoint_pub.publish(OperationalSetpoint(
-            header=header, pose=sp.pose, velocity=_ZERO_TWIST, acceleration=_ZERO_ACCEL, force=sp.force, line=0))
+        out = bare(OperationalSetpoint)       # every field set (conversions.bare): every period
+        out._header, out._pose, out._velocity, out._acceleration = header, sp.pose, _ZERO_TWIST, _ZERO_ACCEL
+        out._force, out._line = sp.force, 0
+        self.setpoint_pub.publish(out)
         x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
         self.state_pub.publish(ControllerState(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
