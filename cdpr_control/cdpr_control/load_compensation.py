@@ -59,8 +59,8 @@ COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period 
 
 
 def _floats(v) -> list[float]:
-    """The entries of a flat vector as a list of floats (the values numpy's float64 casts give)."""
-    return v.tolist() if isinstance(v, np.ndarray) and v.dtype == np.float64 else [float(a) for a in v]
+    """The entries of a flat vector as a list of floats (numpy's float64 cast of them)."""
+    return np.asarray(v, dtype=float).tolist()
 
 
 def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
@@ -382,6 +382,7 @@ class LoadCompensation:
         self.delay: list[list[float]] | None = None            # n + 1 rows of x_d, ẋ_d, ẍ_d (18 floats)
         self.delay_index = 0
         self.z_history: list[float] = []                       # estimated z of the last window + h
+        self._velocity_base = max(int(round(VELOCITY_BASE / dt)), 1)   # h, periods
         self.m_hat: float | None = None
         self.m_c = 0.0
         self.guarded = True
@@ -457,7 +458,7 @@ class LoadCompensation:
     def _estimated_acceleration(self, z: float) -> float | None:
         """Mean vertical acceleration of the estimated pose over the window, (v(t) - v(t - T)) / T
         with v a difference quotient over VELOCITY_BASE; None until the history is long enough."""
-        n, h = self.wrench_filter.n, max(int(round(VELOCITY_BASE / self.dt)), 1)
+        n, h = self.wrench_filter.n, self._velocity_base
         self.z_history.append(z)
         del self.z_history[:-(n + h + 1)]
         if len(self.z_history) < n + h + 1:
