@@ -206,6 +206,7 @@ class HybridForceControl:
         self.state = IDLE
         self.z_t = np.array([0.0, 0.0, 1.0])
         self._z_t_of: bytes | None = None      # F_d,0 (its bytes) whose axis z_t is
+        self._F_d = 0.0                        # N, F_d of that F_d,0 (5.2)
         self.x_t = 0.0
         self.v_t = 0.0
         self.integrator = 0.0
@@ -224,6 +225,19 @@ class HybridForceControl:
         self.force_filter.set_time_constant(params.T_F)
         self.mass = self.robot.platform.mass + params.payload
         self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
+        self._weight = self.weight.tolist()
+
+    def _filter_force(self, w: list[float]) -> np.ndarray:
+        """self.force_filter (PT1) of the contact force -(w_F - m g) (:func:`contact_force`) of the
+        wrench w (6 floats): the filter's arithmetic on three floats, without its array calls."""
+        flt = self.force_filter
+        u = [-(a - b) for a, b in zip(w[:3], self._weight)]
+        if flt.y is None:
+            flt.y = np.array(u)
+        else:
+            alpha = float(flt.alpha)
+            flt.y = np.array([y + alpha * (v - y) for y, v in zip(flt.y.tolist(), u)])
+        return flt.y
 
     def _enter(self, state: str) -> None:
         """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
@@ -258,18 +272,20 @@ class HybridForceControl:
         if F_d0.shape != (3,) or not all_finite(F_d0.tolist()):
             F_d0 = np.zeros(3)                                   # no valid demand: release
         key = F_d0.tobytes()
-        if key != self._z_t_of:                                  # (the same F_d,0 has the same axis)
+        if key != self._z_t_of:                                  # (the same F_d,0 has the same axis and F_d)
             self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
-        F_d = float(self.z_t @ F_d0)                             # (5.2): the z entry of R_t^T F_d,0
-        if w.shape == (6,) and all_finite(w.tolist()):
-            F_vec = self.force_filter.update(-(w[:3] - self.weight))    # contact_force(w, self.mass, g)
+            self._F_d = float(self.z_t @ F_d0)                   # (5.2): the z entry of R_t^T F_d,0
+        F_d = self._F_d
+        w_floats = w.tolist() if w.shape == (6,) else None
+        if w_floats is not None and all_finite(w_floats):
+            F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
             # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
             self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
-        F_vec = F_vec - self.F_tare
+        F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
         e_F = F_d - F
         dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
@@ -312,11 +328,11 @@ class HybridForceControl:
             if self.saturated:
                 self.x_t = _clip(self.x_t, p.x_max)
                 self.v_t = 0.0
-        x = np.zeros(6)
-        x[:3] = self.x_t * self.z_t                              # R_t [0 0 x_t]
+        x_t, (z_x, z_y, z_z) = self.x_t, self.z_t.tolist()
+        x = np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0])    # R_t [0 0 x_t]
+        # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, self.enabled or self.state != IDLE, self.z_t.copy(), F_d0.copy(),
-                         np.array(F_vec, dtype=float), F_d, F, e_F, self.x_t, self.v_t, self.integrator,
-                         self.saturated, x)
+                         F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
 
     def absorb(self, dx: float) -> None:
         """Take over dx [m] along z_t from another output acting on the contact force (in D and R:

@@ -58,6 +58,11 @@ REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, 
 COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period into its window
 
 
+def _floats(v) -> list[float]:
+    """The entries of a flat vector as a list of floats (numpy's float64 cast of them)."""
+    return np.asarray(v, dtype=float).tolist()
+
+
 def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float | None:
     """m̂_p = -w_z / (ẍ_d,z - g) (4.4) [kg]; None where |ẍ_d,z - g| < guard [m/s²] (held)."""
     denominator = xddot_z - g_z
@@ -69,14 +74,19 @@ def mass_estimate(w_z: float, xddot_z: float, g_z: float, guard: float) -> float
 class MovingAverage:
     """Mean of the last n samples (n = round(T / dt), at least 1); the first sample fills the window,
     so the average starts there instead of rising from zero. A running sum, re-summed once per
-    window against rounding drift."""
+    window against rounding drift.
+
+    The window and the sum are plain floats (:meth:`push`, every period in the load compensation):
+    the same element-wise arithmetic as numpy's on arrays of 2 or m numbers, without the call
+    overhead. The fills and the re-sum stay numpy's ``sum(axis=0)`` of the (n, size) window, whose
+    summation order (pairwise for size 1) a Python loop would not reproduce."""
 
     def __init__(self, T: float, dt: float, size: int = 1):
         if not (T >= 0.0 and dt > 0.0):
             raise ValueError(f"need T >= 0 s and dt > 0 s, got T={T}, dt={dt}")
         self.dt, self.size = dt, size
-        self.buffer: np.ndarray | None = None
-        self.sum: np.ndarray | None = None
+        self.buffer: list[list[float]] | None = None     # n rows of size floats, a ring
+        self.sum: list[float] | None = None
         self.index = 0
         self.set_window(T)
 
@@ -91,25 +101,35 @@ class MovingAverage:
             self.reset(mean)
 
     def reset(self, value=None) -> None:
-        self.buffer = None if value is None else np.tile(np.asarray(value, dtype=float), (self.n, 1))
-        self.sum = None if value is None else self.buffer.sum(axis=0)
+        if value is None:
+            self.buffer = self.sum = None
+        else:
+            buffer = np.tile(np.asarray(value, dtype=float), (self.n, 1))
+            self.buffer, self.sum = buffer.tolist(), buffer.sum(axis=0).tolist()
         self.index = 0
 
     @property
     def mean(self) -> np.ndarray | None:
-        return None if self.buffer is None else self.sum / self.n
+        return None if self.buffer is None else np.array(self.sum) / self.n
 
     def update(self, value) -> np.ndarray:
-        value = np.asarray(value, dtype=float).reshape(self.size)
+        self.push(np.asarray(value, dtype=float).reshape(self.size).tolist())
+        return self.mean
+
+    def push(self, value: list[float]) -> list[float]:
+        """:meth:`update` of ``size`` floats -> the mean as floats. The list itself goes into the
+        window: the caller passes one it does not change afterwards."""
         if self.buffer is None:
             self.reset(value)
         else:
-            self.sum += value - self.buffer[self.index]
+            old = self.buffer[self.index]
+            self.sum = [s + (v - o) for s, v, o in zip(self.sum, value, old)]
             self.buffer[self.index] = value
             self.index = (self.index + 1) % self.n
             if self.index == 0:
-                self.sum = self.buffer.sum(axis=0)
-        return self.mean
+                self.sum = np.array(self.buffer).sum(axis=0).tolist()
+        n = self.n
+        return [s / n for s in self.sum]
 
 
 def cable_stiffness_model(robot, ik, f, model: str, f_slack: float = 0.0) -> np.ndarray:
@@ -355,13 +375,14 @@ class LoadCompensation:
         self.cog_filter = MovingAverage(0.24, dt * COG_DECIMATION, size=12)   # normal equations of τ = c × f
         self.force_filter = MovingAverage(0.24, dt, size=robot.m)  # f for K_l: the same window, noise averaged out
         self.m_tare = 0.0                                      # kg, subtracted from (4.4) (see tare)
-        self.f_ref: np.ndarray | None = None                   # forces of the last unloaded state
+        self.f_ref: list[float] | None = None                  # forces of the last unloaded state
         self.tared = False
         self.periods = 0
         self.samples = 0
-        self.delay: np.ndarray | None = None                   # (n + 1, 18) x_d, ẋ_d, ẍ_d
+        self.delay: list[list[float]] | None = None            # n + 1 rows of x_d, ẋ_d, ẍ_d (18 floats)
         self.delay_index = 0
         self.z_history: list[float] = []                       # estimated z of the last window + h
+        self._velocity_base = max(int(round(VELOCITY_BASE / dt)), 1)   # h, periods
         self.m_hat: float | None = None
         self.m_c = 0.0
         self.guarded = True
@@ -385,7 +406,7 @@ class LoadCompensation:
         n = int(round(p.time_shift / self.dt))
         if self.delay is None or len(self.delay) != n + 1:
             last = None if self.delay is None else self.delay[(self.delay_index - 1) % len(self.delay)]
-            self.delay = None if last is None else np.tile(last, (n + 1, 1))
+            self.delay = None if last is None else [list(last) for _ in range(n + 1)]
             self.delay_index = 0
             self._delay_n = n
         if not p.enabled:
@@ -400,7 +421,7 @@ class LoadCompensation:
     def _reference_forces(self) -> np.ndarray:
         """The unloaded forces for the slack cables of :func:`secant_offset`: those of the last window
         with (nearly) no payload, else f_min (what a force distribution keeps an unloaded robot at)."""
-        return self.f_ref if self.f_ref is not None else np.broadcast_to(
+        return np.array(self.f_ref) if self.f_ref is not None else np.broadcast_to(
             np.asarray(self.robot.cable.f_min, dtype=float), (self.robot.m,))
 
     @property
@@ -424,11 +445,12 @@ class LoadCompensation:
             self.settlement.reset(self.force_filter.mean)       # settled to the forces of the known state
         return self.m_tare
 
-    def _shifted(self, x_d, xdot_d, xddot_d) -> np.ndarray:
-        """The set-point of time_shift ago (a ring buffer; it starts filled with the first one)."""
-        sample = np.concatenate((x_d, xdot_d, xddot_d))
+    def _shifted(self, x_d, xdot_d, xddot_d) -> list[float]:
+        """The set-point of time_shift ago, [x_d, ẋ_d, ẍ_d] as 18 floats (a ring buffer; it starts
+        filled with the first one)."""
+        sample = _floats(x_d) + _floats(xdot_d) + _floats(xddot_d)
         if self.delay is None:
-            self.delay = np.tile(sample, (self._delay_n + 1, 1))
+            self.delay = [list(sample) for _ in range(self._delay_n + 1)]
         self.delay[self.delay_index] = sample
         self.delay_index = (self.delay_index + 1) % len(self.delay)
         return self.delay[self.delay_index]                   # written _delay_n periods ago
@@ -436,7 +458,7 @@ class LoadCompensation:
     def _estimated_acceleration(self, z: float) -> float | None:
         """Mean vertical acceleration of the estimated pose over the window, (v(t) - v(t - T)) / T
         with v a difference quotient over VELOCITY_BASE; None until the history is long enough."""
-        n, h = self.wrench_filter.n, max(int(round(VELOCITY_BASE / self.dt)), 1)
+        n, h = self.wrench_filter.n, self._velocity_base
         self.z_history.append(z)
         del self.z_history[:-(n + h + 1)]
         if len(self.z_history) < n + h + 1:
@@ -447,21 +469,22 @@ class LoadCompensation:
     def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
 
-        x: the estimated pose (forward kinematics), needed for acceleration_source = estimated.
+        x: the estimated pose (forward kinematics), needed for acceleration_source = estimated; only
+        its z enters, so its position (3,) will do.
         """
         shifted = self._shifted(x_d, xdot_d, xddot_d)
-        xs, xdots, xddots = shifted[:6], shifted[6:12], shifted[12:]
         w = -np.asarray(AT) @ np.asarray(f, dtype=float)                    # (2.11) at x_d
         if self.m_hat is None:
             self.m_hat = self.m_p
-        if not all_finite(w):
+        w_floats = w.tolist()
+        if not all_finite(w_floats):
             self.guarded = True
             return                                                           # hold the estimate
-        w_z, a = self.wrench_filter.update([w[2], xddots[2]])               # means over the window
+        w_z, a = self.wrench_filter.push([w_floats[2], shifted[14]])        # means over the window (ẍ_z)
         if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
             a_est = self._estimated_acceleration(float(x[2]))
             a = a if a_est is None else a_est          # commanded until the history spans a window
-        estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
+        estimate = mass_estimate(w_z, a, float(self.robot.gravity[2]), self.params.accel_guard)
         self.guarded = estimate is None
         if self.guarded:
             return                                                           # hold the estimate
@@ -470,11 +493,13 @@ class LoadCompensation:
         if self.samples % COG_DECIMATION:
             return
         # payload share of the wrench, in the platform frame: τ_p = c × f_p = -[f_p] c
+        xs, xdots, xddots = np.array(shifted[:6]), np.array(shifted[6:12]), np.array(shifted[12:])
         w_p = w - kernels.platform_wrench(self.robot, xs, xdots, xddots)
         RT = rotation_matrix(xs[3:]).T
         f_p, tau_p = RT @ w_p[:3], RT @ w_p[3:]
-        S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
-        self.cog_filter.update(np.concatenate(((S.T @ S).ravel(), -S.T @ tau_p)))
+        fx, fy, fz = f_p.tolist()
+        S = np.array([[0.0, -fz, fy], [fz, 0.0, -fx], [-fy, fx, 0.0]])
+        self.cog_filter.push((S.T @ S).ravel().tolist() + (-S.T @ tau_p).tolist())
 
     def _centre_of_gravity(self) -> np.ndarray | None:
         if self.m_c <= self.params.cog_min_mass or self.cog_filter.mean is None:
@@ -490,7 +515,7 @@ class LoadCompensation:
         [N] and the estimated pose x -> x_d,LC (6,) [m, m, m, rad, rad, rad] as a pose offset (zero
         when disabled).
 
-        ik_d: inverse_kinematics(robot, x_d) when the caller has it.
+        ik_d: inverse_kinematics(robot, x_d) when the caller has it. x: see :meth:`identify`.
         """
         x_d = np.asarray(x_d, dtype=float)
         ik = ik_d
@@ -506,11 +531,14 @@ class LoadCompensation:
                 and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
-        finite = all_finite(f)
+        f_floats = f.ravel().tolist()
+        finite = all_finite(f_floats)
         if finite:
-            f = self.force_filter.update(f)                       # the forces of the window of (4.4)
+            f_mean = self.force_filter.push(f_floats)             # the forces of the window of (4.4)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:
-                self.f_ref = f.copy()                             # an unloaded state (see secant_offset)
+                self.f_ref = f_mean                               # an unloaded state (see secant_offset)
+            if self.params.enabled or self.settlement.ratio > 0.0:
+                f = np.array(f_mean)
             if self.settlement.ratio > 0.0:
                 if self.settlement.f_settled is None and self.f_ref is not None:
                     self.settlement.reset(self.f_ref)             # no tare: settled to the first unloaded state

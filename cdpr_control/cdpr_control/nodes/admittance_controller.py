@@ -31,7 +31,7 @@ from cdpr_control.admittance import AdmittanceController, default_parameters, se
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
-from .conversions import (accel_from_msg, accel_to_msg, pose_from_msg, pose_to_msg, twist_from_msg,
+from .conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg, twist_from_msg,
                           twist_to_msg, wrench_from_msg)
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL, STATUS
@@ -74,6 +74,7 @@ class AdmittanceControllerNode(CdprNode):
         super().__init__("admittance_controller", **kwargs)
         self.controller: AdmittanceController | None = None
         self._last_ns: int | None = None
+        self._origin_of, self._origin_floats = None, []     # (see _origin)
         self.program_state = ProgramStatus.IDLE
         self.create_subscription(ProgramStatus, "program_status", self._on_status, STATUS)
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
@@ -151,14 +152,24 @@ class AdmittanceControllerNode(CdprNode):
         """Not guiding: the set-point passes through at rest (what the controller returns then), without
         the controller's work (this node runs every period of every graph, mostly idle)."""
         header = self.header(t_ns, sp.header.frame_id or "base")
-        self.setpoint_pub.publish(OperationalSetpoint(
-            header=header, pose=sp.pose, velocity=_ZERO_TWIST, acceleration=_ZERO_ACCEL, force=sp.force, line=0))
-        x_0, x_d = self.controller.zones.x_0, pose_from_msg(sp.pose)
+        out = bare(OperationalSetpoint)       # every field set (conversions.bare): every period
+        out._header, out._pose, out._velocity, out._acceleration = header, sp.pose, _ZERO_TWIST, _ZERO_ACCEL
+        out._force, out._line = sp.force, 0
+        self.setpoint_pub.publish(out)
+        x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
         self.state_pub.publish(ControllerState(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
-            reference=x_0.tolist(), feedback=_ZEROS, error=(x_d - x_0).tolist(),
-            feedforward=_ZEROS, output=x_d.tolist(), saturated=[False] * 6))
+            reference=x_0, feedback=_ZEROS, error=[a - b for a, b in zip(x_d, x_0)],
+            feedforward=_ZEROS, output=x_d, saturated=[False] * 6))
         self.report(DiagnosticStatus.OK, "idle", stamp_ns=t_ns)
+
+    def _origin(self) -> list[float]:
+        """The zone origin x_0 as floats, converted once per zone set (the idle state carries it
+        every period; the message constructor copies it)."""
+        zones = self.controller.zones
+        if self._origin_of is not zones:
+            self._origin_of, self._origin_floats = zones, zones.x_0.tolist()
+        return self._origin_floats
 
 
 def main(args=None):

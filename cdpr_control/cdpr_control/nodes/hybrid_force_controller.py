@@ -49,6 +49,7 @@ from .sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
 ABSORBING = (CONTACT, RELEASE)      # the states in which HybridForceControl.absorb takes a hand-over
+_ZERO3, _ZEROS = [0.0] * 3, [0.0] * 6     # (the message constructor copies them)
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
     ParamSpec("enabled", False, "hybrid position/force control on (M103) or off (M104; releases the contact)"),
@@ -126,18 +127,24 @@ class HybridForceControllerNode(CdprNode):
         cfc_on = self.cfc_on
         s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
         x_comp = self.hand_over.update(s, stage.k_contact or stage.params.K_p, cfc_on)
-        zero3 = [0.0, 0.0, 0.0]
-        feedforward = np.zeros(6) if s.state in (CONTACT, IDLE) else s.x     # the position-controlled x_t
-        reference, feedback = s.F_d0.tolist() + zero3, s.F_vec.tolist() + zero3
+        # the fields' arithmetic in floats: element by element what numpy's would give, without
+        # its call overhead on six numbers
+        x = s.x.tolist()
+        feedforward = _ZEROS if s.state in (CONTACT, IDLE) else x     # the position-controlled x_t
+        reference, feedback = s.F_d0.tolist() + _ZERO3, s.F_vec.tolist() + _ZERO3
+        integrator = s.integrator
         self.publisher.publish(ControllerState(
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
-            integrator=(s.integrator * s.z_t).tolist() + zero3, feedforward=feedforward.tolist(),
-            output=(s.x + x_comp).tolist(), saturated=[bool(s.saturated)] * 6))
-        # published when state or saturation change (report() compares level and message)
+            integrator=[integrator * z for z in s.z_t.tolist()] + _ZERO3, feedforward=feedforward,
+            output=[a + b for a, b in zip(x, x_comp.tolist())], saturated=[bool(s.saturated)] * 6))
+        # published when state or saturation change (report() compares level and message; the
+        # values are formatted only then)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
-        self.report(level, f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else ""),
-                    {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}, stamp_ns=t_ns)
+        message = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+        if (level, message) != self._last_diagnostic:
+            self.report(level, message, {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"},
+                        stamp_ns=t_ns)
 
 
 def main(args=None):
