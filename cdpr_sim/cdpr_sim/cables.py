@@ -129,6 +129,14 @@ class CableModel:
             self.overloads += 1
         return f, FT[:3], FT[3:], anchors
 
+    def wrench_arguments(self) -> tuple:
+        """The arguments of _cable_wrench but the platform state and the winches, for a caller that
+        runs it inside its own compiled code (the simulator's period): (b, c, wrap, l_0, e_grid,
+        f_grid, k_grid, tau_c, h, ref, f, FT, anchors, A, d); it then sets ``moved`` and counts
+        ``overloads`` as :meth:`wrench` does. c, wrap and ref change at :meth:`refresh`."""
+        return (self._b, self.c, self._wrap, self._l_0, self._e_grid, self._f_grid, self._k_grid, self.damping_time,
+                self.step, self._anchors_at_refresh, self._f, self._FT, self._anchors, self._A, self._d)
+
     def linearisation(self) -> tuple[np.ndarray, np.ndarray]:
         """(A (m, 6), d (m,)) of the last :meth:`wrench`, views: rows [u_i, R b_i x u_i] (the
         transposed structure matrix) and the implicit coefficients d_i of :meth:`implicit_wrench`."""
