@@ -5,8 +5,11 @@ on both robots, with and without friction, settlement, external wrenches and pul
 import numpy as np
 import pytest
 
+from cdpr_control.kinematics import rotation_matrix
 from cdpr_control.robot import load_robot
 from cdpr_sim.contacts import ContactMaterial, Plane, default_tool
+from cdpr_sim.period import kardan_into
+from cdpr_sim.platform import kardan_angles
 from cdpr_sim.simulator import SimConfig, Simulator, SimOutput
 from cdpr_sim.startup import startup_state
 
@@ -100,3 +103,14 @@ def test_fused_period_refuses_what_the_readable_path_refuses():
     with pytest.raises(ValueError):          # another length: the readable path's broadcasting error
         sim.step(np.zeros(sim.m + 1))
     sim.close()
+
+
+def test_compiled_kardan_angles_are_platform_kardan_angles():
+    rng = np.random.default_rng(5)
+    x = np.empty(6)
+    angles = np.concatenate([rng.uniform(-np.pi, np.pi, (20000, 3)), rng.normal(0.0, 1e-3, (20000, 3)),
+                             [[0.0, np.pi / 2, 0.0], [0.0, -np.pi / 2, 0.3], [-0.0, 0.0, -0.0]]])
+    for a in angles:
+        R = rotation_matrix(a)
+        kardan_into(R, x)
+        assert same(x[3:], kardan_angles(R))

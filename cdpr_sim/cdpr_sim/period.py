@@ -16,6 +16,10 @@ copies and the element-wise expressions of the numpy code (u = theta_d - offset,
 theta_u + l_0, F + w, f (1 - cos beta_1)), the same operation on each element. numba's fastmath
 stays off, so no operation is reordered or contracted. tests/test_sim_fused_period.py compares the
 two paths bit for bit.
+
+numba's disk cache of these two functions holds the compiled callees too and is renewed when this
+file changes, not when a callee's file does (as for cables._implicit_wrench's Cholesky solve): a
+changed callee needs this file touched or its __pycache__ cleared.
 """
 from __future__ import annotations
 
@@ -56,6 +60,15 @@ def _winch_readings(theta, theta_prev, encoder_offset, resolution, theta_enc_pre
         theta_enc[i] = encoder_count(theta_true[i], resolution)
         thetadot_enc[i] = (theta_enc[i] - theta_enc_prev[i]) * rate
     return thetadot, theta_true, theta_enc, thetadot_enc
+
+
+@numba.njit(cache=True)
+def kardan_into(R, x):
+    """x[3:6] = platform.kardan_angles(R): [a, b, c] with R = Rx(a) Ry(b) Rz(c) (section 2.1.1), the
+    same libm functions on the same numbers."""
+    x[3] = math.atan2(-R[1, 2], R[2, 2])
+    x[4] = math.asin(max(-1.0, min(1.0, R[0, 2])))
+    x[5] = math.atan2(-R[0, 1], R[0, 0])
 
 
 @numba.njit(cache=True)
@@ -124,10 +137,7 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
                                     thetadot_drive, ref, f_buf, FT, anchors, A_buf, d_buf)
     for k in range(3):
         x[k], xdot[k], xdot[3 + k] = r[k], v[k], omega[k]
-    # kardan_angles (platform.py): R = Rx(a) Ry(b) Rz(c)
-    x[3] = math.atan2(-R[1, 2], R[2, 2])
-    x[4] = math.asin(max(-1.0, min(1.0, R[0, 2])))
-    x[5] = math.atan2(-R[0, 1], R[0, 0])
+    kardan_into(R, x)
     if refresh_distance >= 0.0 and moved > refresh_distance:
         return 1, overload, moved
     f[:] = f_buf
