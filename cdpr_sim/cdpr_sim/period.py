@@ -103,7 +103,7 @@ def substep(theta_d, offset, u, Phi, G_new, G_old, x, buffer, head, delay, v_max
 
 @numba.njit(cache=True)
 def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
-            b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, ref, f_buf, FT, anchors, A_buf, d_buf,
+            b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, ref, f_buf, FT, anchors, A_buf, d_buf, hint,
             l_0, settle_ratio, f_settled, k0, settle_alpha, A_next, d_next,
             theta_prev, offset, resolution, theta_enc_prev, rate,
             friction, alpha_t, gamma_t, sigma, v_eps, dahl, tol, max_iterations, sensor_gain, gain,
@@ -134,7 +134,7 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
     for i in range(m):
         theta_u[i] = theta[i] + s[i]                  # unstretched length incl. settlement
     overload, moved = _cable_wrench(b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta_u,
-                                    thetadot_drive, ref, f_buf, FT, anchors, A_buf, d_buf)
+                                    thetadot_drive, ref, f_buf, FT, anchors, A_buf, d_buf, hint)
     for k in range(3):
         x[k], xdot[k], xdot[3 + k] = r[k], v[k], omega[k]
     kardan_into(R, x)
