@@ -449,6 +449,7 @@ class Simulator:
         dahl = friction.dahl
         f_settled = _NONE if settlement.f_settled is None else settlement.f_settled
         check = cables.refresh_distance
+        tol, iterations = 1e-12, 50               # those of kernels.friction_sensor_force (the readable path)
         m, empty = self.m, np.empty
         r, R = self._r, self._R           # the next step's (self._pending), then overwritten
         x, xdot, f, theta_true, theta_enc, thetadot_enc, F_s_true, F_s = (
@@ -459,7 +460,7 @@ class Simulator:
                 pos, rot, lin, ang, theta, settlement.s, drives.thetadot, check, *cables.wrench_arguments(),
                 self.robot.l_0, settlement.ratio, f_settled, settlement.k0, settlement.alpha, self._A_next,
                 self._d_next, self._theta_prev, self.encoder_offset, self.encoder.resolution, self._theta_enc_prev,
-                1.0 / cfg.period, cfg.friction, alpha_t, gamma_t, dahl.sigma, dahl.v_eps, dahl.state, 1e-12, 50,
+                1.0 / cfg.period, cfg.friction, alpha_t, gamma_t, dahl.sigma, dahl.v_eps, dahl.state, tol, iterations,
                 self._friction_gain, self._gain, _NONE if noise is None else noise, noise is not None,
                 *self.sensor.quantiser(), r, R, x, xdot, f, theta_true, theta_enc, thetadot_enc, F_s_true, F_s)
             if overload:
