@@ -159,6 +159,19 @@ class DriveModel:
         self.theta = self._x[0].copy()
         return self.theta
 
+    def step_arguments(self) -> tuple:
+        """The arguments of :func:`drive_step` after theta_d, for a caller that runs the step inside
+        its own compiled code (the simulator's period): it then hands the returned head and the new
+        theta over to :meth:`stepped`."""
+        return (self._Phi, self._G_new, self._G_old, self._x, self._buffer, self._head, self.delay_steps, self.v_max,
+                self.dt, self.thetadot)
+
+    def stepped(self, head: int, theta: np.ndarray) -> None:
+        """Take over the result of a :func:`drive_step` run on :meth:`step_arguments`: the next head
+        and theta (m,), a new array (a copy of the state's first row, as :meth:`step` makes)."""
+        self._head = head
+        self.theta = theta
+
     # --- continuous model ------------------------------------------------------------------
 
     def transfer_function(self, s) -> np.ndarray:

@@ -80,6 +80,7 @@ class CableModel:
         self._f, self._FT, self._anchors = np.empty(robot.m), np.empty(6), np.empty((robot.m, 3))
         self._A, self._d = np.empty((robot.m, 6)), np.empty(robot.m)     # rows [u_i, Rb_i x u_i], implicit d_i
         self._FT_step = np.empty(6)
+        self._hint = np.zeros(robot.m, dtype=np.int64)   # each cable's interval of the force table
         self.slackened = 0      # cables that went slack within a physics step (implicit_wrench)
         self.c = None          # (m, 3) frozen leave points
         self.beta = None       # (m,) frozen wrap angles (2.6)
@@ -124,10 +125,19 @@ class CableModel:
         f, FT, anchors = self._f, self._FT, self._anchors
         overload, self.moved = _cable_wrench(
             self._b, self.c, self._wrap, self._l_0, self._e_grid, self._f_grid, self._k_grid, self.damping_time,
-            self.step, r, R, v, omega, theta, thetadot, self._anchors_at_refresh, f, FT, anchors, self._A, self._d)
+            self.step, r, R, v, omega, theta, thetadot, self._anchors_at_refresh, f, FT, anchors, self._A, self._d,
+            self._hint)
         if overload:
             self.overloads += 1
         return f, FT[:3], FT[3:], anchors
+
+    def wrench_arguments(self) -> tuple:
+        """The arguments of _cable_wrench but the platform state and the winches, for a caller that
+        runs it inside its own compiled code (the simulator's period): (b, c, wrap, l_0, e_grid,
+        f_grid, k_grid, tau_c, h, ref, f, FT, anchors, A, d, hint); it then sets ``moved`` and counts
+        ``overloads`` as :meth:`wrench` does. c, wrap and ref change at :meth:`refresh`."""
+        return (self._b, self.c, self._wrap, self._l_0, self._e_grid, self._f_grid, self._k_grid, self.damping_time,
+                self.step, self._anchors_at_refresh, self._f, self._FT, self._anchors, self._A, self._d, self._hint)
 
     def linearisation(self) -> tuple[np.ndarray, np.ndarray]:
         """(A (m, 6), d (m,)) of the last :meth:`wrench`, views: rows [u_i, R b_i x u_i] (the
@@ -159,12 +169,13 @@ class CableModel:
 
 @numba.njit(cache=True)
 def _cable_wrench(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta, thetadot, ref, f, FT,
-                  anchors, A, d):
+                  anchors, A, d, hint):
     """The loop of CableModel.wrench (one pass over the cables).
 
     Fills f (m,), the wrench FT = A^T f (6,), the anchors (m, 3), the rows A_i = [u_i, Rb_i x u_i]
     (the transposed structure matrix, (2.11)) and the coefficients d_i = (h/4 + tau) k_t,i [N s/m]
-    of the implicit step (see CableModel.implicit_wrench), 0 for a slack cable.
+    of the implicit step (see CableModel.implicit_wrench), 0 for a slack cable. hint (m,): each
+    cable's table interval of the last call, updated.
     Returns (overload, largest anchor displacement from ``ref`` on any axis).
     """
     overload = False
@@ -190,7 +201,13 @@ def _cable_wrench(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omeg
         if e <= 0.0:                                  # slack: pulls nothing
             f[i] = 0.0
             continue
-        j = np.searchsorted(e_grid, e)
+        # np.searchsorted(e_grid, e), the same j, tried first at the cable's last interval: the strain
+        # moves little between steps, and the binary search reads some 15 entries spread over the
+        # 160 kB table per cable, cache misses when the node graph shares the core
+        j = hint[i]
+        if not (0 < j < n and e_grid[j - 1] < e <= e_grid[j]):
+            j = np.searchsorted(e_grid, e)
+            hint[i] = j
         if j >= n:                                    # beyond the table: continued with its end slope
             overload = True
             ki = k_grid[n - 1]

@@ -92,6 +92,17 @@ class PlatformBody:
             v = v - cross(omega, Rc)
         return r, R, v, omega
 
+    def raw_state(self):
+        """The numbers of :meth:`state` as pybullet returns them, for a compiled caller: (r (3,),
+        R (9,) row by row, v (3,), omega (3,)) as tuples of floats."""
+        if self._offset:
+            r, R, v, omega = self.state()
+            return tuple(r.tolist()), tuple(R.ravel().tolist()), tuple(v.tolist()), tuple(omega.tolist())
+        pb, body, cid = self.pb, self.body, self.client
+        pos, quat = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        lin, ang = pb.getBaseVelocity(body, physicsClientId=cid)
+        return pos, pb.getMatrixFromQuaternion(quat), lin, ang
+
     def pose_and_twist(self) -> tuple[np.ndarray, np.ndarray]:
         r, R, v, omega = self.state()
         return np.concatenate([r, kardan_angles(R)]), np.concatenate([v, omega])
@@ -101,3 +112,10 @@ class PlatformBody:
         pb = self.pb
         pb.applyExternalForce(self.body, -1, F.tolist(), r.tolist(), pb.WORLD_FRAME, physicsClientId=self.client)
         pb.applyExternalTorque(self.body, -1, T.tolist(), pb.WORLD_FRAME, physicsClientId=self.client)
+
+    def apply_wrench(self, FT, r) -> None:
+        """:meth:`apply` of the wrench FT = [F; T] (6,) about the platform origin r (base frame)."""
+        pb = self.pb
+        FT = FT.tolist()
+        pb.applyExternalForce(self.body, -1, FT[:3], r.tolist(), pb.WORLD_FRAME, physicsClientId=self.client)
+        pb.applyExternalTorque(self.body, -1, FT[3:], pb.WORLD_FRAME, physicsClientId=self.client)

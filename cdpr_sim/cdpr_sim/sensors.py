@@ -50,18 +50,25 @@ class ForceSensor:
         (3.29) read through the robot file's calibration."""
         return self.cal_gamma_1 * (np.asarray(F_s, dtype=float) / self.gamma_1 + self.gamma_0 - self.cal_gamma_0)
 
+    def next_noise(self) -> np.ndarray | None:
+        """The noise (m,) [N] of the next reading (None without noise); each call is one reading's."""
+        if not self.noise_std:
+            return None
+        # drawn for NOISE_BLOCK readings at once: the generator's stream in the same order, so the
+        # same numbers as one draw per reading, for one call a block instead of one a period
+        if self._next == self._noise.shape[0]:
+            self._noise, self._next = self.rng.normal(0.0, self.noise_std, (NOISE_BLOCK, self.m)), 0
+        noise = self._noise[self._next]
+        self._next += 1
+        return noise
+
+    def quantiser(self) -> tuple:
+        """(k1, k0, code_min, code_max, r1, r0): the constants of _quantise, for a compiled caller."""
+        return self._k1, self._k0, self._code_min, self._code_max, self._r1, self._r0
+
     def read(self, F_s) -> np.ndarray:
         """Calibrated reading [N] (m,): quantised signal through the robot file's line (3.29)."""
-        noise = None
-        if self.noise_std:
-            # drawn for NOISE_BLOCK readings at once: the generator's stream in the same order, so the
-            # same numbers as one draw per reading, for one call a block instead of one a period
-            if self._next == self._noise.shape[0]:
-                self._noise, self._next = self.rng.normal(0.0, self.noise_std, (NOISE_BLOCK, self.m)), 0
-            noise = self._noise[self._next]
-            self._next += 1
-        return _quantise(np.asarray(F_s, dtype=float), noise, self._k1, self._k0, self._code_min, self._code_max,
-                         self._r1, self._r0)
+        return _quantise(np.asarray(F_s, dtype=float), self.next_noise(), *self.quantiser())
 
 
 @numba.njit(cache=True)

@@ -33,11 +33,9 @@ sensor noise, drawn from numpy's PCG64 generator.
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 import pybullet
 
@@ -49,20 +47,17 @@ from cdpr_control.safety import all_finite
 
 from .cables import CableModel
 from .contacts import PlatformShape, add_obstacle, platform_collision_shape
+from .period import _winch_readings, compiled, measure as _measure_kernel, substep as _substep_kernel
 from .plant import KINDS, Settlement, build_plant
 from .platform import PlatformBody, kardan_angles
-from .sensors import Encoder, ForceSensor, encoder_count
+from .sensors import Encoder, ForceSensor
 from .wrench import WrenchPulse
-
-
-@functools.cache
-def compiled(fn):
-    """numba-compiled (and disk-cached) version of a numpy kernel, one per function and process."""
-    return numba.njit(cache=True)(fn)
 
 
 _ZERO6 = np.zeros(6)
 _ZERO6.setflags(write=False)
+_NONE = np.zeros(0)        # array arguments of the compiled period that are not used
+_NONE2 = np.zeros((0, 0))
 
 
 @dataclass(frozen=True)
@@ -159,7 +154,13 @@ class Simulator:
     Starts at rest at pose x0 (default robot.home) with unstretched cable lengths theta0 (default:
     IK{x0}, i.e. no tension) and encoder offset ``encoder_offset`` (default 0). ``output`` holds
     the SimOutput of time ``t``.
+
+    ``fused`` (default True): a period runs as the compiled calls of :mod:`cdpr_sim.period` when
+    the kernels are enabled (cdpr_control.kernels.ENABLED); False runs the readable path of method
+    calls and numpy expressions, the same numbers (tests/test_sim_fused_period.py).
     """
+
+    fused: bool = True
 
     def __init__(self, robot, config: SimConfig = SimConfig(), x0=None, theta0=None, encoder_offset=None):
         self.nominal = robot
@@ -181,6 +182,10 @@ class Simulator:
         self.cables = CableModel(robot, config.cable_damping_time, config.ik_refresh_distance, config.dt)
         self._gravity = np.array(robot.gravity, dtype=float)
         self._thetadot_0 = np.empty(self.m)          # the drives' velocity at the start of a physics step
+        self._u = np.empty(self.m)                    # the drive command of the fused period
+        self._FT_step = np.empty(6)                   # the wrench of a physics step (fused period)
+        self._A_next, self._d_next = np.empty((self.m, 6)), np.empty(self.m)   # linearisation for the next step
+        self._r, self._R = np.empty(3), np.empty((3, 3))                       # and the platform's pose
         self.drives = DriveModel.from_robot(robot, config.dt, jit=compiled)
         self.encoder = Encoder.from_drive(robot.drive, config.encoder_counts)
         self.settlement = Settlement(self.plant.settlement_ratio, self.plant.settlement_time, robot.cable.k0,
@@ -225,6 +230,10 @@ class Simulator:
         self._external = False
         self._theta_enc_prev = self.encoder.read(theta0 + self.encoder_offset)
         self._theta_prev = self.drives.theta
+        # the sensor pulley's gain 1 - cos beta_1 (3.36) of sensor_from_winch_force and of the
+        # friction kernel (kernels.sensors), the same numbers (numpy's cos)
+        self._gain = np.broadcast_to(1.0 - np.cos(np.asarray(self.robot.sensor.beta_1, dtype=float)), (self.m,)).copy()
+        self._friction_gain = float(1.0 - np.cos(self.friction.beta_1))
         self.output = self._measure()
         return self.output
 
@@ -314,6 +323,10 @@ class Simulator:
 
     def step(self, theta_d) -> SimOutput:
         """Advance one control period with the drive command theta_d (m,) (encoder coordinates)."""
+        if self.fused and kernels.ENABLED:
+            td = np.asarray(theta_d, dtype=float)
+            if td.shape == (self.m,):            # else the readable path: broadcasts or refuses
+                return self._step_fused(td, theta_d)
         u = np.asarray(theta_d, dtype=float) - self.encoder_offset
         if u.shape != (self.m,) or not all_finite(u):       # (a fifth of isfinite().all() on m values)
             raise ValueError(f"theta_d must be {self.m} finite numbers, got {theta_d}")
@@ -346,6 +359,38 @@ class Simulator:
         self.output = self._measure()
         return self.output
 
+    def _step_fused(self, theta_d: np.ndarray, given) -> SimOutput:
+        """:meth:`step` with the arithmetic after the pybullet calls in compiled calls (period.substep,
+        period.measure): the same numbers. ``given``: theta_d as the caller passed it (for the error)."""
+        cfg, body, cables, drives, pb, cid = self.config, self._body, self.cables, self.drives, self._pb, self._client
+        dt = cfg.dt
+        t = self.t
+        f, A, d, r, R = self._pending
+        FT = self._FT_step
+        for i in range(cfg.substeps):
+            if i > 0:
+                r, R, v, omega = body.state()
+                f, _, _, _ = cables.wrench(r, R, v, omega, drives.theta + self.settlement.s, drives.thetadot)
+                A, d = cables.linearisation()
+            w = self._external_wrench(t, R) if self._external else _ZERO6
+            w_load = w + self._w_contact if self._obstacles else w
+            # self._external read after _external_wrench, which may end a pulse (as the readable path)
+            theta = np.empty(self.m)
+            head, dropped = _substep_kernel(
+                theta_d, self.encoder_offset, self._u, *drives.step_arguments(), self._thetadot_0, f, A, d, cables.step,
+                body.mass, body.c, body.inertia, R, self._gravity, w_load, w, self._external, FT, theta)
+            if head < 0:
+                raise ValueError(f"theta_d must be {self.m} finite numbers, got {given}")
+            drives.stepped(head, theta)
+            cables.slackened += dropped
+            body.apply_wrench(FT, r)
+            pb.stepSimulation(physicsClientId=cid)
+            t += dt
+        self.steps += 1
+        self.t = self.steps * cfg.period
+        self.output = self._measure()
+        return self.output
+
     def _external_wrench(self, t: float, R) -> np.ndarray:
         w = self._w_cont
         if self._pulse is not None:
@@ -356,6 +401,9 @@ class Simulator:
 
     def _measure(self) -> SimOutput:
         """Outputs at the current time; also prepares the forces for the next physics step."""
+        settlement = self.settlement
+        if self.fused and kernels.ENABLED and (settlement.ratio == 0.0 or settlement.f_settled is not None):
+            return self._measure_fused()
         body, cables, drives, period = self._body, self.cables, self.drives, self.config.period
         r, R, v, omega = body.state()
         theta = drives.theta
@@ -390,6 +438,46 @@ class Simulator:
             w_contact=self._w_contact,
         )
 
+    def _measure_fused(self) -> SimOutput:
+        """:meth:`_measure` with the arithmetic after the pybullet reads in one compiled call
+        (period.measure; a second one after a pulley IK refresh): the same numbers."""
+        body, cables, drives, settlement, cfg = self._body, self.cables, self.drives, self.settlement, self.config
+        pos, rot, lin, ang = body.raw_state()
+        theta = drives.theta
+        noise = self.sensor.next_noise()
+        friction = self.friction
+        dahl = friction.dahl
+        f_settled = _NONE if settlement.f_settled is None else settlement.f_settled
+        check = cables.refresh_distance
+        tol, iterations = 1e-12, 50               # those of kernels.friction_sensor_force (the readable path)
+        m, empty = self.m, np.empty
+        r, R = self._r, self._R           # the next step's (self._pending), then overwritten
+        x, xdot, f, theta_true, theta_enc, thetadot_enc, F_s_true, F_s = (
+            empty(6), empty(6), empty(m), empty(m), empty(m), empty(m), empty(m), empty(m))
+        while True:
+            alpha_t, gamma_t = friction.series.tables(cables.beta) if cfg.friction else (_NONE2, _NONE2)
+            status, overload, cables.moved = _measure_kernel(
+                pos, rot, lin, ang, theta, settlement.s, drives.thetadot, check, *cables.wrench_arguments(),
+                self.robot.l_0, settlement.ratio, f_settled, settlement.k0, settlement.alpha, self._A_next,
+                self._d_next, self._theta_prev, self.encoder_offset, self.encoder.resolution, self._theta_enc_prev,
+                1.0 / cfg.period, cfg.friction, alpha_t, gamma_t, dahl.sigma, dahl.v_eps, dahl.state, tol, iterations,
+                self._friction_gain, self._gain, _NONE if noise is None else noise, noise is not None,
+                *self.sensor.quantiser(), r, R, x, xdot, f, theta_true, theta_enc, thetadot_enc, F_s_true, F_s)
+            if overload:
+                cables.overloads += 1
+            if status == 0:
+                break
+            cables.refresh(x)                     # then the forces again, without a second check
+            check = -1.0
+        self._pending = (f, self._A_next, self._d_next, r, R)
+        w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
+        self._theta_prev = theta
+        self._theta_enc_prev = theta_enc
+        self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
+        return SimOutput(
+            t=self.t, theta=theta_enc, thetadot=thetadot_enc, F_s=F_s, x=x, xdot=xdot, f=f, F_s_true=F_s_true,
+            theta_true=theta_true, beta=cables.beta, w_ext=w_ext, w_contact=self._w_contact)
+
     def _contact_wrench(self, r) -> np.ndarray:
         """Sum of the contact forces on the platform (last physics step) about its origin."""
         w = np.zeros(6)
@@ -399,19 +487,3 @@ class Simulator:
             w[:3] += F
             w[3:] += cross(np.array(c[5]) - r, F)
         return w
-
-
-@numba.njit(cache=True)
-def _winch_readings(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
-    """The winch side of Simulator._measure in one pass over the cables (once per control period;
-    as numpy expressions on m values they cost several times more): the period's mean velocity
-    (theta - theta_prev) rate, the drive position in encoder coordinates theta_true = theta +
-    encoder_offset, the encoder reading of it (Encoder.read) and that reading's difference quotient."""
-    m = theta.shape[0]
-    thetadot, theta_true, theta_enc, thetadot_enc = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    for i in range(m):
-        thetadot[i] = (theta[i] - theta_prev[i]) * rate
-        theta_true[i] = theta[i] + encoder_offset[i]
-        theta_enc[i] = encoder_count(theta_true[i], resolution)
-        thetadot_enc[i] = (theta_enc[i] - theta_enc_prev[i]) * rate
-    return thetadot, theta_true, theta_enc, thetadot_enc
