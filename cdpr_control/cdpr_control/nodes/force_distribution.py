@@ -32,7 +32,7 @@ import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import InertiaStamped, WrenchStamped
+from geometry_msgs.msg import InertiaStamped, Vector3, Wrench, WrenchStamped
 from rclpy.parameter import Parameter
 
 from cdpr_control import kernels
@@ -43,7 +43,7 @@ from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contac
 from cdpr_control.load_compensation import payload_wrench
 
 from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, wrench_from_msg, wrench_to_msg
+from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, wrench_from_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -204,7 +204,7 @@ class ForceDistributionNode(CdprNode):
         msg._header = self.header(t_ns)
         msg._f_d = array("d", res.f.tolist())
         msg._f_ref, msg._f_min, msg._f_max = array("d", limits[3]), array("d", limits[4]), array("d", limits[5])
-        msg._w_d = wrench_to_msg(self.stage.w_d)
+        msg._w_d = _wrench(*self.stage.w_d.tolist())
         msg._method = res.method
         msg._status = int(res.status)
         msg._max_violation = max_violation
@@ -212,6 +212,15 @@ class ForceDistributionNode(CdprNode):
         msg._iterations = int(res.iterations)
         msg._solve_time = float(res.solve_time)
         return msg
+
+
+def _wrench(fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> Wrench:
+    """conversions.wrench_to_msg of the six floats, without indexing an array element by element."""
+    force, torque, msg = bare(Vector3), bare(Vector3), bare(Wrench)
+    force._x, force._y, force._z = fx, fy, fz
+    torque._x, torque._y, torque._z = tx, ty, tz
+    msg._force, msg._torque = force, torque
+    return msg
 
 
 def main(args=None):
