@@ -94,6 +94,7 @@ class ForceDistributionNode(CdprNode):
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
         self.F_d0 = None                           # its reference F_d,0 that gave z_t
+        self._controller, self._state = None, None   # its last controller field and the state parsed from it
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
@@ -178,7 +179,10 @@ class ForceDistributionNode(CdprNode):
             F_d0 = hpfc.reference[:3]
             if F_d0 != self.F_d0:            # task_axis of an unchanged F_d,0 keeps z_t
                 self.F_d0, self.z_t = F_d0, task_axis(np.asarray(F_d0, dtype=float), self.z_t)
-            state = parse_state(hpfc.controller)
+            controller = hpfc.controller
+            if controller != self._controller:   # the state letter changes rarely: parsed on a change
+                self._controller, self._state = controller, parse_state(controller)
+            state = self._state
             if state in FORCE_CONTROLLED:    # else the expected contact wrench is zero
                 w = w + expected_contact_wrench_of(state, np.asarray(F_d0, dtype=float), hpfc.feedback[:3], self.z_t)
         res = self.stage.update(x_d, xdot_d, xddot_d, w, AT, w_model, w_dyn)

@@ -181,7 +181,7 @@ class JointCommandNode(CdprNode):
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
-        hold = any(f.holds for f in faults)
+        hold = any(f.holds for f in faults) if faults else False
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
@@ -233,14 +233,15 @@ class JointCommandNode(CdprNode):
     @staticmethod
     def _offset_sample(msg) -> OffsetSample | None:
         """None for no message or an inactive one: OffsetInputs takes both alike (they add nothing)."""
-        if msg is None or not msg.enabled:
+        if msg is None or not msg._enabled:          # (the slots: three inputs every period)
             return None
-        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg.output))
+        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg._output))
 
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
         now = t_ns * 1e-9
-        times = {self.watched_topics[name]: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
+        topics = self.watched_topics
+        times = {topics[name]: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
         x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         faults = self.monitor.check(
