@@ -106,7 +106,7 @@ class ForceDistributionNode(CdprNode):
         # pose, or a pause of a program, gives the same x_d, ẋ_d, ẍ_d, w_dyn and A^T every period
         self._setpoint_key: tuple = (None, None)         # (key bytes, kernels.ENABLED)
         self._model: tuple = ()                          # (x_d, ẋ_d, ẍ_d, w_dyn, A^T) of that key
-        self._payload_key: bytes | None = None
+        self._payload_key: tuple | None = None          # (set-point key, payload bytes) of _w_model
         self._w_model = None
         self._limits: tuple = ()                         # (f_ref, f_min, f_max, their message arrays)
 
@@ -144,35 +144,35 @@ class ForceDistributionNode(CdprNode):
         return response
 
     def _setpoint(self, sp) -> tuple:
-        """(x_d, ẋ_d, ẍ_d, w_dyn (2.33), A^T at x_d) of the set-point message and whether they were
-        computed anew; the arrays of the last period again (read, never written) when its values are."""
+        """(x_d, ẋ_d, ẍ_d, w_dyn (2.33), A^T at x_d) of the set-point message; the arrays of the last
+        period again (read, never written) when its values are."""
         pose, velocity, acceleration = sp.pose, sp.velocity, sp.acceleration
         p, o = pose._position, pose._orientation
         v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
         key = (_SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
                              a._x, a._y, a._z, al._x, al._y, al._z), kernels.ENABLED)
         if key == self._setpoint_key:
-            return self._model, False
+            return self._model
         x_d, xdot_d, xddot_d = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
         w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)
         AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
         self._setpoint_key, self._model = key, (x_d, xdot_d, xddot_d, w_dyn, AT)
-        return self._model, True
+        return self._model
 
-    def _payload_wrench(self, payload, x_d, xdot_d, xddot_d, new_setpoint: bool):
+    def _payload_wrench(self, payload, x_d, xdot_d, xddot_d):
         """The identified payload's wrench at the set-point, the last one again while both repeat."""
         p = payload.inertia
         com = p.com
-        key = _PAYLOAD_KEY(p.m, com.x, com.y, com.z)
-        if new_setpoint or key != self._payload_key:
+        key = (self._setpoint_key, _PAYLOAD_KEY(p.m, com.x, com.y, com.z))
+        if key != self._payload_key:
             self._payload_key = key
             self._w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (com.x, com.y, com.z))
         return self._w_model
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        (x_d, xdot_d, xddot_d, w_dyn, AT), new_setpoint = self._setpoint(msgs["setpoint"])
+        x_d, xdot_d, xddot_d, w_dyn, AT = self._setpoint(msgs["setpoint"])
         payload = msgs.get("payload")
-        w_model = None if payload is None else self._payload_wrench(payload, x_d, xdot_d, xddot_d, new_setpoint)
+        w_model = None if payload is None else self._payload_wrench(payload, x_d, xdot_d, xddot_d)
         w = wrench_from_msg(msgs["wrench"].wrench)
         hpfc = msgs.get("hpfc")
         if hpfc is not None:                 # section 5.1.2: the expected contact force, not the measured
