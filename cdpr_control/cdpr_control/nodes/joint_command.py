@@ -105,6 +105,7 @@ class JointCommandNode(CdprNode):
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
+        self.input_times: dict[str, float] = {}      # stamp [s] of each watched topic's message in latest
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
         self._last_cycle_ns = -1                     # stamp of the newest period commanded
@@ -131,15 +132,17 @@ class JointCommandNode(CdprNode):
         m = self.robot.m
 
         def keep(msg):
-            problem = input_problem(msg, m) or self.watched_stamps.check(name, stamp_ns(msg), self.sync._reference)
+            t = stamp_ns(msg)
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync._reference)
             if problem is not None:
                 self.input_fault(topic, problem)
                 return
             self.latest[name] = msg
+            self.input_times[topic] = t * 1e-9       # (the safety monitor's staleness check)
             if name == "fd":
                 self.infeasible = self.infeasible + 1 if msg.status == Status.INFEASIBLE else 0
             elif name == "theta":
-                self.sync.advance(stamp_ns(msg))     # the clock of the deadlines: a dead input holds
+                self.sync.advance(t)                 # the clock of the deadlines: a dead input holds
         return keep
 
     @staticmethod
@@ -184,7 +187,7 @@ class JointCommandNode(CdprNode):
         hold = any(f.holds for f in faults) if faults else False
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
-        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
+        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc._output), hold=hold)  # IK only at 0
         self._standing = False
         self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
         self._publish(t_ns, theta_d, faults, hold)
@@ -240,13 +243,11 @@ class JointCommandNode(CdprNode):
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
         now = t_ns * 1e-9
-        topics = self.watched_topics
-        times = {topics[name]: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
         x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         faults = self.monitor.check(
             now, f=None if f_msg is None else np.asarray(f_msg.f), f_min=c.f_min, f_max=c.f_max,
-            x_d=x_d, x=x, fk_converged=True if fk is None else fk.converged, input_times=times)
+            x_d=x_d, x=x, fk_converged=True if fk is None else fk.converged, input_times=self.input_times)
         sync = self.sync
         for name in sync.stale:
             faults.append(Fault(STALE_INPUT, f"stale input {sync.topics[name]}: older than input_deadline "
