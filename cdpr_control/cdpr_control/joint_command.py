@@ -39,8 +39,8 @@ class JointCommand:
         self.held = False
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
         if kernels.ENABLED:                  # and the compiled period (kernels.command)
-            joint_command_period(*(np.zeros(6),) * 2, *self._robot_arrays(), *(np.zeros(robot.m),) * 2,
-                                 1e-3, 1e-3, *(np.empty(robot.m),) * 2)
+            x, f = np.zeros(6), np.zeros(robot.m)
+            joint_command_period(x, x, *self._robot_arrays(), f, f, 1e-3, 1e-3, np.empty(robot.m), np.empty(robot.m))
 
     def _robot_arrays(self) -> tuple:
         d = robot_data(self.robot)
@@ -93,7 +93,7 @@ class JointCommand:
             return None
         theta_next, velocity = np.empty(m), np.empty(m)
         if not joint_command_period(x_d, offset, *self._robot_arrays(), dq_cfc, theta_d, float(self.v_max * self.dt),
-                                    self.dt, theta_next, velocity):
+                                    float(self.dt), theta_next, velocity):
             return None
         self.held = False
         self.velocity, self.theta_d = velocity, theta_next
