@@ -54,6 +54,7 @@ def _step_reference(jc, x_d, offset, dq):
     return jc.theta_d + delta, delta / jc.dt
 
 
+@pytest.mark.skipif(not kernels.ENABLED, reason="CDPR_KERNELS=0: JointCommand runs the numpy reference")
 def test_joint_command_update_with_one_offset_is_the_general_path(robot):  # noqa: F811
     rng = np.random.default_rng(4)
     jc = JointCommand(robot, DT)
