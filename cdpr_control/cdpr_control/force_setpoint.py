@@ -114,16 +114,19 @@ class ForceSetpoint:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
 
-    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None) -> DistributionResult:
+    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None, w_dyn=None) -> DistributionResult:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
 
         AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
         known wrench beyond the platform's own (an identified payload, load_compensation): it is not
         part of the saturated disturbance of (3.24), and the model-only set-point (3.1) includes it.
+        w_dyn: kernels.platform_wrench of x_d, ẋ_d, ẍ_d (2.33) when the caller has it (a node that
+        keeps it while the set-point repeats), else computed here; it is read, never written.
         """
         if self.f_ref_override is None:
             self._ramp_level()
-        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)      # (2.33), A^T f = -w
+        if w_dyn is None:
+            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)  # (2.33), A^T f = -w
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and all_finite(w):

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
+from .kernels.command import joint_command_period
+from .kernels.robot_data import robot_data, vector
 from .safety import all_finite
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
@@ -36,6 +38,13 @@ class JointCommand:
         self.no_dq = np.zeros(robot.m)         # Δq_CFC when none is given (q - 0 = q)
         self.held = False
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
+        if kernels.ENABLED:                  # and the compiled period (kernels.command)
+            x, f = np.zeros(6), np.zeros(robot.m)
+            joint_command_period(x, x, *self._robot_arrays(), f, f, 1e-3, 1e-3, np.empty(robot.m), np.empty(robot.m))
+
+    def _robot_arrays(self) -> tuple:
+        d = robot_data(self.robot)
+        return d.a, d.b, d.R_A, d.r_p, d.pulleys
 
     def reset(self, theta) -> None:
         """Start from the measured cable lengths θ, so that enabling the command does not jump."""
@@ -62,6 +71,10 @@ class JointCommand:
         """One period: the rate-limited θ_d, or braking to a stand when holding or the target is invalid."""
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
+        if not hold and kernels.ENABLED and len(offsets) == 1 and dq_cfc is not None:
+            theta_d = self._period(x_d, offsets[0], dq_cfc)
+            if theta_d is not None:
+                return theta_d
         delta = None if hold else self._step(x_d, offsets, dq_cfc)
         self.held = delta is None
         if self.held:
@@ -69,6 +82,22 @@ class JointCommand:
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()
+
+    def _period(self, x_d, offset, dq_cfc) -> np.ndarray | None:
+        """:meth:`update` of one offset in one compiled call (kernels.command, the same numbers); None
+        where it does not apply (shapes to broadcast, or a target that is not finite: :meth:`update`
+        then takes its general path)."""
+        m = self.robot.m
+        x_d, offset, dq_cfc, theta_d = vector(x_d), vector(offset), vector(dq_cfc), vector(self.theta_d)
+        if x_d.shape != (6,) or offset.shape != (6,) or dq_cfc.shape != (m,) or theta_d.shape != (m,):
+            return None
+        theta_next, velocity = np.empty(m), np.empty(m)
+        if not joint_command_period(x_d, offset, *self._robot_arrays(), dq_cfc, theta_d, float(self.v_max * self.dt),
+                                    float(self.dt), theta_next, velocity):
+            return None
+        self.held = False
+        self.velocity, self.theta_d = velocity, theta_next
+        return theta_next.copy()
 
     def _step(self, x_d, offsets, dq_cfc) -> np.ndarray | None:
         """The change of θ_d towards the target, at most v_max dt per cable; None if the target is not finite."""

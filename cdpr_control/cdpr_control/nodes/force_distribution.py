@@ -25,13 +25,17 @@ after the release.
 """
 from __future__ import annotations
 
+import struct
+from array import array
+
 import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import InertiaStamped, WrenchStamped
+from geometry_msgs.msg import InertiaStamped, Vector3, Wrench, WrenchStamped
 from rclpy.parameter import Parameter
 
+from cdpr_control import kernels
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of, parse_state,
@@ -39,7 +43,7 @@ from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contac
 from cdpr_control.load_compensation import payload_wrench
 
 from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg, wrench_to_msg
+from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, wrench_from_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -48,6 +52,12 @@ from .sync import StampSync
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
                              "replaces the measured one in the distributed wrench (5.1.2); empty: none",
                              read_only=True)
+# the raw values of a set-point (pose, twist, acceleration) and of a payload (mass, cog): compared as
+# bytes, so that a repeated period is recognised exactly (a tuple would take -0.0 for 0.0)
+_SETPOINT_KEY = struct.Struct("19d").pack
+_PAYLOAD_KEY = struct.Struct("4d").pack
+_OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+_INFEASIBLE, _OVERLOADED = Status.INFEASIBLE, Status.OVERLOADED
 
 
 class ForceDistributionNode(CdprNode):
@@ -84,6 +94,7 @@ class ForceDistributionNode(CdprNode):
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
         self.F_d0 = None                           # its reference F_d,0 that gave z_t
+        self._controller, self._state = None, None   # its last controller field and the state parsed from it
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
@@ -91,6 +102,13 @@ class ForceDistributionNode(CdprNode):
             inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
                               optional=tuple(n for n in ("payload", "hpfc") if n in inputs))
+        # the model side of the last period, reused while the set-point (and payload) repeat: holding a
+        # pose, or a pause of a program, gives the same x_d, ẋ_d, ẍ_d, w_dyn and A^T every period
+        self._setpoint_key: tuple = (None, None)         # (key bytes, kernels.ENABLED)
+        self._model: tuple = ()                          # (x_d, ẋ_d, ẍ_d, w_dyn, A^T) of that key
+        self._payload_key: tuple | None = None          # (set-point key, payload bytes) of _w_model
+        self._w_model = None
+        self._limits: tuple = ()                         # (f_ref, f_min, f_max, their message arrays)
 
     @staticmethod
     def _stage_params(v: dict) -> ForceSetpointParams:
@@ -125,35 +143,88 @@ class ForceDistributionNode(CdprNode):
         response.f_ref = self.stage.distributor.f_ref.tolist()
         return response
 
+    def _setpoint(self, sp) -> tuple:
+        """(x_d, ẋ_d, ẍ_d, w_dyn (2.33), A^T at x_d) of the set-point message; the arrays of the last
+        period again (read, never written) when its values are."""
+        pose, velocity, acceleration = sp.pose, sp.velocity, sp.acceleration
+        p, o = pose._position, pose._orientation
+        v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
+        key = (_SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
+                             a._x, a._y, a._z, al._x, al._y, al._z), kernels.ENABLED)
+        if key == self._setpoint_key:
+            return self._model
+        x_d, xdot_d, xddot_d = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
+        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)
+        AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
+        self._setpoint_key, self._model = key, (x_d, xdot_d, xddot_d, w_dyn, AT)
+        return self._model
+
+    def _payload_wrench(self, payload, x_d, xdot_d, xddot_d):
+        """The identified payload's wrench at the set-point, the last one again while both repeat."""
+        p = payload.inertia
+        com = p.com
+        key = (self._setpoint_key, _PAYLOAD_KEY(p.m, com.x, com.y, com.z))
+        if key != self._payload_key:
+            self._payload_key = key
+            self._w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (com.x, com.y, com.z))
+        return self._w_model
+
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        sp = msgs["setpoint"]
-        x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
-        w_model = None
-        if "payload" in msgs:
-            p = msgs["payload"].inertia
-            w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (p.com.x, p.com.y, p.com.z))
+        x_d, xdot_d, xddot_d, w_dyn, AT = self._setpoint(msgs["setpoint"])
+        payload = msgs.get("payload")
+        w_model = None if payload is None else self._payload_wrench(payload, x_d, xdot_d, xddot_d)
         w = wrench_from_msg(msgs["wrench"].wrench)
         hpfc = msgs.get("hpfc")
         if hpfc is not None:                 # section 5.1.2: the expected contact force, not the measured
             F_d0 = hpfc.reference[:3]
             if F_d0 != self.F_d0:            # task_axis of an unchanged F_d,0 keeps z_t
                 self.F_d0, self.z_t = F_d0, task_axis(np.asarray(F_d0, dtype=float), self.z_t)
-            state = parse_state(hpfc.controller)
+            controller = hpfc.controller
+            if controller != self._controller:   # the state letter changes rarely: parsed on a change
+                self._controller, self._state = controller, parse_state(controller)
+            state = self._state
             if state in FORCE_CONTROLLED:    # else the expected contact wrench is zero
                 w = w + expected_contact_wrench_of(state, np.asarray(F_d0, dtype=float), hpfc.feedback[:3], self.z_t)
-        res = self.stage.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
-        self.publisher.publish(ForceDistribution(
-            header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),
-            f_max=res.f_max.tolist(), w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
-            max_violation=float(res.max_violation), residual=float(res.residual), iterations=int(res.iterations),
-            solve_time=float(res.solve_time)))
-        if res.status == Status.INFEASIBLE:
-            self.report(DiagnosticStatus.ERROR, f"no feasible distribution: max violation {res.max_violation:.1f} N",
-                        stamp_ns=t_ns)
-        elif res.status == Status.OVERLOADED:
-            self.report(DiagnosticStatus.WARN, "feasible only with raised f_max (workspace border)", stamp_ns=t_ns)
+        res = self.stage.update(x_d, xdot_d, xddot_d, w, AT, w_model, w_dyn)
+        max_violation = float(res.max_violation)
+        self.publisher.publish(self._message(res, max_violation, t_ns))
+        status = res.status
+        if status == _INFEASIBLE:
+            self.report(_ERROR, f"no feasible distribution: max violation {max_violation:.1f} N", stamp_ns=t_ns)
+        elif status == _OVERLOADED:
+            self.report(_WARN, "feasible only with raised f_max (workspace border)", stamp_ns=t_ns)
         else:
-            self.report(DiagnosticStatus.OK, "feasible", stamp_ns=t_ns)
+            self.report(_OK, "feasible", stamp_ns=t_ns)
+
+    def _message(self, res, max_violation: float, t_ns: int) -> ForceDistribution:
+        """cdpr_msgs/ForceDistribution of a result, built field by field (conversions.bare): the limits
+        and f_ref are the same arrays period after period, so their message arrays are copied from the
+        last ones (the arrays are never written in place: a change is a new array)."""
+        limits = self._limits
+        if not limits or res.f_ref is not limits[0] or res.f_min is not limits[1] or res.f_max is not limits[2]:
+            limits = self._limits = (res.f_ref, res.f_min, res.f_max,
+                                     *(array("d", v.tolist()) for v in (res.f_ref, res.f_min, res.f_max)))
+        msg = bare(ForceDistribution)
+        msg._header = self.header(t_ns)
+        msg._f_d = array("d", res.f.tolist())
+        msg._f_ref, msg._f_min, msg._f_max = array("d", limits[3]), array("d", limits[4]), array("d", limits[5])
+        msg._w_d = _wrench(*self.stage.w_d.tolist())
+        msg._method = res.method
+        msg._status = int(res.status)
+        msg._max_violation = max_violation
+        msg._residual = float(res.residual)
+        msg._iterations = int(res.iterations)
+        msg._solve_time = float(res.solve_time)
+        return msg
+
+
+def _wrench(fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> Wrench:
+    """conversions.wrench_to_msg of the six floats, without indexing an array element by element."""
+    force, torque, msg = bare(Vector3), bare(Vector3), bare(Wrench)
+    force._x, force._y, force._z = fx, fy, fz
+    torque._x, torque._y, torque._z = tx, ty, tz
+    msg._force, msg._torque = force, torque
+    return msg
 
 
 def main(args=None):

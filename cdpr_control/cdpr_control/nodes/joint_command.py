@@ -29,6 +29,9 @@ Invalid messages (lengths, non-finite values, frame) are dropped and reported (n
 """
 from __future__ import annotations
 
+import struct
+from array import array
+
 import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, ForwardKinematicsDiagnostics, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -48,7 +51,7 @@ from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, Saf
 ABORTING = frozenset({STALE_INPUT, WORKSPACE})
 
 from .base import CdprNode, spin_node
-from .conversions import pose_from_msg
+from .conversions import bare, pose_from_msg
 from .mode import mode_publisher, publish_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
@@ -57,6 +60,8 @@ from .sync import StampJumps, StampSync, input_problem, stamp_ns
 OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/state output (6 values) is added "
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
 DEFAULT_OFFSET = OffsetConfig()
+_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
+_OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
 
 def offset_params(name: str) -> list[ParamSpec]:
@@ -100,9 +105,11 @@ class JointCommandNode(CdprNode):
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.latest: dict[str, object] = {}
+        self.input_times: dict[str, float] = {}      # stamp [s] of each watched topic's message in latest
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
         self._last_cycle_ns = -1                     # stamp of the newest period commanded
+        self._x_d_key, self._x_d = None, None        # x_d of the last set-point pose (held while it repeats)
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -125,15 +132,17 @@ class JointCommandNode(CdprNode):
         m = self.robot.m
 
         def keep(msg):
-            problem = input_problem(msg, m) or self.watched_stamps.check(name, stamp_ns(msg), self.sync._reference)
+            t = stamp_ns(msg)
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync._reference)
             if problem is not None:
                 self.input_fault(topic, problem)
                 return
             self.latest[name] = msg
+            self.input_times[topic] = t * 1e-9       # (the safety monitor's staleness check)
             if name == "fd":
                 self.infeasible = self.infeasible + 1 if msg.status == Status.INFEASIBLE else 0
             elif name == "theta":
-                self.sync.advance(stamp_ns(msg))     # the clock of the deadlines: a dead input holds
+                self.sync.advance(t)                 # the clock of the deadlines: a dead input holds
         return keep
 
     @staticmethod
@@ -155,6 +164,7 @@ class JointCommandNode(CdprNode):
         if v["mode"] != self.mode:
             publish_mode(self.mode_pub, v["mode"])
         self.mode = v["mode"]
+        self._ok_message = f"ok ({self.mode})"       # the report of every good period
         self.command.v_max = v["v_max"] or self.robot.drive.v_max
         self.command.a_brake = v["a_brake"]
         self.infeasible_periods = int(v["infeasible_periods"])
@@ -168,19 +178,28 @@ class JointCommandNode(CdprNode):
             return                                   # no measurement yet: nothing safe to start from
         if self.command.theta_d is None:
             self.command.reset(np.asarray(theta_msg.position))
-        x_d = pose_from_msg(msgs["setpoint"].pose)
+        x_d = self._setpoint_pose(msgs["setpoint"].pose)
         force_control = self.mode == "force_control"
         samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
-        hold = any(f.holds for f in faults)
+        hold = any(f.holds for f in faults) if faults else False
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
-        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc.output), hold=hold)  # IK only at 0
+        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc._output), hold=hold)  # IK only at 0
         self._standing = False
         self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
         self._publish(t_ns, theta_d, faults, hold)
+
+    def _setpoint_pose(self, pose) -> np.ndarray:
+        """x_d of the set-point's pose; the array of the last period again (read, never written) when
+        the pose repeats (holding, a pause)."""
+        p, o = pose._position, pose._orientation
+        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
+        if key != self._x_d_key:
+            self._x_d_key, self._x_d = key, pose_from_msg(pose)
+        return self._x_d
 
     def _hold_cycle(self, t_ns: int) -> None:
         """A period whose required input is stale (its producer stopped): brake on the path, so that
@@ -200,34 +219,35 @@ class JointCommandNode(CdprNode):
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+            msg = bare(JointState)       # built field by field (conversions.bare): every period
+            msg._header, msg._name = self.header(t_ns), self.names
+            msg._position, msg._velocity, msg._effort = array("d", theta_d.tolist()), array("d"), array("d")
+            self.publisher.publish(msg)
         if faults:
-            level = DiagnosticStatus.ERROR if hold else DiagnosticStatus.WARN
+            level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),
                         {"holding": hold, "abort": hold and any(f.code in ABORTING for f in faults),
                          "faults": len(faults)}, stamp_ns=t_ns)
         elif self.command.held:
-            self.report(DiagnosticStatus.ERROR, "command outside the model (non-finite IK): holding",
-                        {"holding": True}, stamp_ns=t_ns)
+            self.report(_ERROR, "command outside the model (non-finite IK): holding", {"holding": True}, stamp_ns=t_ns)
         else:
-            self.report(DiagnosticStatus.OK, f"ok ({self.mode})", stamp_ns=t_ns)
+            self.report(_OK, self._ok_message, stamp_ns=t_ns)
 
     @staticmethod
     def _offset_sample(msg) -> OffsetSample | None:
         """None for no message or an inactive one: OffsetInputs takes both alike (they add nothing)."""
-        if msg is None or not msg.enabled:
+        if msg is None or not msg._enabled:          # (the slots: three inputs every period)
             return None
-        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg.output))
+        return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg._output))
 
     def _faults(self, t_ns: int, x_d):
         f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
         now = t_ns * 1e-9
-        times = {self.watched_topics[name]: stamp_ns(msg) * 1e-9 for name, msg in self.latest.items()}
         x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         faults = self.monitor.check(
             now, f=None if f_msg is None else np.asarray(f_msg.f), f_min=c.f_min, f_max=c.f_max,
-            x_d=x_d, x=x, fk_converged=True if fk is None else fk.converged, input_times=times)
+            x_d=x_d, x=x, fk_converged=True if fk is None else fk.converged, input_times=self.input_times)
         sync = self.sync
         for name in sync.stale:
             faults.append(Fault(STALE_INPUT, f"stale input {sync.topics[name]}: older than input_deadline "
