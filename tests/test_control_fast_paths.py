@@ -1,5 +1,5 @@
 """The per-period fast paths of the force distribution and joint command give the same numbers, bit for
-bit, as the computation they replace: the compiled joint command period (kernels.command), the model
+bit, as the computation they replace: the compiled joint command period (kernels.model.joint_command_period), the model
 wrench handed to ForceSetpoint, and the nodes' values kept while their set-point repeats."""
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ rclpy = import_or_skip("rclpy")
 from cdpr_control import kernels  # noqa: E402
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams  # noqa: E402
 from cdpr_control.joint_command import JointCommand  # noqa: E402
-from cdpr_control.kernels.command import joint_command_period  # noqa: E402
+from cdpr_control.kernels.model import joint_command_period  # noqa: E402
 from cdpr_control.kernels.robot_data import robot_data  # noqa: E402
 from cdpr_control.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.load_compensation import payload_wrench  # noqa: E402

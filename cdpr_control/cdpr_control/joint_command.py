@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
-from .kernels.command import joint_command_period
+from .kernels.model import joint_command_period
 from .kernels.robot_data import robot_data, vector
 from .safety import all_finite
 
@@ -38,7 +38,7 @@ class JointCommand:
         self.no_dq = np.zeros(robot.m)         # Δq_CFC when none is given (q - 0 = q)
         self.held = False
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
-        if kernels.ENABLED:                  # and the compiled period (kernels.command)
+        if kernels.ENABLED:                  # and the compiled period (kernels.model.joint_command_period)
             x, f = np.zeros(6), np.zeros(robot.m)
             joint_command_period(x, x, *self._robot_arrays(), f, f, 1e-3, 1e-3, np.empty(robot.m), np.empty(robot.m))
 
@@ -84,7 +84,7 @@ class JointCommand:
         return self.theta_d.copy()
 
     def _period(self, x_d, offset, dq_cfc) -> np.ndarray | None:
-        """:meth:`update` of one offset in one compiled call (kernels.command, the same numbers); None
+        """:meth:`update` of one offset in one compiled call (kernels.model.joint_command_period, the same numbers); None
         where it does not apply (shapes to broadcast, or a target that is not finite: :meth:`update`
         then takes its general path)."""
         m = self.robot.m

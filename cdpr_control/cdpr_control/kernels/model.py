@@ -415,3 +415,26 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
             if lam > _LAMBDA_MAX:
                 return STALLED, it, math.sqrt(cost), x
     return MAX_ITERATIONS, max_iterations, math.sqrt(cost), x
+
+
+# The joint command's whole period (5.10) in one call: JointCommand.update with one offset sum, as
+# one call instead of the offset pose, joint_command_step and three numpy operations on 8 numbers
+# (call overhead at 1 kHz): the same operations in the same order (x_d + offset, the step of
+# joint_command_kernel, θ̇_d = Δθ / dt, θ_d + Δθ), so the same numbers, bit for bit
+# (tests/test_control_fast_paths.py). Here, beside joint_command_kernel, because numba's disk cache
+# keeps the callees of a kernel and renews it only when the kernel's own file changes.
+@numba.njit(cache=True, error_model="numpy")
+def joint_command_period(x_d, offset, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, dt, theta_next, velocity):
+    """θ_d of the next period into theta_next (m,) and θ̇_d into velocity (m,): the target
+    q(x_d + offset) - Δq_CFC ((2.7), (5.10)) approached by at most ±step; False (outputs not set)
+    when the target is not finite."""
+    x = np.empty(6)
+    for k in range(6):
+        x[k] = x_d[k] + offset[k]
+    delta = np.empty(theta_d.shape[0])
+    if not joint_command_kernel(x, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, delta):
+        return False
+    for i in range(delta.shape[0]):
+        velocity[i] = delta[i] / dt
+        theta_next[i] = theta_d[i] + delta[i]
+    return True
