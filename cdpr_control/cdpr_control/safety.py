@@ -32,7 +32,10 @@ def all_finite(values) -> bool:
 
 
 def _floats(value) -> list:
-    return (value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)).ravel().tolist()
+    if not isinstance(value, np.ndarray):
+        value = np.asarray(value, dtype=float)
+    # a plain vector's tolist is its ravel's (the call spared; a subclass may ravel otherwise)
+    return value.tolist() if type(value) is np.ndarray and value.ndim == 1 else value.ravel().tolist()
 
 
 def _finite_floats(name: str, value, faults: list) -> list | None:
@@ -40,7 +43,7 @@ def _finite_floats(name: str, value, faults: list) -> list | None:
     if value is None:
         return None
     values = _floats(value)
-    if all_finite(values):
+    if isfinite(sum(values)) or all(map(isfinite, values)):      # (all_finite of a list, inline)
         return values
     faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
     return None
@@ -50,6 +53,9 @@ def _inside(f: list, f_min, f_max, tolerance: float) -> bool:
     """Whether every force is within the tightest limits (so within its own: rounding is monotonic,
     f_i >= min f >= max f_min - tol >= f_min,i - tol); False asks for the element-wise check."""
     return not f or (min(f) >= max(_floats(f_min)) - tolerance and max(f) <= min(_floats(f_max)) + tolerance)
+
+
+_F64 = np.dtype(float)
 
 
 @dataclass
@@ -76,6 +82,25 @@ class SafetyMonitor:
     def __init__(self, config: SafetyConfig | None = None):
         self.config = config or SafetyConfig()
         self.config.validate()
+        self._limits_key: tuple | None = None     # the raw bytes and dtypes of the last f_min, f_max
+        self._limits = (None, None)               # their max f_min, min f_max (None: not float64, or empty)
+
+    def _inside(self, f: list, f_min, f_max, tolerance: float) -> bool:
+        """:func:`_inside` with max f_min and min f_max kept while the limits' bytes repeat (the
+        robot's limits, every period; bytes and dtype fix the values); other limits (not float64
+        arrays, or empty) take _inside."""
+        if not f:
+            return True
+        if type(f_min) is np.ndarray and type(f_max) is np.ndarray:
+            key = (f_min.tobytes(), f_max.tobytes(), f_min.dtype, f_max.dtype)
+            if key != self._limits_key:
+                self._limits_key = key
+                self._limits = (max(f_min.ravel().tolist(), default=None), min(f_max.ravel().tolist(), default=None)) \
+                    if f_min.dtype == _F64 and f_max.dtype == _F64 else (None, None)
+            lo, hi = self._limits
+            if lo is not None and hi is not None:
+                return min(f) >= lo - tolerance and max(f) <= hi + tolerance
+        return _inside(f, f_min, f_max, tolerance)
 
     def check(self, now: float, *, f=None, f_min=None, f_max=None, x_d=None, x=None,
               fk_converged: bool = True, input_times: dict[str, float] | None = None) -> list[Fault]:
@@ -87,7 +112,7 @@ class SafetyMonitor:
         f_values = _finite_floats("f", f, faults)
         x_d_values = _finite_floats("x_d", x_d, faults)
         x_values = _finite_floats("x", x, faults)
-        if f_values is not None and not _inside(f_values, f_min, f_max, c.force_tolerance):
+        if f_values is not None and not self._inside(f_values, f_min, f_max, c.force_tolerance):
             below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
             for i in np.flatnonzero(below):
                 faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N below f_min {f_min[i]:.1f} N", c.hold_on_force_limit))
@@ -102,8 +127,11 @@ class SafetyMonitor:
                 faults.append(Fault(POSITION_LAG, f"orientation lag {np.rad2deg(dphi):.2f} deg > {np.rad2deg(c.max_orientation_lag):.2f} deg", True))
         if not fk_converged:
             faults.append(Fault(FK_NOT_CONVERGED, "forward kinematics did not converge", True))
-        for name, t in (input_times or {}).items():
-            if now - t > c.stale_timeout:
-                # (a fixed text: the report on /diagnostics changes with the message, not every period)
-                faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
+        # none stale when the oldest is not (now - t falls as t grows: rounding is monotonic; a NaN
+        # first in min, or a NaN now, fails the test and goes through every input)
+        if input_times and not now - min(input_times.values()) <= c.stale_timeout:
+            for name, t in input_times.items():
+                if now - t > c.stale_timeout:
+                    # (a fixed text: the report on /diagnostics changes with the message, not every period)
+                    faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
         return faults

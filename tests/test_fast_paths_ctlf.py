@@ -1,0 +1,125 @@
+"""The per-period fast paths of the joint command's safety monitor and offset inputs and of the
+force distribution's payload wrench against the code they replaced, on random inputs: the same
+faults in the same order with the same messages, and the same numbers bit for bit.
+
+The references below are the implementations as they were written first (numpy on the short
+vectors, every limit and every input time looked at each period).
+"""
+import math
+
+import numpy as np
+import pytest
+
+from cdpr_control.safety import (FK_NOT_CONVERGED, FORCE_LIMIT, NON_FINITE, POSITION_LAG, STALE_INPUT, Fault,
+                                 SafetyConfig, SafetyMonitor, all_finite)
+
+
+def same(a, b) -> bool:
+    """Bit-equal: the same float64 bytes (so -0.0 differs from 0.0 and a NaN equals itself)."""
+    return np.asarray(a, dtype=float).tobytes() == np.asarray(b, dtype=float).tobytes()
+
+
+def _ref_floats(value) -> list:
+    return (value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)).ravel().tolist()
+
+
+def reference_check(c: SafetyConfig, now, *, f=None, f_min=None, f_max=None, x_d=None, x=None,
+                    fk_converged=True, input_times=None) -> list[Fault]:
+    """SafetyMonitor.check as it was: the limits reduced and every input time compared each period."""
+    faults = []
+
+    def finite(name, value):
+        if value is None:
+            return None
+        values = _ref_floats(value)
+        if all_finite(values):
+            return values
+        faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
+        return None
+
+    f_values, x_d_values, x_values = finite("f", f), finite("x_d", x_d), finite("x", x)
+    if f_values is not None and not (not f_values or (
+            min(f_values) >= max(_ref_floats(f_min)) - c.force_tolerance
+            and max(f_values) <= min(_ref_floats(f_max)) + c.force_tolerance)):
+        below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
+        for i in np.flatnonzero(below):
+            faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N below f_min {f_min[i]:.1f} N", c.hold_on_force_limit))
+        for i in np.flatnonzero(above):
+            faults.append(Fault(FORCE_LIMIT, f"cable {i + 1}: {f[i]:.1f} N above f_max {f_max[i]:.1f} N", c.hold_on_force_limit))
+    if x_d_values is not None and x_values is not None:
+        dr = math.dist(x_d_values[:3], x_values[:3])
+        dphi = math.dist(x_d_values[3:], x_values[3:])
+        if dr > c.max_position_lag:
+            faults.append(Fault(POSITION_LAG, f"position lag {dr * 1e3:.1f} mm > {c.max_position_lag * 1e3:.1f} mm", True))
+        if dphi > c.max_orientation_lag:
+            faults.append(Fault(POSITION_LAG, f"orientation lag {np.rad2deg(dphi):.2f} deg > {np.rad2deg(c.max_orientation_lag):.2f} deg", True))
+    if not fk_converged:
+        faults.append(Fault(FK_NOT_CONVERGED, "forward kinematics did not converge", True))
+    for name, t in (input_times or {}).items():
+        if now - t > c.stale_timeout:
+            faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
+    return faults
+
+
+def _maybe_bad(rng, v, p=0.05):
+    """v with, rarely, a NaN or an infinity in it."""
+    v = np.array(v, dtype=float)
+    if rng.random() < p:
+        v[rng.integers(v.size)] = rng.choice([np.nan, np.inf, -np.inf])
+    return v
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_safety_monitor_reports_the_faults_of_the_reference(seed):
+    """Random periods near and beyond every bound (force limits that change now and then, NaN and
+    infinite values, stale and NaN input times, a missing input): the same faults in the same order."""
+    rng = np.random.default_rng(seed)
+    config = SafetyConfig(force_tolerance=float(rng.choice([0.0, 1.75])), max_position_lag=0.02,
+                          stale_timeout=0.05, hold_on_force_limit=bool(seed % 2))
+    monitor = SafetyMonitor(config)
+    m = 8
+    f_min, f_max = np.full(m, 5.0), np.full(m, 40.0)
+    f_min.setflags(write=False)
+    f_max.setflags(write=False)
+    n_faults = 0
+    for k in range(3000):
+        now = 3.0 + k * 1e-3
+        if rng.random() < 0.01:          # new limits (another array, or the same values as a list)
+            f_min = rng.uniform(0.0, 10.0, m)
+            f_max = f_min + rng.uniform(20.0, 40.0, m)
+        limits = (f_min.tolist(), f_max.tolist()) if rng.random() < 0.05 else (f_min, f_max)
+        f = _maybe_bad(rng, rng.uniform(0.0, 50.0, m) if rng.random() < 0.2 else rng.uniform(8.0, 35.0, m))
+        x_d = _maybe_bad(rng, rng.normal(0.0, 0.01, 6))
+        x = _maybe_bad(rng, x_d + rng.normal(0.0, 0.02, 6))
+        times = {name: now - float(rng.choice([0.0, 0.001, 0.05, 0.0501, 0.2])) for name in ("a", "b", "c", "d")}
+        if rng.random() < 0.05:
+            times[str(rng.choice(list(times)))] = np.nan
+        kwargs = dict(f=None if rng.random() < 0.05 else f, f_min=limits[0], f_max=limits[1],
+                      x_d=None if rng.random() < 0.05 else x_d, x=x, fk_converged=bool(rng.random() > 0.02),
+                      input_times=times if rng.random() > 0.05 else None)
+        if kwargs["f"] is not None and isinstance(limits[0], list):
+            kwargs["f_min"], kwargs["f_max"] = np.asarray(limits[0]), np.asarray(limits[1])
+        got = monitor.check(now, **kwargs)
+        assert got == reference_check(config, now, **kwargs)
+        n_faults += len(got)
+    assert n_faults > 1000                   # (the faults were exercised)
+
+
+def test_safety_monitor_limits_of_another_dtype_or_in_place_changes():
+    """The limits kept from an earlier period are those of the same bytes and dtype only."""
+    config = SafetyConfig(force_tolerance=0.5)
+    monitor = SafetyMonitor(config)
+    f_min, f_max = np.full(4, 5.0), np.full(4, 40.0)
+    f = np.array([10.0, 4.8, 20.0, 30.0])
+    assert monitor.check(0.0, f=f, f_min=f_min, f_max=f_max) == []
+    f_min[1] = 5.5                          # changed in place: a fault now
+    got = monitor.check(0.0, f=f, f_min=f_min, f_max=f_max)
+    assert got == reference_check(config, 0.0, f=f, f_min=f_min, f_max=f_max) and len(got) == 1
+    for lo, hi in ((f_min.astype(np.float32), f_max.astype(np.float32)), (f_min.astype(">f8"), f_max.astype(">f8")),
+                   (np.array([5, 6, 5, 5]), np.array([40, 40, 40, 40]))):
+        got = monitor.check(0.0, f=f, f_min=lo, f_max=hi)
+        assert got == reference_check(config, 0.0, f=f, f_min=lo, f_max=hi) and got
+    with pytest.raises(ValueError):          # empty limits: the reference's error
+        reference_check(config, 0.0, f=f, f_min=np.zeros(0), f_max=np.zeros(0))
+    with pytest.raises(ValueError):
+        monitor.check(0.0, f=f, f_min=np.zeros(0), f_max=np.zeros(0))
