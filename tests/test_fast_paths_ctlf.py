@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import (FK_NOT_CONVERGED, FORCE_LIMIT, NON_FINITE, POSITION_LAG, STALE_INPUT, Fault,
                                  SafetyConfig, SafetyMonitor, all_finite)
 
@@ -123,3 +124,83 @@ def test_safety_monitor_limits_of_another_dtype_or_in_place_changes():
         reference_check(config, 0.0, f=f, f_min=np.zeros(0), f_max=np.zeros(0))
     with pytest.raises(ValueError):
         monitor.check(0.0, f=f, f_min=np.zeros(0), f_max=np.zeros(0))
+
+
+class ReferenceOffsetInputs(OffsetInputs):
+    """OffsetInputs.update as it was: the sum on numpy arrays."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.last = {n: np.zeros(6) for n in self.names}
+
+    def reset(self):
+        for name in self.names:
+            self.alpha[name] = 0.0
+            self.last[name] = np.zeros(6)
+
+    def update(self, now, samples):
+        total = np.zeros(6)
+        faults = []
+        step = 1.0 if self.ramp_time == 0.0 else self.dt / self.ramp_time
+        for name in self.names:
+            sample = samples.get(name)
+            active = self.configs[name].enabled and sample is not None and sample.active
+            if active:
+                age = now - sample.t
+                x = np.asarray(sample.x, dtype=float)
+                if age > self.configs[name].deadline:
+                    faults.append(Fault(STALE_INPUT, f"stale input offset {name}: older than its deadline "
+                                        f"{1e3 * self.configs[name].deadline:.0f} ms", True))
+                    active = False
+                elif x.shape != (6,) or not all_finite(x.tolist()):
+                    faults.append(Fault(NON_FINITE, f"offset {name} is not 6 finite values: {x}", True))
+                    active = False
+                else:
+                    self.last[name] = x
+            alpha = min(1.0, self.alpha[name] + step) if active else max(0.0, self.alpha[name] - step)
+            self.alpha[name] = alpha
+            if alpha:
+                total += alpha * self.last[name]
+        return total, faults
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_offset_inputs_sum_and_faults_of_the_reference(seed):
+    """Inputs switched on and off at random (ramps in and out), stale, non-finite, of the wrong shape,
+    with -0.0 and tiny values, reconfigured and reset now and then: the same totals bit for bit, the
+    same faults and ramp states."""
+    rng = np.random.default_rng(seed)
+    names = ["ospc", "hybrid_force_controller", "load_compensation"]
+    ramp = float(rng.choice([0.0, 0.005, 0.5]))
+    fast, ref = OffsetInputs(names, 0.001, ramp), ReferenceOffsetInputs(names, 0.001, ramp)
+    n_faults = 0
+    for k in range(4000):
+        now = k * 1e-3
+        if rng.random() < 0.01:
+            configs = {n: OffsetConfig(enabled=bool(rng.random() < 0.8), deadline=float(rng.choice([0.001, 0.005])))
+                       for n in names if rng.random() < 0.5}
+            ramp = float(rng.choice([0.0, 0.003, 0.5]))
+            fast.configure(configs, ramp)
+            ref.configure({n: OffsetConfig(c.enabled, c.deadline) for n, c in configs.items()}, ramp)
+        if rng.random() < 0.002:
+            fast.reset()
+            ref.reset()
+        samples = {}
+        for name in names:
+            if rng.random() < 0.1:
+                continue                                  # no message
+            x = rng.normal(0.0, 1e-3, 6) * rng.choice([1.0, 1e-300])
+            x[rng.random(6) < 0.1] = -0.0
+            r = rng.random()
+            if r < 0.01:
+                x[rng.integers(6)] = rng.choice([np.nan, np.inf])
+            elif r < 0.015:
+                x = np.zeros(5)
+            age = float(rng.choice([0.0, 0.0, 0.0, 0.002, 0.01]))
+            samples[name] = OffsetSample(now - age, bool(rng.random() < 0.9 if k % 1000 < 700 else rng.random() < 0.05), x)
+        total, faults = fast.update(now, samples)
+        total_ref, faults_ref = ref.update(now, samples)
+        assert same(total, total_ref) and total.shape == (6,) and faults == faults_ref
+        assert fast.alpha == ref.alpha
+        n_faults += len(faults)
+    assert n_faults > 100                    # (the faults were exercised)
