@@ -10,9 +10,11 @@ import math
 import numpy as np
 import pytest
 
+from cdpr_control import load_compensation as lcm
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import (FK_NOT_CONVERGED, FORCE_LIMIT, NON_FINITE, POSITION_LAG, STALE_INPUT, Fault,
                                  SafetyConfig, SafetyMonitor, all_finite)
+from cdpr_control.robot import load_robot
 
 
 def same(a, b) -> bool:
@@ -204,3 +206,36 @@ def test_offset_inputs_sum_and_faults_of_the_reference(seed):
         assert fast.alpha == ref.alpha
         n_faults += len(faults)
     assert n_faults > 100                    # (the faults were exercised)
+
+
+def reference_payload_wrench(robot, x, xdot, xddot, mass, cog=(0.0, 0.0, 0.0)):
+    """load_compensation.payload_wrench as it was: one function of set-point, cog and mass."""
+    phi_x, phi_y, phi_z = np.asarray(x, dtype=float)[3:].tolist()
+    cx, cy, cz = lcm._rotate(phi_x, phi_y, phi_z, *np.asarray(cog, dtype=float).tolist())
+    wx, wy, wz = np.asarray(xdot, dtype=float)[3:].tolist()
+    ax, ay, az, dwx, dwy, dwz = np.asarray(xddot, dtype=float).tolist()
+    vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx
+    a = (ax + dwy * cz - dwz * cy + wy * vz - wz * vy,
+         ay + dwz * cx - dwx * cz + wz * vx - wx * vz,
+         az + dwx * cy - dwy * cx + wx * vy - wy * vx)
+    gx, gy, gz = robot.gravity.tolist()
+    fx, fy, fz = mass * (gx - a[0]), mass * (gy - a[1]), mass * (gz - a[2])
+    return np.array([fx, fy, fz, cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx])
+
+
+@pytest.mark.parametrize("name", ["ipanema3_mini", "ipanema3"])
+def test_payload_wrench_split_at_the_mass_is_the_reference(name):
+    """payload_wrench = payload_wrench_of_mass(payload_kinematics(...), m), and the kinematics kept
+    over a set-point with masses changing every period give the reference's wrench, bit for bit."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        x, xdot, xddot = rng.normal(0.0, 0.3, 6), rng.normal(0.0, 0.5, 6), rng.normal(0.0, 2.0, 6)
+        x[rng.random(6) < 0.2] = -0.0
+        xdot[rng.random(6) < 0.3] = 0.0
+        cog = (0.0, 0.0, 0.0) if rng.random() < 0.3 else tuple(rng.normal(0.0, 0.05, 3).tolist())
+        kinematics = lcm.payload_kinematics(robot, x, xdot, xddot, cog)
+        for mass in (*rng.normal(3.0, 2.0, 5).tolist(), 0.0, -0.0, np.float64(1.25), 2):
+            ref = reference_payload_wrench(robot, x, xdot, xddot, mass, cog)
+            assert same(lcm.payload_wrench(robot, x, xdot, xddot, mass, cog), ref)
+            assert same(lcm.payload_wrench_of_mass(kinematics, mass), ref)

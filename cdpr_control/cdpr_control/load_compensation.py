@@ -304,6 +304,13 @@ def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> n
 
         f = m (g - a_c),  τ = (R c) × f,  a_c = a + ω̇ × R c + ω × (ω × R c) .
     """
+    return payload_wrench_of_mass(payload_kinematics(robot, x, xdot, xddot, cog), mass)
+
+
+def payload_kinematics(robot, x, xdot, xddot, cog=(0.0, 0.0, 0.0)) -> tuple[float, ...]:
+    """The mass-free part of :func:`payload_wrench`: R c and g - a_c as six floats. The force
+    distribution node keeps it while the set-point and the cog repeat (the identified mass changes
+    every period)."""
     # scalar math: the force distribution node runs this every period (numpy: 50 us, this: 4)
     phi_x, phi_y, phi_z = np.asarray(x, dtype=float)[3:].tolist()
     cx, cy, cz = _rotate(phi_x, phi_y, phi_z, *np.asarray(cog, dtype=float).tolist())   # R c
@@ -314,7 +321,14 @@ def payload_wrench(robot, x, xdot, xddot, mass: float, cog=(0.0, 0.0, 0.0)) -> n
          ay + dwz * cx - dwx * cz + wz * vx - wx * vz,
          az + dwx * cy - dwy * cx + wx * vy - wy * vx)
     gx, gy, gz = robot.gravity.tolist()
-    fx, fy, fz = mass * (gx - a[0]), mass * (gy - a[1]), mass * (gz - a[2])
+    return cx, cy, cz, gx - a[0], gy - a[1], gz - a[2]
+
+
+def payload_wrench_of_mass(kinematics: tuple[float, ...], mass: float) -> np.ndarray:
+    """:func:`payload_wrench` of the mass-free part ``kinematics`` (:func:`payload_kinematics`):
+    f = m (g - a_c), τ = (R c) × f."""
+    cx, cy, cz, ex, ey, ez = kinematics
+    fx, fy, fz = mass * ex, mass * ey, mass * ez
     return np.array([fx, fy, fz, cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx])
 
 

@@ -40,7 +40,7 @@ from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of, parse_state,
                                                task_axis)
-from cdpr_control.load_compensation import payload_wrench
+from cdpr_control.load_compensation import payload_kinematics, payload_wrench_of_mass
 
 from .base import CdprNode, spin_node
 from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, wrench_from_msg
@@ -52,10 +52,10 @@ from .sync import StampSync
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
                              "replaces the measured one in the distributed wrench (5.1.2); empty: none",
                              read_only=True)
-# the raw values of a set-point (pose, twist, acceleration) and of a payload (mass, cog): compared as
+# the raw values of a set-point (pose, twist, acceleration) and of a payload's cog: compared as
 # bytes, so that a repeated period is recognised exactly (a tuple would take -0.0 for 0.0)
 _SETPOINT_KEY = struct.Struct("19d").pack
-_PAYLOAD_KEY = struct.Struct("4d").pack
+_COG_KEY = struct.Struct("3d").pack
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 _INFEASIBLE, _OVERLOADED = Status.INFEASIBLE, Status.OVERLOADED
 
@@ -106,8 +106,8 @@ class ForceDistributionNode(CdprNode):
         # pose, or a pause of a program, gives the same x_d, ẋ_d, ẍ_d, w_dyn and A^T every period
         self._setpoint_key: tuple = (None, None)         # (key bytes, kernels.ENABLED)
         self._model: tuple = ()                          # (x_d, ẋ_d, ẍ_d, w_dyn, A^T) of that key
-        self._payload_key: tuple | None = None          # (set-point key, payload bytes) of _w_model
-        self._w_model = None
+        self._payload_key: tuple | None = None          # (set-point key, cog bytes) of _payload_kinematics
+        self._payload_kinematics: tuple = ()            # R c, g - a_c of that key (load_compensation.payload_kinematics)
         self._limits: tuple = ()                         # (f_ref, f_min, f_max, their message arrays)
 
     @staticmethod
@@ -160,14 +160,16 @@ class ForceDistributionNode(CdprNode):
         return self._model
 
     def _payload_wrench(self, payload, x_d, xdot_d, xddot_d):
-        """The identified payload's wrench at the set-point, the last one again while both repeat."""
-        p = payload.inertia
-        com = p.com
-        key = (self._setpoint_key, _PAYLOAD_KEY(p.m, com.x, com.y, com.z))
+        """The identified payload's wrench at the set-point (load_compensation.payload_wrench): its
+        mass-free part kept while the set-point and the cog repeat, times the mass of the period."""
+        p = payload._inertia                  # (the slots: every period)
+        com = p._com
+        cog = com._x, com._y, com._z
+        key = (self._setpoint_key, _COG_KEY(*cog))
         if key != self._payload_key:
             self._payload_key = key
-            self._w_model = payload_wrench(self.robot, x_d, xdot_d, xddot_d, p.m, (com.x, com.y, com.z))
-        return self._w_model
+            self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
+        return payload_wrench_of_mass(self._payload_kinematics, p._m)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d, xdot_d, xddot_d, w_dyn, AT = self._setpoint(msgs["setpoint"])
