@@ -42,7 +42,7 @@ def _finite_floats(name: str, value, faults: list) -> list | None:
     """value's entries as floats when it is given and finite; None otherwise (a fault when not finite)."""
     if value is None:
         return None
-    values = _floats(value)
+    values = value.tolist() if type(value) is np.ndarray and value.ndim == 1 else _floats(value)   # (the call spared)
     if isfinite(sum(values)) or all(map(isfinite, values)):      # (all_finite of a list, inline)
         return values
     faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
