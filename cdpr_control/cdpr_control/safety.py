@@ -32,17 +32,15 @@ def all_finite(values) -> bool:
 
 
 def _floats(value) -> list:
-    if not isinstance(value, np.ndarray):
-        value = np.asarray(value, dtype=float)
-    # a plain vector's tolist is its ravel's (the call spared; a subclass may ravel otherwise)
-    return value.tolist() if type(value) is np.ndarray and value.ndim == 1 else value.ravel().tolist()
+    return (value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)).ravel().tolist()
 
 
 def _finite_floats(name: str, value, faults: list) -> list | None:
     """value's entries as floats when it is given and finite; None otherwise (a fault when not finite)."""
     if value is None:
         return None
-    values = value.tolist() if type(value) is np.ndarray and value.ndim == 1 else _floats(value)   # (the call spared)
+    # (a plain vector's tolist is _floats': the calls spared; a subclass may ravel otherwise)
+    values = value.tolist() if type(value) is np.ndarray and value.ndim == 1 else _floats(value)
     if isfinite(sum(values)) or all(map(isfinite, values)):      # (all_finite of a list, inline)
         return values
     faults.append(Fault(NON_FINITE, f"{name} has non-finite values", True))
