@@ -198,8 +198,8 @@ def test_ospc_keeps_x_d_of_a_repeated_pose(robot):
     def forget(node):
         node._x_d_key = None
 
-    kept, fresh = _run_pair(lambda: OSPCNode(parameter_overrides=_overrides(force_controller="hybrid_force_controller")),
-                            periods, forget)
+    overrides = _overrides(force_controller="hybrid_force_controller")
+    kept, fresh = _run_pair(lambda: OSPCNode(parameter_overrides=overrides), periods, forget)
     assert len(kept) == len(periods) and kept == fresh
 
 
@@ -215,7 +215,8 @@ def test_cable_force_controller_state_message(robot):
             f = f_d + rng.uniform(-3.0, 3.0, m)
             if k == 30:
                 f[2] = float("nan")
-            msgs = {"f_d": ForceDistribution(header=_stamp(k), f_d=f_d.tolist(), f_min=[5.0] * m, f_max=[200.0] * m),
+            msgs = {"f_d": ForceDistribution(header=_stamp(k), f_d=f_d.tolist(), f_min=[5.0] * m,
+                                             f_max=[200.0] * m),
                     "f": CableForces(header=_stamp(k), f=f.tolist()),
                     "theta": _winch_state(robot, k, robot.home, rng)}
             c = node.stage.controller

@@ -99,7 +99,10 @@ class FrictionCompensationNode(CdprNode):
     def _wrap_angles(self, pose) -> np.ndarray:
         """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
         never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
-        p, o = pose._position, pose._orientation
+        try:
+            p, o = pose._position, pose._orientation
+        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
+            return kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")[0]
         key = (_POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w), kernels.ENABLED)
         if key != self._beta_key:
             self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
@@ -121,8 +124,9 @@ class FrictionCompensationNode(CdprNode):
         f = self.stage.update(F_s, theta, thetadot, self._wrap_angles(msgs["setpoint"].pose))
         msg = bare(CableForces)             # field by field (conversions.bare): the constructor's values
         msg._header, msg._f = self.header(t_ns), array.array("d", f.tolist())
-        msg._f_min, msg._f_max = array.array("d", self.f_min), array.array("d", self.f_max)   # a copy each, as the constructor
+        msg._f_min, msg._f_max = array.array("d", self.f_min), array.array("d", self.f_max)   # copies, as it makes
         self.publisher.publish(msg)
+
 
 def main(args=None):
     spin_node(FrictionCompensationNode, args)

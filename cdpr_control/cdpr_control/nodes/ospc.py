@@ -129,6 +129,7 @@ class OSPCNode(CdprNode):
             state.output = [0.0] * 6
         self.publisher.publish(state)
 
+
 def main(args=None):
     spin_node(OSPCNode, args)
 
