@@ -91,6 +91,10 @@ class ForwardKinematics:
         self._S = np.zeros((9, 3))  # buffer of _rotation_derivatives
         self._S[1, 2], self._S[2, 1] = -1.0, 1.0
         self._lever = float(np.mean(np.linalg.norm(robot.b, axis=1)))
+        # the pulley IK fields at x_d of the last compiled frozen solve, as the kernel takes them,
+        # kept for the same x_d (bytes): the set-point repeats while holding, the IK with it
+        self._ik_key: bytes | None = None
+        self._ik_fields: tuple = ()
 
     # --- public solves ------------------------------------------------------------------------
 
@@ -192,13 +196,18 @@ class ForwardKinematics:
         """elastic(pulleys='frozen') as one compiled call (cdpr_control.kernels), same numbers."""
         robot = self.robot
         d = kernels.robot_data(robot)
-        if ik_d is None:      # the four fields the kernel takes, without building the others
-            q, AT, cT, beta = kernels.inverse_kinematics_fields(robot, x_d, "q", "AT", "cT", "beta")
-        else:
-            q, AT, cT, beta = ik_d.q, ik_d.AT, ik_d.c.T, ik_d.beta
         v, x = kernels.vector, np.empty(6)
+        x_d = v(x_d)
+        if ik_d is None:      # the four fields the kernel takes, without building the others
+            key = x_d.tobytes()
+            if key != self._ik_key:
+                self._ik_key, self._ik_fields = key, tuple(map(v, kernels.inverse_kinematics_fields(
+                    robot, x_d, "q", "AT", "cT", "beta")))
+            q, AT, cT, beta = self._ik_fields
+        else:
+            q, AT, cT, beta = v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta)
         code, iterations, norm = kernels.elastic_frozen(
-            v(x_d), v(q), v(AT), v(cT), v(beta), d.b, d.r_p, v(theta), v(f), d.l_0,
+            x_d, q, AT, cT, beta, d.b, d.r_p, v(theta), v(f), d.l_0,
             d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
 

@@ -114,18 +114,21 @@ class CableForceControllerNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         fd_msg = msgs["f_d"]
-        f_d, f = np.asarray(fd_msg.f_d), np.asarray(msgs["f"].f)
-        theta = np.asarray(msgs["theta"].position)
+        f_d_values, f_values, theta_values = fd_msg.f_d, msgs["f"].f, msgs["theta"].position
         stage = self.stage
+        enabled = stage.enabled
         header = self.header(t_ns)          # (shared with the hand-over: messages are not modified)
-        state = ControllerState(header=header, controller="cable_force_controller",
-                                enabled=stage.enabled, names=self.names, reference=f_d.tolist(), feedback=f.tolist())
-        if not _valid(self.robot.m, fd_msg.f_d, msgs["f"].f, msgs["theta"].position):
+        # the state message is built once, every field given (the constructor's own copies); the
+        # reference, and the feedback unless filtered, straight from the messages' sequences, which
+        # the constructor copies into the float64 arrays that f_d.tolist() and f.tolist() would fill
+        if not _valid(self.robot.m, f_d_values, f_values, theta_values):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            state.output = [0.0] * self.robot.m
-            self.publisher.publish(state)
+            self.publisher.publish(ControllerState(
+                header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
+                reference=f_d_values, feedback=f_values, output=[0.0] * self.robot.m))
             return
-        f_ref, f_fb, f_ff = f_d, f, None
+        f_d, f, theta = np.asarray(f_d_values), np.asarray(f_values), np.asarray(theta_values)
+        f_ref, f_ff = f_d, None
         if self.force_controller:           # section 5.1.2: paused in A-C, running in D and R
             f_d, f_ff, paused = self._contact(msgs, f_d, f, t_ns, header)
         else:
@@ -133,17 +136,20 @@ class CableForceControllerNode(CdprNode):
         if not paused:
             self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max), f_ff)
         c = stage.controller
-        if stage.enabled and c.f_filtered is not None:
-            f_fb = c.f_filtered
-            state.feedback = f_fb.tolist()
-            state.integrator = c.pi.integrator.tolist()
-            state.feedforward = (f_d if f_ff is None else f_ff).tolist()
+        f_fb = c.f_filtered
+        if stage.enabled and f_fb is not None:
             saturated = c.pi.saturated.tolist()
-            state.saturated = saturated
             self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
                         "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
-        state.error = (f_ref - f_fb).tolist()
-        state.output = self.dq_held.tolist()
+            state = ControllerState(
+                header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
+                reference=f_d_values, feedback=f_fb.tolist(), error=(f_ref - f_fb).tolist(),
+                integrator=c.pi.integrator.tolist(), feedforward=(f_d if f_ff is None else f_ff).tolist(),
+                output=self.dq_held.tolist(), saturated=saturated)
+        else:
+            state = ControllerState(
+                header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
+                reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
         self.publisher.publish(state)
 
     def _contact(self, msgs: dict, f_d, f, t_ns: int, header):

@@ -13,6 +13,7 @@ then carries the last converged estimate. The computation is
 from __future__ import annotations
 
 import inspect
+import struct
 import time
 
 import numpy as np
@@ -37,6 +38,7 @@ TERMINATION = {
     fk.NON_FINITE: ForwardKinematicsDiagnostics.INVALID_INPUT,
 }
 
+_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 _D = {k: v.default for k, v in inspect.signature(fk.PoseEstimator).parameters.items()}   # one source of truth
 PARAMS = [
     ParamSpec("pulleys", _D["pulleys"], "pulley model in the iterations: frozen at x_d (section 3.2) or full",
@@ -53,6 +55,7 @@ class ForwardKinematicsNode(CdprNode):
         self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m),
                                    lambda v: startup_calibration(self.robot, v), self._apply)
         self.estimator.calibration = startup_calibration(self.robot, self.params.values)
+        self._x_d_key, self._x_d = None, (None, False)   # (x_d, finite) of the last set-point pose
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
@@ -68,28 +71,40 @@ class ForwardKinematicsNode(CdprNode):
         e.solver.max_iterations = int(v["max_iterations"])
         e.solver.xtol = float(v["xtol"])
 
+    def _setpoint_pose(self, pose) -> tuple[np.ndarray, bool]:
+        """(x_d, whether it is finite) of the set-point's pose; the same array again (read, never
+        written) while the pose repeats (holding, a pause)."""
+        try:
+            p, o = pose._position, pose._orientation
+        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
+            x_d = pose_from_msg(pose)
+            return x_d, all_finite(x_d)
+        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
+        if key != self._x_d_key:
+            x_d = pose_from_msg(pose)
+            self._x_d_key, self._x_d = key, (x_d, all_finite(x_d))
+        return self._x_d
+
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         position, forces = msgs["theta"].position, msgs["f"].f
-        x_d = pose_from_msg(msgs["setpoint"].pose)
+        x_d, x_d_finite = self._setpoint_pose(msgs["setpoint"].pose)
         header = self.header(t_ns)
-        diag = ForwardKinematicsDiagnostics(header=header, formulation="elastic")
         m = self.robot.m
         if len(position) != m or len(forces) != m or not (all_finite(position) and all_finite(forces)
-                                                          and all_finite(x_d)):
-            diag.termination, diag.converged = ForwardKinematicsDiagnostics.INVALID_INPUT, False
-            self.diag_pub.publish(diag)
+                                                          and x_d_finite):
+            self.diag_pub.publish(ForwardKinematicsDiagnostics(
+                header=header, formulation="elastic", termination=ForwardKinematicsDiagnostics.INVALID_INPUT,
+                converged=False))
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)
             return
         theta, f = np.asarray(position, dtype=float), np.asarray(forces, dtype=float)
         start = time.perf_counter()
         x, w = self.estimator.update(theta, f, x_d)
         result = self.estimator.result
-        diag.solve_time = time.perf_counter() - start
-        diag.termination = TERMINATION[result.termination]
-        diag.converged = result.converged
-        diag.iterations = result.iterations
-        diag.residual_norm = float(result.residual_norm)
-        self.diag_pub.publish(diag)
+        solve_time = time.perf_counter() - start
+        self.diag_pub.publish(ForwardKinematicsDiagnostics(       # every field given: one constructor call
+            header=header, formulation="elastic", solve_time=solve_time, termination=TERMINATION[result.termination],
+            converged=result.converged, iterations=result.iterations, residual_norm=float(result.residual_norm)))
         if result.converged:
             self.report(DiagnosticStatus.OK, "converged", stamp_ns=t_ns)
         else:

@@ -14,6 +14,8 @@ friction`` writes a parameter file with identified ones. The computation is
 """
 from __future__ import annotations
 
+import array
+import struct
 
 import numpy as np
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
@@ -25,10 +27,12 @@ from cdpr_control import kernels
 from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
-from .conversions import pose_from_msg
+from .conversions import bare, pose_from_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
+
+_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 
 
 class FrictionCompensationNode(CdprNode):
@@ -47,7 +51,10 @@ class FrictionCompensationNode(CdprNode):
             ParamSpec("F_pv", fr.F_pv.tolist(), "viscous parameter per cable [N s/m] (3.31)"),
         ]
         self.stage = None
-        self.command: tuple[float, np.ndarray, np.ndarray] | None = None     # (t, θ_d, θ̇_d)
+        # the last two winch commands as they came, (t, θ_d) (None before them): θ̇_d is their
+        # difference quotient, computed in the periods that use it (velocity_source desired)
+        self._commands: tuple = (None, None)
+        self._beta_key, self._beta = None, None     # β_np of the last set-point pose, held while it repeats
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
         self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
@@ -73,11 +80,34 @@ class FrictionCompensationNode(CdprNode):
             self.stage.set_params(self._stage_params(v))
 
     def _keep_command(self, msg: JointState) -> None:
-        theta_d = np.asarray(msg.position, dtype=float)
-        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        last = self.command
-        thetadot_d = np.zeros_like(theta_d) if last is None or t <= last[0] else (theta_d - last[1]) / (t - last[0])
-        self.command = (t, theta_d, thetadot_d)
+        stamp = msg.header.stamp
+        self._commands = (self._commands[1], (stamp.sec + 1e-9 * stamp.nanosec, msg.position))
+
+    @property
+    def command(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """(t, θ_d, θ̇_d) of the last winch command; θ̇_d the difference quotient to the one before
+        (zero for the first command or one not later than that)."""
+        last, latest = self._commands
+        if latest is None:
+            return None
+        t, position = latest
+        theta_d = np.asarray(position, dtype=float)
+        if last is None or t <= last[0]:
+            return t, theta_d, np.zeros_like(theta_d)
+        return t, theta_d, (theta_d - np.asarray(last[1], dtype=float)) / (t - last[0])
+
+    def _wrap_angles(self, pose) -> np.ndarray:
+        """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
+        never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
+        try:
+            p, o = pose._position, pose._orientation
+        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
+            return kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")[0]
+        key = (_POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w), kernels.ENABLED)
+        if key != self._beta_key:
+            self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
+            self._beta_key = key
+        return self._beta
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]
@@ -86,13 +116,16 @@ class FrictionCompensationNode(CdprNode):
             self.report(DiagnosticStatus.ERROR, "sensor forces missing or non-finite", stamp_ns=t_ns)
             return
         F_s = np.asarray(effort, dtype=float)
-        if self.velocity_source == "desired" and self.command is not None:
-            _, theta, thetadot = self.command
+        command = self.command if self.velocity_source == "desired" else None
+        if command is not None:
+            _, theta, thetadot = command
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
-        beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(msgs["setpoint"].pose), "beta")
-        f = self.stage.update(F_s, theta, thetadot, beta)
-        self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.f_min, f_max=self.f_max))
+        f = self.stage.update(F_s, theta, thetadot, self._wrap_angles(msgs["setpoint"].pose))
+        msg = bare(CableForces)             # field by field (conversions.bare): the constructor's values
+        msg._header, msg._f = self.header(t_ns), array.array("d", f.tolist())
+        msg._f_min, msg._f_max = array.array("d", self.f_min), array.array("d", self.f_max)   # copies, as it makes
+        self.publisher.publish(msg)
 
 
 def main(args=None):

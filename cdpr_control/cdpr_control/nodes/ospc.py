@@ -10,6 +10,8 @@ Raibert and Craig's selection, Fig. 5.2). While ``joint_command`` runs IK-only (
 """
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -34,6 +36,7 @@ PARAMS = [
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
 ]
+_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose force axis is not "
                              "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
 
@@ -44,6 +47,10 @@ class OSPCNode(CdprNode):
         self.controller: OperationalSpacePositionController | None = None
         self.enabled = True
         self.precondition: str | None = None
+        self.names = list(AXES)                     # shared by the published messages (never modified)
+        # x_d of the last set-point pose, its list and whether it is finite: held while the pose
+        # repeats (holding, a pause), as the numbers of the same pose are the same
+        self._x_d_key, self._x_d = None, (None, None, False)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
@@ -80,8 +87,24 @@ class OSPCNode(CdprNode):
     def _on_mode(self, ik_only: bool) -> None:
         self.controller.pi.hold = ik_only           # bumpless: no wind-up while not applied
 
+    def _setpoint(self, pose) -> tuple[np.ndarray, list, bool]:
+        """(x_d, x_d as a list, whether it is finite) of the set-point's pose; the same objects again
+        (read, never written) while the pose repeats."""
+        try:
+            p, o = pose._position, pose._orientation
+        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
+            x_d = pose_from_msg(pose)
+            reference = x_d.tolist()
+            return x_d, reference, all_finite(reference)
+        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
+        if key != self._x_d_key:
+            x_d = pose_from_msg(pose)
+            reference = x_d.tolist()
+            self._x_d_key, self._x_d = key, (x_d, reference, all_finite(reference))
+        return self._x_d
+
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        x_d = pose_from_msg(msgs["setpoint"].pose)
+        x_d, reference, reference_finite = self._setpoint(msgs["setpoint"].pose)
         x = pose_from_msg(msgs["pose"].pose)
         hpfc = msgs.get("hpfc")
         if hpfc is not None and parse_state(hpfc.controller) in FORCE_CONTROLLED:
@@ -90,19 +113,20 @@ class OSPCNode(CdprNode):
                          if np.any(a != 0.0)), None)
             if axis is not None:
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
-        reference, feedback = x_d.tolist(), x.tolist()
+        feedback = x.tolist()
+        # e = x_d - x element by element: the bits of numpy's subtraction
         state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                names=list(AXES), reference=reference, feedback=feedback,
-                                error=(x_d - x).tolist())
+                                names=self.names, reference=reference, feedback=feedback,
+                                error=[a - b for a, b in zip(reference, feedback)])
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
-        if self.enabled and all_finite(feedback) and all_finite(reference):
-            out = self.controller.update(x_d, x)
-            state.integrator = self.controller.pi.integrator.tolist()
-            state.saturated = self.controller.pi.saturated.tolist()
+        if self.enabled and all_finite(feedback) and reference_finite:
+            pi = self.controller.pi
+            state.output = self.controller.update(x_d, x).tolist()
+            state.integrator = pi.integrator.tolist()
+            state.saturated = pi.saturated.tolist()
         else:
-            out = np.zeros(6)
-        state.output = out.tolist()
+            state.output = [0.0] * 6
         self.publisher.publish(state)
 
 
