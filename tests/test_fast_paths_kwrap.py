@@ -1,0 +1,76 @@
+"""The kernel wrappers' fast paths give the same numbers, bit for bit, as computing everything
+again: the friction compensation's pulley tables kept while β_np's bytes repeat
+(kernels/friction.py) against tables computed every call."""
+import sys
+
+import numpy as np
+import pytest
+
+from cdpr_control import kernels
+from cdpr_control.friction import PulleyFriction
+from cdpr_control.robot import load_robot
+
+kfriction = sys.modules["cdpr_control.kernels.friction"]
+
+
+def _forget_tables():
+    kfriction._last_tables = (None, b"", (), None, None)
+
+
+@pytest.fixture(params=["ipanema3_mini", "ipanema3"])
+def robot(request):
+    robot = load_robot(request.param)
+    kernels.warm_up(robot)
+    return robot
+
+
+def _betas(robot, rng):
+    """A sequence of wrap angles: repeats, a change, the same values again, a sign of zero flipped."""
+    beta = kernels.inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).beta.copy()
+    other = beta + rng.normal(scale=0.05, size=beta.shape)
+    zero = beta.copy()
+    zero[0] = 0.0
+    neg_zero = zero.copy()
+    neg_zero[0] = -0.0
+    return [beta, beta.copy(), beta, other, other.copy(), beta.copy(), zero, neg_zero, neg_zero.copy(), zero,
+            list(beta), beta]
+
+
+def test_friction_tables_kept_while_beta_repeats_bit_for_bit(robot):
+    """Two models fed the same samples, one with the kept tables, one with the tables computed every
+    call: the same forces and the same Dahl state, bit for bit, also with a second model's calls in
+    between (the tables follow the series)."""
+    rng = np.random.default_rng(11)
+    q = kernels.inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).q
+    kept, fresh, between = (PulleyFriction.from_robot(robot, q) for _ in range(3))
+    hits = 0
+    for k, beta in enumerate(_betas(robot, rng) * 2):
+        f_w = rng.uniform(50.0, 500.0, robot.m)
+        theta = q + rng.normal(scale=1e-3, size=robot.m)
+        thetadot = rng.normal(scale=0.01, size=robot.m) * (k % 3 != 0)
+        if k % 5 == 4:
+            kernels.friction_platform_force(between, f_w, theta, thetadot, beta)
+        hits_before = kfriction._last_tables
+        out = kernels.friction_platform_force(kept, f_w, theta, thetadot, beta)
+        hits += kfriction._last_tables is hits_before
+        kept_tables = kfriction._last_tables
+        _forget_tables()
+        ref = kernels.friction_platform_force(fresh, f_w, theta, thetadot, beta)
+        kfriction._last_tables = kept_tables
+        assert out.tobytes() == ref.tobytes()
+        assert kept.dahl.state.tobytes() == fresh.dahl.state.tobytes()
+    assert hits >= 8                        # the kept tables did serve the repeats
+
+def test_friction_tables_follow_sign_of_zero_and_values():
+    """The kept tables are those of β's exact bytes: -0.0 after 0.0 and a changed value compute
+    again, equal to a fresh computation."""
+    robot = load_robot("ipanema3_mini")
+    series = PulleyFriction.from_robot(robot, np.zeros(robot.m)).series
+    beta = np.linspace(-0.3, 0.3, robot.m)
+    beta[0] = 0.0
+    for b in (beta, beta.copy(), np.where(beta == 0.0, -0.0, beta), beta + 1e-12, beta):
+        alpha, gamma = kfriction._series_tables(series, b)
+        _forget_tables()
+        alpha_ref, gamma_ref = kfriction._series_tables(series, b)
+        assert alpha.tobytes() == alpha_ref.tobytes() and gamma.tobytes() == gamma_ref.tobytes()
+        assert kfriction._last_tables[1] == np.asarray(b, dtype=float).tobytes()
