@@ -74,3 +74,23 @@ def test_friction_tables_follow_sign_of_zero_and_values():
         alpha_ref, gamma_ref = kfriction._series_tables(series, b)
         assert alpha.tobytes() == alpha_ref.tobytes() and gamma.tobytes() == gamma_ref.tobytes()
         assert kfriction._last_tables[1] == np.asarray(b, dtype=float).tobytes()
+
+
+def test_vector_passes_a_kernel_array_and_copies_the_rest():
+    """kernels.vector returns a writeable aligned C-contiguous float64 array itself, and an equal
+    copy of anything else (a view with strides, read-only, another dtype, unaligned, a list)."""
+    vector = sys.modules["cdpr_control.kernels.robot_data"].vector
+    a = np.array([0.5, -0.0, np.nan, 1e30, -3.25, 7.0])
+    assert vector(a) is a
+    read_only = a.copy()
+    read_only.flags.writeable = False
+    raw = np.zeros(a.nbytes + 1, dtype=np.uint8)
+    unaligned = raw[1:].view(float)
+    unaligned[:] = a
+    others = [a[::2], read_only, a.astype(np.float32), unaligned, a.tolist(), a[::-1], a.reshape(2, 3).T]
+    assert not unaligned.flags.aligned
+    for v in others:
+        out = vector(v)
+        assert out is not v
+        assert out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable and out.flags.aligned
+        assert out.tobytes() == np.array(v, dtype=float, order="C").tobytes()
