@@ -94,3 +94,35 @@ def test_vector_passes_a_kernel_array_and_copies_the_rest():
         assert out is not v
         assert out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable and out.flags.aligned
         assert out.tobytes() == np.array(v, dtype=float, order="C").tobytes()
+
+
+def test_friction_step_loop_equals_the_compiled_reference_bit_for_bit():
+    """kernels.friction.platform_force_kernel against friction.platform_force_step compiled by numba
+    (what the wrapper ran before): the same forces and Dahl state, bit for bit, over a random walk
+    with standstill, direction changes, speeds at v_eps, signed zeros and a NaN."""
+    import numba
+
+    from cdpr_control import friction as np_friction
+
+    reference = numba.njit(np_friction.platform_force_step)
+    rng = np.random.default_rng(7)
+    m = 8
+    alpha_t, gamma_t = rng.uniform(0.8, 1.3, (3, m)), rng.uniform(-5.0, 5.0, (3, m))
+    sigma = rng.uniform(1e4, 1e6, m)
+    for v_eps in (0.0, 1e-3):
+        state = np.zeros((5, m))
+        state[3] = rng.uniform(0.5, 2.0, m)
+        state_ref = state.copy()
+        theta = state[3].copy()
+        for k in range(300):
+            thetadot = rng.normal(scale=2e-3, size=m) * (k % 7 != 0)
+            thetadot[k % m] = (v_eps, -v_eps, 0.0, -0.0, 2 * v_eps + 1e-4, thetadot[k % m])[k % 6]
+            if k == 150:
+                thetadot[3] = np.nan
+            theta = theta + thetadot * 1e-3
+            f_w = rng.uniform(-20.0, 800.0, m)
+            f = np.empty(m)
+            kfriction.platform_force_kernel(f_w, theta, thetadot, alpha_t, gamma_t, sigma, v_eps, state, f)
+            f_ref = reference(f_w, theta, thetadot, alpha_t, gamma_t, sigma, v_eps, state_ref)
+            assert f.tobytes() == f_ref.tobytes(), k
+            assert state.tobytes() == state_ref.tobytes(), k
