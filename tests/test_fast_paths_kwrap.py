@@ -1,6 +1,7 @@
-"""The kernel wrappers' fast paths give the same numbers, bit for bit, as computing everything
-again: the friction compensation's pulley tables kept while β_np's bytes repeat
-(kernels/friction.py) against tables computed every call."""
+"""The kernel wrappers' fast paths give the same numbers, bit for bit, as what they replace: the
+friction compensation's pulley tables kept while β_np's bytes repeat against tables computed every
+call, its Dahl step as a loop against the compiled numpy reference (kernels/friction.py), and
+kernels.vector's one-flag test against the copy it replaces."""
 import sys
 
 import numpy as np
