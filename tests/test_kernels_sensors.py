@@ -1,4 +1,4 @@
-"""The simulator's compiled sensor friction (cdpr_control.kernels.sensors) against the numpy reference.
+"""The simulator's compiled sensor friction (cdpr_control.kernels.friction) against the numpy reference.
 
 kernels.friction_sensor_force does the operations of PulleyFriction.sensor_force in the same order,
 element by element: against the reference compiled by numba (cdpr_sim.simulator.compiled, the

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from cdpr_control.drive_models import drive_step
-from cdpr_control.kernels.sensors import sensor_force_kernel
+from cdpr_control.kernels.friction import sensor_force_kernel
 
 from .cables import _cable_wrench, _implicit_wrench
 from .plant import _settle

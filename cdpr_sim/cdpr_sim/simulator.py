@@ -231,7 +231,7 @@ class Simulator:
         self._theta_enc_prev = self.encoder.read(theta0 + self.encoder_offset)
         self._theta_prev = self.drives.theta
         # the sensor pulley's gain 1 - cos beta_1 (3.36) of sensor_from_winch_force and of the
-        # friction kernel (kernels.sensors), the same numbers (numpy's cos)
+        # friction kernel (kernels.friction), the same numbers (numpy's cos)
         self._gain = np.broadcast_to(1.0 - np.cos(np.asarray(self.robot.sensor.beta_1, dtype=float)), (self.m,)).copy()
         self._friction_gain = float(1.0 - np.cos(self.friction.beta_1))
         self.output = self._measure()

@@ -7,7 +7,7 @@ kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics
 (3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
 predictor of the wrench set-point (3.24)-(3.26), the PI arithmetic (3.16)/(3.19), the whole CFC
 period (3.19)-(3.23) and the joint command's period (5.10); for the simulator, the pulley friction to
-the force sensors (3.43)-(3.44) (:mod:`.sensors`). The control flow and the state stay in the stage
+the force sensors (3.43)-(3.44) (:mod:`.friction`). The control flow and the state stay in the stage
 classes (and the simulator's models), which call the functions below at their call sites.
 
 The numpy modules (kinematics, forward_kinematics, dynamics, friction, wrench_setpoint, pi_control)
@@ -36,7 +36,7 @@ from .. import kinematics as np_kinematics
 from .control import cfc_period as _cfc_period
 from .control import pi_update as _pi_update
 from .control import widened_saturation_kernel
-from .friction import friction_platform_force
+from .friction import friction_platform_force, friction_sensor_force
 from .model import cable_lengths as _cable_lengths
 from .model import _AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q, _ROWS, elastic_cable_state, elastic_frozen, ik_packed
 from .model import secant_stiffness
@@ -46,7 +46,6 @@ from .model import measured_wrench as _measured_wrench
 from .model import platform_wrench as _platform_wrench
 from .robot_data import RobotData, robot_data, vector
 from .setpoint import smith_step
-from .sensors import friction_sensor_force
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
