@@ -354,10 +354,7 @@ class Simulator:
             body.apply(F, T, r)
             pb.stepSimulation(physicsClientId=cid)
             t += dt
-        self.steps += 1
-        self.t = self.steps * cfg.period
-        self.output = self._measure()
-        return self.output
+        return self._end_period()
 
     def _step_fused(self, theta_d: np.ndarray, given) -> SimOutput:
         """:meth:`step` with the arithmetic after the pybullet calls in compiled calls (period.substep,
@@ -386,8 +383,12 @@ class Simulator:
             body.apply_wrench(FT, r)
             pb.stepSimulation(physicsClientId=cid)
             t += dt
+        return self._end_period()
+
+    def _end_period(self) -> SimOutput:
+        """The period done (both step paths): its count, time and measured outputs."""
         self.steps += 1
-        self.t = self.steps * cfg.period
+        self.t = self.steps * self.config.period
         self.output = self._measure()
         return self.output
 
