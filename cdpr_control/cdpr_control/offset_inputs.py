@@ -19,11 +19,10 @@ saying whether it is active. The joint command treats them all alike:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import isfinite
 
 import numpy as np
 
-from .safety import NON_FINITE, STALE_INPUT, Fault
+from .safety import NON_FINITE, STALE_INPUT, Fault, all_finite
 
 
 @dataclass
@@ -97,8 +96,7 @@ class OffsetInputs:
                     faults.append(Fault(STALE_INPUT, f"stale input offset {name}: older than its deadline "
                                         f"{1e3 * config.deadline:.0f} ms", True))
                     active = False
-                # (safety.all_finite of the list, inline)
-                elif x.shape != (6,) or not (isfinite(sum(values := x.tolist())) or all(map(isfinite, values))):
+                elif x.shape != (6,) or not all_finite(values := x.tolist()):
                     faults.append(Fault(NON_FINITE, f"offset {name} is not 6 finite values: {x}", True))
                     active = False
                 else:

@@ -13,7 +13,6 @@ then carries the last converged estimate. The computation is
 from __future__ import annotations
 
 import inspect
-import struct
 import time
 
 import numpy as np
@@ -26,7 +25,7 @@ from cdpr_control import forward_kinematics as fk
 from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
-from .conversions import pose_from_msg, pose_to_msg, wrench_to_msg
+from .conversions import pose_from_msg, pose_key, pose_to_msg, wrench_to_msg
 from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
 from .qos import CONTROL
 from .sync import StampSync
@@ -38,7 +37,6 @@ TERMINATION = {
     fk.NON_FINITE: ForwardKinematicsDiagnostics.INVALID_INPUT,
 }
 
-_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 _D = {k: v.default for k, v in inspect.signature(fk.PoseEstimator).parameters.items()}   # one source of truth
 PARAMS = [
     ParamSpec("pulleys", _D["pulleys"], "pulley model in the iterations: frozen at x_d (section 3.2) or full",
@@ -74,13 +72,8 @@ class ForwardKinematicsNode(CdprNode):
     def _setpoint_pose(self, pose) -> tuple[np.ndarray, bool]:
         """(x_d, whether it is finite) of the set-point's pose; the same array again (read, never
         written) while the pose repeats (holding, a pause)."""
-        try:
-            p, o = pose._position, pose._orientation
-        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
-            x_d = pose_from_msg(pose)
-            return x_d, all_finite(x_d)
-        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
-        if key != self._x_d_key:
+        key = pose_key(pose)
+        if key is None or key != self._x_d_key:
             x_d = pose_from_msg(pose)
             self._x_d_key, self._x_d = key, (x_d, all_finite(x_d))
         return self._x_d

@@ -15,7 +15,6 @@ friction`` writes a parameter file with identified ones. The computation is
 from __future__ import annotations
 
 import array
-import struct
 
 import numpy as np
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
@@ -27,12 +26,11 @@ from cdpr_control import kernels
 from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
-from .conversions import bare, pose_from_msg
+from .conversions import bare, pose_from_msg, pose_key
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
 
-_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 
 
 class FrictionCompensationNode(CdprNode):
@@ -99,14 +97,10 @@ class FrictionCompensationNode(CdprNode):
     def _wrap_angles(self, pose) -> np.ndarray:
         """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
         never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
-        try:
-            p, o = pose._position, pose._orientation
-        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
-            return kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")[0]
-        key = (_POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w), kernels.ENABLED)
-        if key != self._beta_key:
+        key = pose_key(pose)
+        if key is None or (key, kernels.ENABLED) != self._beta_key:
             self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
-            self._beta_key = key
+            self._beta_key = (key, kernels.ENABLED)
         return self._beta
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:

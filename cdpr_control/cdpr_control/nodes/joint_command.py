@@ -29,7 +29,6 @@ Invalid messages (lengths, non-finite values, frame) are dropped and reported (n
 """
 from __future__ import annotations
 
-import struct
 from array import array
 
 import numpy as np
@@ -51,7 +50,7 @@ from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, Saf
 ABORTING = frozenset({STALE_INPUT, WORKSPACE})
 
 from .base import CdprNode, spin_node
-from .conversions import bare, pose_from_msg
+from .conversions import bare, pose_from_msg, pose_key
 from .mode import mode_publisher, publish_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
@@ -60,7 +59,6 @@ from .sync import StampJumps, StampSync, input_problem, stamp_ns
 OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/state output (6 values) is added "
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
 DEFAULT_OFFSET = OffsetConfig()
-_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
 
@@ -195,9 +193,8 @@ class JointCommandNode(CdprNode):
     def _setpoint_pose(self, pose) -> np.ndarray:
         """x_d of the set-point's pose; the array of the last period again (read, never written) when
         the pose repeats (holding, a pause)."""
-        p, o = pose._position, pose._orientation
-        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
-        if key != self._x_d_key:
+        key = pose_key(pose)
+        if key is None or key != self._x_d_key:
             self._x_d_key, self._x_d = key, pose_from_msg(pose)
         return self._x_d
 

@@ -10,7 +10,6 @@ Raibert and Craig's selection, Fig. 5.2). While ``joint_command`` runs IK-only (
 """
 from __future__ import annotations
 
-import struct
 
 import numpy as np
 from cdpr_msgs.msg import ControllerState, OperationalSetpoint
@@ -23,7 +22,7 @@ from cdpr_control.safety import all_finite
 from cdpr_control.stability import check_force_control, planned_home_forces
 
 from .base import CdprNode, spin_node
-from .conversions import from_vector3, pose_from_msg
+from .conversions import from_vector3, pose_from_msg, pose_key
 from .mode import follow_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
@@ -36,7 +35,6 @@ PARAMS = [
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
 ]
-_POSE_KEY = struct.Struct("7d").pack   # a pose message's values as bytes (a tuple would take -0.0 for 0.0)
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose force axis is not "
                              "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
 
@@ -90,14 +88,8 @@ class OSPCNode(CdprNode):
     def _setpoint(self, pose) -> tuple[np.ndarray, list, bool]:
         """(x_d, x_d as a list, whether it is finite) of the set-point's pose; the same objects again
         (read, never written) while the pose repeats."""
-        try:
-            p, o = pose._position, pose._orientation
-        except AttributeError:                      # a message of another reader (conversions.pose_from_msg)
-            x_d = pose_from_msg(pose)
-            reference = x_d.tolist()
-            return x_d, reference, all_finite(reference)
-        key = _POSE_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
-        if key != self._x_d_key:
+        key = pose_key(pose)
+        if key is None or key != self._x_d_key:
             x_d = pose_from_msg(pose)
             reference = x_d.tolist()
             self._x_d_key, self._x_d = key, (x_d, reference, all_finite(reference))
