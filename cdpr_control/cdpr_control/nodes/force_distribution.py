@@ -26,13 +26,12 @@ after the release.
 from __future__ import annotations
 
 import struct
-from array import array
 
 import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import InertiaStamped, Vector3, Wrench, WrenchStamped
+from geometry_msgs.msg import InertiaStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
 from cdpr_control import kernels
@@ -43,7 +42,7 @@ from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contac
 from cdpr_control.load_compensation import payload_kinematics, payload_wrench_of_mass
 
 from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, wrench_from_msg
+from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg, wrench_to_msg
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -108,7 +107,6 @@ class ForceDistributionNode(CdprNode):
         self._model: tuple = ()                          # (x_d, ẋ_d, ẍ_d, w_dyn, A^T) of that key
         self._payload_key: tuple | None = None          # (set-point key, cog bytes) of _payload_kinematics
         self._payload_kinematics: tuple = ()            # R c, g - a_c of that key (load_compensation.payload_kinematics)
-        self._limits: tuple = ()                         # (f_ref, f_min, f_max, their message arrays)
 
     @staticmethod
     def _stage_params(v: dict) -> ForceSetpointParams:
@@ -199,34 +197,11 @@ class ForceDistributionNode(CdprNode):
             self.report(_OK, "feasible", stamp_ns=t_ns)
 
     def _message(self, res, max_violation: float, t_ns: int) -> ForceDistribution:
-        """cdpr_msgs/ForceDistribution of a result, built field by field (conversions.bare): the limits
-        and f_ref are the same arrays period after period, so their message arrays are copied from the
-        last ones (the arrays are never written in place: a change is a new array)."""
-        limits = self._limits
-        if not limits or res.f_ref is not limits[0] or res.f_min is not limits[1] or res.f_max is not limits[2]:
-            limits = self._limits = (res.f_ref, res.f_min, res.f_max,
-                                     *(array("d", v.tolist()) for v in (res.f_ref, res.f_min, res.f_max)))
-        msg = bare(ForceDistribution)
-        msg._header = self.header(t_ns)
-        msg._f_d = array("d", res.f.tolist())
-        msg._f_ref, msg._f_min, msg._f_max = array("d", limits[3]), array("d", limits[4]), array("d", limits[5])
-        msg._w_d = _wrench(*self.stage.w_d.tolist())
-        msg._method = res.method
-        msg._status = int(res.status)
-        msg._max_violation = max_violation
-        msg._residual = float(res.residual)
-        msg._iterations = int(res.iterations)
-        msg._solve_time = float(res.solve_time)
-        return msg
-
-
-def _wrench(fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> Wrench:
-    """conversions.wrench_to_msg of the six floats, without indexing an array element by element."""
-    force, torque, msg = bare(Vector3), bare(Vector3), bare(Wrench)
-    force._x, force._y, force._z = fx, fy, fz
-    torque._x, torque._y, torque._z = tx, ty, tz
-    msg._force, msg._torque = force, torque
-    return msg
+        return ForceDistribution(
+            header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),
+            f_max=res.f_max.tolist(), w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
+            max_violation=max_violation, residual=float(res.residual), iterations=int(res.iterations),
+            solve_time=float(res.solve_time))
 
 
 def main(args=None):

@@ -14,8 +14,6 @@ friction`` writes a parameter file with identified ones. The computation is
 """
 from __future__ import annotations
 
-import array
-
 import numpy as np
 from cdpr_msgs.msg import CableForces, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -26,7 +24,7 @@ from cdpr_control import kernels
 from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
-from .conversions import bare, pose_from_msg, pose_key
+from .conversions import pose_from_msg, pose_key
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -116,10 +114,7 @@ class FrictionCompensationNode(CdprNode):
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
         f = self.stage.update(F_s, theta, thetadot, self._wrap_angles(msgs["setpoint"].pose))
-        msg = bare(CableForces)             # field by field (conversions.bare): the constructor's values
-        msg._header, msg._f = self.header(t_ns), array.array("d", f.tolist())
-        msg._f_min, msg._f_max = array.array("d", self.f_min), array.array("d", self.f_max)   # copies, as it makes
-        self.publisher.publish(msg)
+        self.publisher.publish(CableForces(header=self.header(t_ns), f=f.tolist(), f_min=self.f_min, f_max=self.f_max))
 
 
 def main(args=None):

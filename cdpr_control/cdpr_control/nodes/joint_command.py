@@ -29,8 +29,6 @@ Invalid messages (lengths, non-finite values, frame) are dropped and reported (n
 """
 from __future__ import annotations
 
-from array import array
-
 import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, ForwardKinematicsDiagnostics, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -50,7 +48,7 @@ from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, Saf
 ABORTING = frozenset({STALE_INPUT, WORKSPACE})
 
 from .base import CdprNode, spin_node
-from .conversions import bare, pose_from_msg, pose_key
+from .conversions import pose_from_msg, pose_key
 from .mode import mode_publisher, publish_mode
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
@@ -182,7 +180,7 @@ class JointCommandNode(CdprNode):
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
-        hold = any(f.holds for f in faults) if faults else False
+        hold = any(f.holds for f in faults)
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc._output), hold=hold)  # IK only at 0
@@ -216,10 +214,7 @@ class JointCommandNode(CdprNode):
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            msg = bare(JointState)       # built field by field (conversions.bare): every period
-            msg._header, msg._name = self.header(t_ns), self.names
-            msg._position, msg._velocity, msg._effort = array("d", theta_d.tolist()), array("d"), array("d")
-            self.publisher.publish(msg)
+            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
         if faults:
             level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),
