@@ -67,23 +67,25 @@ class CdprNode(IntraProcessNode):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS)
         self._last_diagnostic = None
 
-    _last_header = (None, None, None)
+    _header_stamp: int | None = None
+    _headers: dict = {}             # frame_id -> Header of _header_stamp
 
     @staticmethod
     def header(stamp_ns: int, frame_id: str = "base") -> Header:
         """A header stamped ``stamp_ns`` (built field by field: see conversions.bare; 1.5 us, not 7).
 
-        Every node publishes period k with the stamp t_k, so the header of the last call is handed out
+        Every node publishes period k with the stamp t_k, so the headers of the period are handed out
         again for the same stamp and frame (13 calls a period in closed_loop.yaml): one object in
         several messages, which is safe because a published message is never modified (intraprocess.py)."""
-        last_stamp, last_frame, h = CdprNode._last_header
-        if last_stamp == stamp_ns and last_frame == frame_id:
-            return h
-        stamp = bare(Time)
-        stamp._sec, stamp._nanosec = divmod(int(stamp_ns), 1_000_000_000)
-        h = bare(Header)
-        h._stamp, h._frame_id = stamp, str(frame_id)
-        CdprNode._last_header = (stamp_ns, frame_id, h)
+        if stamp_ns != CdprNode._header_stamp:
+            CdprNode._header_stamp, CdprNode._headers = stamp_ns, {}
+        h = CdprNode._headers.get(frame_id)
+        if h is None:
+            stamp = bare(Time)
+            stamp._sec, stamp._nanosec = divmod(int(stamp_ns), 1_000_000_000)
+            h = bare(Header)
+            h._stamp, h._frame_id = stamp, str(frame_id)
+            CdprNode._headers[frame_id] = h
         return h
 
     # -- fault isolation ----------------------------------------------------------------------

@@ -25,7 +25,6 @@ import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseStamped
-from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
 from cdpr_control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
@@ -34,7 +33,7 @@ from cdpr_control.safety import all_finite
 from cdpr_control.ospc import AXES
 
 from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, bare, pose_from_msg, twist_from_msg, vector3
+from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
 from .parameters import ParameterSet, ParamSpec
 from .qos import CONTROL
 from .sync import StampSync
@@ -85,18 +84,6 @@ class LoadCompensationNode(CdprNode):
             "pose": (PoseStamped, "platform/pose"),
         }, primary="f", callback=self._cycle, mode=self.sync_mode)
         self.create_service(Trigger, "~/tare", self._on_tare)
-        self._platform_header: Header | None = None
-
-    def _header_platform(self, base: Header) -> Header:
-        """The header of ``base``'s stamp in frame ``platform``, built here rather than by
-        :meth:`CdprNode.header`, whose one shared entry holds the period's ``base`` header that the
-        other nodes ask for next."""
-        h = self._platform_header
-        if h is None or h._stamp is not base._stamp:
-            h = bare(Header)
-            h._stamp, h._frame_id = base._stamp, "platform"     # one Time in both: messages are never modified
-            self._platform_header = h
-        return h
 
     def _on_tare(self, request, response):
         """Tare the estimate now: it reads the platform plus ``tare_payload`` (at rest, payload known)."""
@@ -140,14 +127,9 @@ class LoadCompensationNode(CdprNode):
             header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
             reference=reference, feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
             saturated=lc.rate_limited.tolist()))
-        # built field by field (conversions.bare): every period, with all of Inertia's fields set
-        inertia = bare(Inertia)
-        inertia._m = float(lc.m_c)
-        inertia._com = vector3((0.0, 0.0, 0.0) if lc.cog is None else lc.cog)
-        inertia._ixx = inertia._ixy = inertia._ixz = inertia._iyy = inertia._iyz = inertia._izz = 0.0
-        payload = bare(InertiaStamped)
-        payload._header, payload._inertia = self._header_platform(header), inertia
-        self.payload_pub.publish(payload)
+        com = (0.0, 0.0, 0.0) if lc.cog is None else lc.cog
+        self.payload_pub.publish(InertiaStamped(header=self.header(t_ns, "platform"),
+                                                inertia=Inertia(m=float(lc.m_c), com=vector3(com))))
         if not valid:
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite): holding", stamp_ns=t_ns)
         elif lc.guarded:
