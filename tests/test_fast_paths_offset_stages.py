@@ -290,3 +290,20 @@ def test_hybrid_force_control_contact_force_and_F_equal_the_numpy_formulation(ro
         assert same(s.F_vec, F_vec) and same(s.F, float(s.z_t @ F_vec))
         assert same(s.F_d, float(s.z_t @ s.F_d0))
     assert s.state == "I"
+
+
+def test_low_pass_on_floats_is_update_bit_for_bit():
+    """LowPass.update_floats (1-3 values as floats) gives update's numbers, for vectors and a scalar."""
+    from cdpr_control.filters import LowPass
+    rng = np.random.default_rng(5)
+    for size in (1, 3):
+        for T in (0.0, 0.01, 0.3):
+            a, b = LowPass(T, 1e-3), LowPass(T, 1e-3)
+            for _ in range(500):
+                u = rng.normal(0.0, 10.0, size) * rng.choice([1.0, 1e-6, 1e6])
+                ref = a.update(u.copy())
+                out = b.update_floats(u.tolist())
+                assert np.array(out).tobytes() == ref.tobytes() == b.y.tobytes()
+    scalar_ref, scalar = LowPass(0.05, 1e-3), LowPass(0.05, 1e-3)
+    for u in rng.normal(0.0, 5.0, 300).tolist():
+        assert np.float64(scalar.update_floats((u,))[0]).tobytes() == np.float64(scalar_ref.update(u)).tobytes()

@@ -32,3 +32,17 @@ class LowPass:
         else:
             self.y += self.alpha * (np.asarray(u, dtype=float) - self.y)
         return self.y
+
+    def update_floats(self, u: list[float]) -> list[float]:
+        """:meth:`update` of a short vector given as Python floats, element by element: the same
+        numbers (the same IEEE operations in the same order) without numpy's per-call cost, which
+        on 1-3 values at 1 kHz is most of the time. The state stays an array."""
+        y = self.y
+        if y is None:
+            out = [float(v) for v in u]
+        else:
+            alpha = float(self.alpha)
+            out = [a + alpha * (b - a) for a, b in zip(y.tolist(), u)] if y.ndim else [
+                float(y) + alpha * (float(u[0]) - float(y))]
+        self.y = np.array(out) if y is None or y.ndim else np.array(out[0])
+        return out

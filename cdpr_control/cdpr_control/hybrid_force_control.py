@@ -229,15 +229,9 @@ class HybridForceControl:
 
     def _filter_force(self, w: list[float]) -> np.ndarray:
         """self.force_filter (PT1) of the contact force -(w_F - m g) (:func:`contact_force`) of the
-        wrench w (6 floats): the filter's arithmetic on three floats, without its array calls."""
-        flt = self.force_filter
-        u = [-(a - b) for a, b in zip(w[:3], self._weight)]
-        if flt.y is None:
-            flt.y = np.array(u)
-        else:
-            alpha = float(flt.alpha)
-            flt.y = np.array([y + alpha * (v - y) for y, v in zip(flt.y.tolist(), u)])
-        return flt.y
+        wrench w (6 floats), on floats (LowPass.update_floats)."""
+        self.force_filter.update_floats([-(a - b) for a, b in zip(w[:3], self._weight)])
+        return self.force_filter.y
 
     def _enter(self, state: str) -> None:
         """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
@@ -543,15 +537,9 @@ class ContactHandOver:
     def set_time_constant(self, T_c: float) -> None:
         self.filter.set_time_constant(T_c)
 
-    def _filter(self, u: float) -> float:
-        """The PT1 self.filter of a scalar, without its arrays (the same arithmetic, a fraction of the cost)."""
-        y = self.filter.y
-        self.filter.y = y = float(u) if y is None else float(y + self.filter.alpha * (u - y))
-        return y
-
     def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
         """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]."""
-        F_c = self._filter(state.F_d if state.state in FORCE_CONTROLLED else 0.0)
+        F_c, = self.filter.update_floats((state.F_d if state.state in FORCE_CONTROLLED else 0.0,))
         if state.state in CFC_PAUSED:
             self.share = 0.0
         elif state.state in (CONTACT, RELEASE):
