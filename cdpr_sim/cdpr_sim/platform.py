@@ -115,7 +115,4 @@ class PlatformBody:
 
     def apply_wrench(self, FT, r) -> None:
         """:meth:`apply` of the wrench FT = [F; T] (6,) about the platform origin r (base frame)."""
-        pb = self.pb
-        FT = FT.tolist()
-        pb.applyExternalForce(self.body, -1, FT[:3], r.tolist(), pb.WORLD_FRAME, physicsClientId=self.client)
-        pb.applyExternalTorque(self.body, -1, FT[3:], pb.WORLD_FRAME, physicsClientId=self.client)
+        self.apply(FT[:3], FT[3:], r)
