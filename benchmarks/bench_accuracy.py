@@ -20,10 +20,10 @@ import tempfile
 import numpy as np
 
 from cdpr_control import programs
-from cdpr_control.controller_params import control_loop_params
-from cdpr_control.gcode import parse_gcode
-from cdpr_control.interpolation import Interpolator
-from cdpr_control.robot import load_robot
+from cdpr_control.control.params import control_loop_params
+from cdpr_control.motion.gcode import parse_gcode
+from cdpr_control.motion.interpolation import Interpolator
+from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import program, run
 from cdpr_sim.simulator import SimConfig, plant_of
 from cdpr_sim.startup import startup_forces

@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from cdpr_control.admittance import AdmittanceController
-from cdpr_control.dynamics import gravity_wrench
-from cdpr_control.ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.robot import load_robot
+from cdpr_control.control.admittance import AdmittanceController
+from cdpr_control.model.dynamics import gravity_wrench
+from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
+from cdpr_control.model.robot import load_robot
 from timing import python_calibration_us
 
 PERIOD = 1e-3

@@ -49,9 +49,9 @@ from sensor_msgs.msg import JointState
 from cdpr_tools.bag import BagWriter
 from cdpr_tools.bag.encode import encoder
 from cdpr_tools.bag.recorder import BagRecorder
-from cdpr_control.nodes.intraprocess import IntraProcessNode
+from cdpr_control.ros.intraprocess import IntraProcessNode
 from cdpr_tools.message_convert import type_name_of
-from cdpr_control.nodes.runner import spin
+from cdpr_control.ros.runner import spin
 from cdpr_tools.ros_graph import new_context
 
 ROOT = Path(__file__).resolve().parents[1]

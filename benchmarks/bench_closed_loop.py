@@ -1,6 +1,6 @@
 """Cost of one control period of the thesis' control architecture (Fig. 3.4), in-process.
 
-The stages of cdpr_control.control_loop (the code each node runs) against the simulator, for both
+The stages of cdpr_control.control.loop (the code each node runs) against the simulator, for both
 robots on a circle set-point, twice in the same run: with the compiled kernels
 (cdpr_control.kernels, the default) and on the numpy reference (``kernels.numpy_reference()``,
 today's baseline). For each: the median cost of each stage per period, the median of their sum
@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from cdpr_control import kernels
-from cdpr_control.control_loop import ControlLoop
-from cdpr_control.robot import load_robot
+from cdpr_control.control.loop import ControlLoop
+from cdpr_control.model.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator
 from cdpr_sim.startup import startup_state
 
@@ -122,7 +122,7 @@ def bench(name: str) -> dict:
 def startup_s() -> float:
     """A fresh interpreter: import the kernels and load them for the Mini from the disk cache."""
     code = ("import time; t = time.perf_counter(); from cdpr_control import kernels; "
-            "from cdpr_control.robot import load_robot; kernels.warm_up(load_robot('ipanema3_mini')); "
+            "from cdpr_control.model.robot import load_robot; kernels.warm_up(load_robot('ipanema3_mini')); "
             "print(time.perf_counter() - t)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return float(out.stdout.strip().splitlines()[-1])

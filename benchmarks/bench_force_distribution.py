@@ -25,10 +25,11 @@ import proxsuite
 import qpsolvers
 
 from cdpr_control import force_distribution as fd
-from cdpr_control.dynamics import gravity_wrench
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.robot import load_robot
-from cdpr_control.workspace import evaluate_workspace, static_problem, with_platform_mass, workspace_grid
+from cdpr_control.model.dynamics import gravity_wrench
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.model.robot import load_robot
+from cdpr_control.model.workspace import (evaluate_workspace, static_problem, with_platform_mass,
+    workspace_grid)
 from timing import python_calibration_us
 
 ROOT = Path(__file__).resolve().parents[1]

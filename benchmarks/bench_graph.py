@@ -61,11 +61,11 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 
 from cdpr_control import programs  # noqa: E402
-from cdpr_control.nodes.intraprocess import IntraProcess  # noqa: E402
-from cdpr_control.nodes.qos import DIAGNOSTICS  # noqa: E402
-from cdpr_control.nodes.timing import DurationStats  # noqa: E402
-from cdpr_control.nodes.runner import spin  # noqa: E402
-from cdpr_control.robot import load_robot  # noqa: E402
+from cdpr_control.ros.intraprocess import IntraProcess  # noqa: E402
+from cdpr_control.ros.qos import DIAGNOSTICS  # noqa: E402
+from cdpr_control.ros.timing import DurationStats  # noqa: E402
+from cdpr_control.ros.runner import spin  # noqa: E402
+from cdpr_control.model.robot import load_robot  # noqa: E402
 from cdpr_sim.closed_loop import hold, run  # noqa: E402
 from cdpr_tools.bag import BagReader  # noqa: E402
 from cdpr_tools.demo_cmd import GRAPH  # noqa: E402

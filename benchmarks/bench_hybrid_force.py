@@ -22,11 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_control import kernels
-from cdpr_control.cable_force_control import CableForceControl
-from cdpr_control.hybrid_force_control import CFCCoupling, ContactHandOver, HybridForceControl, task_force_direction
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.robot import load_robot
+from cdpr_control.control.cable_force_control import CableForceControl
+from cdpr_control.control.hybrid_force_control import (CFCCoupling, ContactHandOver, HybridForceControl,
+    task_force_direction)
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
+from cdpr_control.model.robot import load_robot
 from timing import python_calibration_us
 
 ROOT = Path(__file__).resolve().parents[1]

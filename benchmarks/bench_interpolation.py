@@ -13,8 +13,8 @@ import numpy as np
 from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
 from cdpr_control import programs
-from cdpr_control.gcode import parse_gcode
-from cdpr_control.interpolation import TERMINAL_STATES, Interpolator, Limits
+from cdpr_control.motion.gcode import parse_gcode
+from cdpr_control.motion.interpolation import TERMINAL_STATES, Interpolator, Limits
 
 DT = 1e-3
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "interpolation.json"

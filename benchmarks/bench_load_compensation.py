@@ -19,11 +19,11 @@ import time
 import numpy as np
 from timing import python_calibration_us
 
-from cdpr_control.dynamics import platform_wrench
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.load_compensation import LoadCompensation, LoadCompensationParams
-from cdpr_control.ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.robot import load_robot
+from cdpr_control.model.dynamics import platform_wrench
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.control.load_compensation import LoadCompensation, LoadCompensationParams
+from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
+from cdpr_control.model.robot import load_robot
 
 STEPS = 2000
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "load_compensation.json"

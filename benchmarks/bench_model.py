@@ -18,11 +18,11 @@ import numpy as np
 import scipy
 from scipy.optimize import least_squares
 
-from cdpr_control import cable
-from cdpr_control.dynamics import platform_wrench
-from cdpr_control.forward_kinematics import ForwardKinematics
-from cdpr_control.kinematics import inverse_kinematics, twist_from_pose_rates
-from cdpr_control.robot import load_robot
+from cdpr_control.model import cable
+from cdpr_control.model.dynamics import platform_wrench
+from cdpr_control.model.forward_kinematics import ForwardKinematics
+from cdpr_control.model.kinematics import inverse_kinematics, twist_from_pose_rates
+from cdpr_control.model.robot import load_robot
 from timing import python_calibration_us
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -22,7 +22,7 @@ import numpy as np
 import pybullet
 
 from cdpr_control import kernels
-from cdpr_control.robot import load_robot
+from cdpr_control.model.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator, pretension_lengths
 from cdpr_sim.startup import startup_forces
 

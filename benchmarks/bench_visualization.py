@@ -26,8 +26,9 @@ import time
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
-from bench_graph import NODE_WINDOW_S, PERIOD_S, ROBOT, START_TIMEOUT_S, CallbackCpu, ClockProbe, sim_node  # noqa: E402
-from cdpr_control.nodes.intraprocess import IntraProcess  # noqa: E402
+from bench_graph import (NODE_WINDOW_S, PERIOD_S, ROBOT, START_TIMEOUT_S, CallbackCpu,  # noqa: E402
+                         ClockProbe, sim_node)
+from cdpr_control.ros.intraprocess import IntraProcess  # noqa: E402
 from cdpr_tools.launch import Launcher  # noqa: E402
 from cdpr_tools.launch_file import load_launch_file  # noqa: E402
 from cdpr_tools.share import package_share  # noqa: E402

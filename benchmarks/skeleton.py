@@ -2,8 +2,8 @@
 
 What the transport and the node layer alone cost per control period: the same nodes (names),
 topics, message types, QoS, messages per period and lockstep dependencies as the real graph, on
-the same node layer (:class:`~cdpr_control.nodes.base.CdprNode`: the callback guard,
-:class:`~cdpr_control.nodes.sync.StampSync` with its input checks, headers, in-process delivery
+the same node layer (:class:`~cdpr_control.ros.base.CdprNode`: the callback guard,
+:class:`~cdpr_control.ros.sync.StampSync` with its input checks, headers, in-process delivery
 or DDS), but every node, once the inputs of a period t_k are complete, only publishes a new
 message per per-period publisher: a shallow copy of a real message of that topic with a header
 stamped t_k. The skeleton simulator steps (a counter) on the winch command of t_k and publishes
@@ -43,10 +43,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 
-from cdpr_control.nodes.base import CdprNode
-from cdpr_control.nodes.intraprocess import IntraProcess
-from cdpr_control.nodes.runner import run_node
-from cdpr_control.nodes.sync import StampSync, stamp_ns
+from cdpr_control.ros.base import CdprNode
+from cdpr_control.ros.intraprocess import IntraProcess
+from cdpr_control.ros.runner import run_node
+from cdpr_control.ros.sync import StampSync, stamp_ns
 
 MODULE = "skeleton"          # this module's name for the launcher (benchmarks/ on sys.path)
 SIM = "winch_platform_sim"

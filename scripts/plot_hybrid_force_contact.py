@@ -16,7 +16,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_hybrid_force_control import floor_program_run  # noqa: E402
 
-from cdpr_control.hybrid_force_control import STATES  # noqa: E402
+from cdpr_control.control.hybrid_force_control import STATES  # noqa: E402
 
 
 def main(out: str) -> None:

@@ -91,17 +91,17 @@ fi
 h=$(hash_of cdpr_control/cdpr_control/kernels/*.py)
 if ! fresh kernels "$h"; then
   say "compiling the controller kernels (first run: about a minute)"
-  "$PY" -c "from cdpr_control import kernels; from cdpr_control.robot import load_robot; kernels.warm_up(load_robot('ipanema3_mini'))" \
+  "$PY" -c "from cdpr_control import kernels; from cdpr_control.model.robot import load_robot; kernels.warm_up(load_robot('ipanema3_mini'))" \
     || die "the compiled controller kernels do not load"
   stamp kernels "$h"
 fi
 
 # the simulator's numba code (drives, cables, friction, sensors) likewise: else the first graph of
 # a fresh clone compiles it in its first period (about 6 s)
-h=$(hash_of cdpr_sim/cdpr_sim/*.py cdpr_control/cdpr_control/drive_models.py cdpr_control/cdpr_control/friction.py)
+h=$(hash_of cdpr_sim/cdpr_sim/*.py cdpr_sim/cdpr_sim/drive_models.py cdpr_control/cdpr_control/model/friction.py)
 if ! fresh simulator "$h"; then
   say "compiling the simulator's kernels"
-  "$PY" -c "from cdpr_sim.simulator import Simulator, SimConfig; from cdpr_control.robot import load_robot
+  "$PY" -c "from cdpr_sim.simulator import Simulator, SimConfig; from cdpr_control.model.robot import load_robot
 with Simulator(load_robot('ipanema3_mini'), SimConfig()) as s: s.step(s.output.theta)" \
     > "$ROOT/build/simulator-warmup.log" 2>&1 \
     || { tail -n 20 "$ROOT/build/simulator-warmup.log"; die "the simulator does not load"; }

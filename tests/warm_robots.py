@@ -3,7 +3,7 @@ their numpy reference (import ``robot`` into a test module to use the fixture)."
 import pytest
 
 from cdpr_control import kernels
-from cdpr_control.robot import load_robot
+from cdpr_control.model.robot import load_robot
 
 ROBOTS = ("ipanema3_mini", "ipanema3")
 

@@ -6,10 +6,10 @@ Cable i pulls the platform anchor B_i = r + R b_i towards its leave point C_i wi
 
 with the elongation dq = q - theta (2.24) (q = IK{x} (2.7), theta the winch's unstretched cable
 length), the non-linear spring (2.16)-(2.17) over the total free length l_t = q + l_0 (2.14)
-(cdpr_control.cable), its tangent stiffness k_t and a Kelvin-Voigt damping with time constant
+(cdpr_control.model.cable), its tangent stiffness k_t and a Kelvin-Voigt damping with time constant
 tau_c (damping proportional to stiffness). A slack cable pulls nothing and no cable pushes.
 
-Speed: the swivelling-pulley IK of cdpr_control.kinematics is evaluated at "refresh" poses only;
+Speed: the swivelling-pulley IK of cdpr_control.model.kinematics is evaluated at "refresh" poses only;
 between refreshes the leave points c_i and wrap angles beta_i are frozen (the simplification of
 thesis section 3.2) and q = |c_i - B_i| + beta_i r_p. The length error is second order in the
 distance moved since the refresh (below 1e-8 m for 5 mm on IPAnema 3, 5e-7 m on the Mini), the
@@ -31,9 +31,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from cdpr_control import cable
-from cdpr_control.kernels.model import _cholesky_solve
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.model import cable
+from cdpr_control.kernels.model import cholesky_solve
+from cdpr_control.model.kinematics import inverse_kinematics
 
 _TABLE_POINTS = 20001
 
@@ -41,7 +41,7 @@ _TABLE_POINTS = 20001
 class CableModel:
     """The m cables of a robot; :meth:`wrench` gives the forces and their wrench on the platform.
 
-    robot: cdpr_control.robot.Robot; damping_time [s]: tau_c; refresh_distance [m]: anchor motion
+    robot: cdpr_control.model.robot.Robot; damping_time [s]: tau_c; refresh_distance [m]: anchor motion
     after which the pulley IK is evaluated again; step [s]: the physics step h of
     :meth:`implicit_wrench`. ``f_top`` [N]: end of the force table, the lower of 4 f_max and
     0.99 sqrt(k0 / k2) (where (2.17) stops being monotone); strains beyond continue the force with
@@ -123,7 +123,7 @@ class CableModel:
         views of buffers that the next call overwrites.
         """
         f, FT, anchors = self._f, self._FT, self._anchors
-        overload, self.moved = _cable_wrench(
+        overload, self.moved = cable_wrench_kernel(
             self._b, self.c, self._wrap, self._l_0, self._e_grid, self._f_grid, self._k_grid, self.damping_time,
             self.step, r, R, v, omega, theta, thetadot, self._anchors_at_refresh, f, FT, anchors, self._A, self._d,
             self._hint)
@@ -132,7 +132,7 @@ class CableModel:
         return f, FT[:3], FT[3:], anchors
 
     def wrench_arguments(self) -> tuple:
-        """The arguments of _cable_wrench but the platform state and the winches, for a caller that
+        """The arguments of cable_wrench_kernel but the platform state and the winches, for a caller that
         runs it inside its own compiled code (the simulator's period): (b, c, wrap, l_0, e_grid,
         f_grid, k_grid, tau_c, h, ref, f, FT, anchors, A, d, hint); it then sets ``moved`` and counts
         ``overloads`` as :meth:`wrench` does. c, wrap and ref change at :meth:`refresh`."""
@@ -161,14 +161,14 @@ class CableModel:
         damping) and an implicit (backward Euler) damper, which cannot overshoot: stable for any
         stiffness, so energy cannot grow; a cable that would push is slack (unilateral, f >= 0).
         """
-        self.slackened += _implicit_wrench(A, f, d, thetadot_0, thetadot_1, self.step, mass, c_p, J_p, R, g,
+        self.slackened += implicit_wrench_kernel(A, f, d, thetadot_0, thetadot_1, self.step, mass, c_p, J_p, R, g,
                                            w_ext, self._FT_step)
         FT = self._FT_step
         return FT[:3], FT[3:]
 
 
 @numba.njit(cache=True)
-def _cable_wrench(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta, thetadot, ref, f, FT,
+def cable_wrench_kernel(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta, thetadot, ref, f, FT,
                   anchors, A, d, hint):
     """The loop of CableModel.wrench (one pass over the cables).
 
@@ -239,7 +239,7 @@ def _cable_wrench(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omeg
 
 
 @numba.njit(cache=True)
-def _implicit_wrench(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w_ext, FT):
+def implicit_wrench_kernel(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w_ext, FT):
     """Cable wrench over one physics step of length h, linearly implicit in the cable forces.
 
     The platform twist xi = [v; omega] of its origin changes by dxi over the step; M is its spatial
@@ -315,7 +315,7 @@ def _implicit_wrench(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w
             rhs[a] *= h
             for b in range(a):
                 K[a, b] = K[b, a]
-        _cholesky_solve(K, rhs, x, K)                   # in place: K becomes its Cholesky factor
+        cholesky_solve(K, rhs, x, K)                   # in place: K becomes its Cholesky factor
         again = False
         for i in range(m):
             if active[i]:

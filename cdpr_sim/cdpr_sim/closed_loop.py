@@ -1,6 +1,6 @@
 """The control loop of Fig. 3.4 closed around the simulator in one Python process, without ROS.
 
-The same stage objects as the nodes (:class:`cdpr_control.control_loop.ControlLoop`) against the
+The same stage objects as the nodes (:class:`cdpr_control.control.loop.ControlLoop`) against the
 same simulator as the ``winch_platform_sim`` node, one control period per step: for the closed-loop
 tests, benchmarks and offline studies, where the transport between the nodes is not the subject.
 """
@@ -11,13 +11,13 @@ from typing import Callable
 
 import numpy as np
 
-from cdpr_control.control_loop import ControlLoop, ControlLoopParams
-from cdpr_control.controller_params import control_loop_params
-from cdpr_control.interpolation import Interpolator
-from cdpr_control.kinematics import twist_from_pose_rates
+from cdpr_control.control.loop import ControlLoop, ControlLoopParams
+from cdpr_control.control.params import control_loop_params
+from cdpr_control.motion.interpolation import Interpolator
+from cdpr_control.model.kinematics import twist_from_pose_rates
 
-from .simulator import SimConfig, Simulator
-from .startup import calibration_forces, startup_state
+from cdpr_sim.simulator import SimConfig, Simulator
+from cdpr_sim.startup import calibration_forces, startup_state
 
 
 @dataclass
@@ -65,13 +65,13 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     attached at t = 0 (the controller does not know it); the loop gets the home calibration's
     forces for its Δq_0 (3.9), (3.23). ``before_step(k, loop, sim)`` may change
     parameters during the run. params None: the robot's parameter file (the node graph's
-    configuration, :func:`cdpr_control.controller_params.control_loop_params`). The simulated
+    configuration, :func:`cdpr_control.control.params.control_loop_params`). The simulated
     robot is the plant of ``config`` (by default one that differs from the robot file).
     ``setpoints(t)`` returns (x_d, xdot_d, xddot_d), optionally followed by the desired force F_d,0
     (3,) and a list of parameter commands; a set-point source with a ``bind(loop)`` method (one that
     closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first;
     ``offset_stages`` are further offset inputs of the joint command (see
-    :class:`cdpr_control.control_loop.ControlLoop`)."""
+    :class:`cdpr_control.control.loop.ControlLoop`)."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
     x0, theta0, offset = startup_state(robot, x0, tension_level, calibrate_home=True, config=config)
     loop = ControlLoop(robot, config.period, control_loop_params(robot) if params is None else params,
@@ -114,7 +114,7 @@ class HandGuiding:
 
     As in the node graph, the wrench measured in period k acts on the set-point of period k + 1.
     Starts holding ``x_hold`` (default the robot's home) with the controller enabled or not as it
-    is; ``outputs`` records every period's :class:`cdpr_control.admittance.AdmittanceOutput`.
+    is; ``outputs`` records every period's :class:`cdpr_control.control.admittance.AdmittanceOutput`.
     """
 
     def __init__(self, controller, x_hold=None):

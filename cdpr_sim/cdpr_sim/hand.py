@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .wrench import SHAPES, WrenchPulse
+from cdpr_sim.wrench import SHAPES, WrenchPulse
 
 
 @dataclass(frozen=True)

@@ -10,15 +10,15 @@ each) was most of the simulator's time; here the arithmetic after the pybullet c
 :func:`substep` and :func:`measure`, two calls.
 
 Why the numbers are the same: both run the same compiled functions as the readable path
-(``drive_step``, ``_implicit_wrench``, ``_cable_wrench``, ``_settle``, ``_winch_readings``,
-``sensor_force_kernel``, ``_quantise``) on the same arguments, and the glue between them is element
+(``drive_step``, ``implicit_wrench_kernel``, ``cable_wrench_kernel``, ``settle_kernel``, ``winch_readings_kernel``,
+``sensor_force_kernel``, ``quantise_kernel``) on the same arguments, and the glue between them is element
 copies and the element-wise expressions of the numpy code (u = theta_d - offset, theta + s,
 theta_u + l_0, F + w, f (1 - cos beta_1)), the same operation on each element. numba's fastmath
-stays off, so no operation is reordered or contracted. tests/test_sim_fused_period.py compares the
+stays off, so no operation is reordered or contracted. tests/sim/test_sim_fused_period.py compares the
 two paths bit for bit.
 
 numba's disk cache of these two functions holds the compiled callees too and is renewed when this
-file changes, not when a callee's file does (as for cables._implicit_wrench's Cholesky solve): a
+file changes, not when a callee's file does (as for cables.implicit_wrench_kernel's Cholesky solve): a
 changed callee needs this file touched or its __pycache__ cleared.
 """
 from __future__ import annotations
@@ -29,12 +29,12 @@ import math
 import numba
 import numpy as np
 
-from cdpr_control.drive_models import drive_step
+from cdpr_sim.drive_models import drive_step
 from cdpr_control.kernels.friction import sensor_force_kernel
 
-from .cables import _cable_wrench, _implicit_wrench
-from .plant import _settle
-from .sensors import _quantise, encoder_count
+from cdpr_sim.cables import cable_wrench_kernel, implicit_wrench_kernel
+from cdpr_sim.plant import settle_kernel
+from cdpr_sim.sensors import quantise_kernel, encoder_count
 
 
 @functools.cache
@@ -47,7 +47,7 @@ _drive_step = compiled(drive_step)        # the drives' own compiled step (Drive
 
 
 @numba.njit(cache=True)
-def _winch_readings(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
+def winch_readings_kernel(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
     """The winch side of Simulator._measure in one pass over the cables (once per control period;
     as numpy expressions on m values they cost several times more): the period's mean velocity
     (theta - theta_prev) rate, the drive position in encoder coordinates theta_true = theta +
@@ -77,7 +77,7 @@ def substep(theta_d, offset, u, Phi, G_new, G_old, x, buffer, head, delay, v_max
     """One physics step's forces: the drive command u = theta_d - offset (encoder to drive
     coordinates), the drives' step (drive_models.drive_step, (3.10)/(5.11)) from thetadot_0 (a copy
     of the velocity before it) to thetadot, and the implicit cable wrench of the step
-    (cables._implicit_wrench) plus the external wrench w when ``external``, into FT (6,).
+    (cables.implicit_wrench_kernel) plus the external wrench w when ``external``, into FT (6,).
 
     Writes the drives' position after the step into theta (m,) (a new array from the caller, see
     :func:`measure`); returns (the drives' next ring-buffer head, cables that went slack), head -1
@@ -93,7 +93,7 @@ def substep(theta_d, offset, u, Phi, G_new, G_old, x, buffer, head, delay, v_max
     for i in range(m):
         thetadot_0[i] = thetadot[i]
     head = _drive_step(u, Phi, G_new, G_old, x, buffer, head, delay, v_max, dt, thetadot)
-    dropped = _implicit_wrench(A, f, d, thetadot_0, thetadot, h, mass, c_p, J_p, R, g, w_load, FT)
+    dropped = implicit_wrench_kernel(A, f, d, thetadot_0, thetadot, h, mass, c_p, J_p, R, g, w_load, FT)
     if external:
         for k in range(6):
             FT[k] += w[k]
@@ -110,11 +110,11 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
             noise, noisy, k1, k0_ad, code_min, code_max, r1, r0,
             r, R, x, xdot, f, theta_true, theta_enc, thetadot_enc, F_s_true, F_s):
     """Simulator._measure after the pybullet reads, for a platform origin at pos (3,) with rotation
-    rot (9,) (row-major) and twist lin, ang (3,): the cable forces (cables._cable_wrench) at the
+    rot (9,) (row-major) and twist lin, ang (3,): the cable forces (cables.cable_wrench_kernel) at the
     unstretched lengths theta + s, the pose x = [r, Kardan angles (2.1)], the settlement step,
     copies of the linearisation into A_next, d_next, the winch readings and the sensor forces
     (friction, sensor_force_kernel, or the sensor pulley's gain (3.36)) read through the AD
-    converter (_quantise with the noise row when ``noisy``).
+    converter (quantise_kernel with the noise row when ``noisy``).
 
     Writes the platform origin r (3,) and rotation R (3, 3), the pose x (6,), the twist xdot (6,),
     the forces f (m,), the winch readings theta_true, theta_enc, thetadot_enc (m,) and the sensor
@@ -133,7 +133,7 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
     theta_u = np.empty(m)
     for i in range(m):
         theta_u[i] = theta[i] + s[i]                  # unstretched length incl. settlement
-    overload, moved = _cable_wrench(b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta_u,
+    overload, moved = cable_wrench_kernel(b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta_u,
                                     thetadot_drive, ref, f_buf, FT, anchors, A_buf, d_buf, hint)
     for k in range(3):
         x[k], xdot[k], xdot[3 + k] = r[k], v[k], omega[k]
@@ -145,10 +145,10 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
         l_t = np.empty(m)
         for i in range(m):
             l_t[i] = theta_u[i] + l_0[i]
-        _settle(s, f, l_t, f_settled, settle_ratio, k0, settle_alpha)
+        settle_kernel(s, f, l_t, f_settled, settle_ratio, k0, settle_alpha)
     A_next[:, :] = A_buf
     d_next[:] = d_buf
-    thetadot, theta_true[:], theta_enc[:], thetadot_enc[:] = _winch_readings(theta, theta_prev, offset, resolution,
+    thetadot, theta_true[:], theta_enc[:], thetadot_enc[:] = winch_readings_kernel(theta, theta_prev, offset, resolution,
                                                                           theta_enc_prev, rate)
     if friction:
         sensor_force_kernel(f, theta, thetadot, alpha_t, gamma_t, sigma, v_eps, dahl, tol, max_iterations,
@@ -157,7 +157,7 @@ def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
         for i in range(m):
             F_s_true[i] = f[i] * gain[i]
     if noisy:
-        F_s[:] = _quantise(F_s_true, noise, k1, k0_ad, code_min, code_max, r1, r0)
+        F_s[:] = quantise_kernel(F_s_true, noise, k1, k0_ad, code_min, code_max, r1, r0)
     else:
-        F_s[:] = _quantise(F_s_true, None, k1, k0_ad, code_min, code_max, r1, r0)
+        F_s[:] = quantise_kernel(F_s_true, None, k1, k0_ad, code_min, code_max, r1, r0)
     return 0, overload, moved

@@ -11,10 +11,10 @@ perfect model (the plant equals the robot file), for tests that check an equatio
 What the simulator takes from the plant (and not from the robot file):
 
 * geometry a_i, b_i, l_0 and the cable stiffness (2.16): the physics of :mod:`cdpr_sim.cables`
-  (the simulator reuses ``cdpr_control.cable`` and ``cdpr_control.kinematics`` as functions, with
+  (the simulator reuses ``cdpr_control.model.cable`` and ``cdpr_control.model.kinematics`` as functions, with
   these parameters);
-* pulley friction mu, sigma, F_pv (3.30)-(3.43) (``cdpr_control.friction`` with these parameters);
-* drive time constant, damping and dead time (3.10)/(5.11) (``cdpr_control.drive_models``);
+* pulley friction mu, sigma, F_pv (3.30)-(3.43) (``cdpr_control.model.friction`` with these parameters);
+* drive time constant, damping and dead time (3.10)/(5.11) (``cdpr_sim.drive_models``);
 * the true sensor lines gamma_1, gamma_0 (3.29); the readings still apply the robot file's
   calibration, so the difference is a force measurement error;
 * cable settlement under load (section 4.1.3), :class:`Settlement`.
@@ -32,7 +32,7 @@ import numba
 import numpy as np
 import yaml
 
-from cdpr_control.robot import Robot
+from cdpr_control.model.robot import Robot
 
 MISMATCH_FILE = Path(__file__).parent / "plants" / "mismatch.yaml"
 KINDS = ("mismatched", "nominal")
@@ -155,13 +155,13 @@ class Settlement:
             return self.s
         if self.f_settled is None:
             self.reset(f)
-        _settle(self.s, np.asarray(f, dtype=float), np.asarray(l_t, dtype=float), self.f_settled, self.ratio, self.k0,
+        settle_kernel(self.s, np.asarray(f, dtype=float), np.asarray(l_t, dtype=float), self.f_settled, self.ratio, self.k0,
                 self.alpha)
         return self.s
 
 
 @numba.njit(cache=True)
-def _settle(s, f, l_t, f_settled, ratio, k0, alpha):
+def settle_kernel(s, f, l_t, f_settled, ratio, k0, alpha):
     """The loop of Settlement.update (once per control period: as numpy calls on m values it cost
     five times more), the same expression per cable as the array form
     s += alpha max(ratio l_t max(f - f_settled, 0) / k0 - s, 0)."""

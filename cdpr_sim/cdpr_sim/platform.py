@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cdpr_control.kinematics import cross, rotation_matrix
+from cdpr_control.model.kinematics import cross, rotation_matrix
 
 
 def kardan_angles(R: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ NOISE_BLOCK = 1000      # force sensor readings whose noise is drawn at once
 
 
 class ForceSensor:
-    """m winch force sensors. sensor: cdpr_control.robot.SensorParams (range, bits, noise_std and the
+    """m winch force sensors. sensor: cdpr_control.model.robot.SensorParams (range, bits, noise_std and the
     calibration gamma_1, gamma_0); rng: numpy Generator for the noise (drawn NOISE_BLOCK readings
     ahead, so do not draw from it elsewhere); gamma_1, gamma_0 (m,): the
     true sensor lines (default: the calibration); noise_std [N] overrides sensor.noise_std."""
@@ -63,16 +63,16 @@ class ForceSensor:
         return noise
 
     def quantiser(self) -> tuple:
-        """(k1, k0, code_min, code_max, r1, r0): the constants of _quantise, for a compiled caller."""
+        """(k1, k0, code_min, code_max, r1, r0): the constants of quantise_kernel, for a compiled caller."""
         return self._k1, self._k0, self._code_min, self._code_max, self._r1, self._r0
 
     def read(self, F_s) -> np.ndarray:
         """Calibrated reading [N] (m,): quantised signal through the robot file's line (3.29)."""
-        return _quantise(np.asarray(F_s, dtype=float), self.next_noise(), *self.quantiser())
+        return quantise_kernel(np.asarray(F_s, dtype=float), self.next_noise(), *self.quantiser())
 
 
 @numba.njit(cache=True)
-def _quantise(F, noise, k1, k0, code_min, code_max, r1, r0):
+def quantise_kernel(F, noise, k1, k0, code_min, code_max, r1, r0):
     """AD code of each force plus its noise (None: none), clipped to the converter's range, read
     back through the calibration."""
     out = np.empty_like(F)

@@ -8,9 +8,9 @@ What is simulated (thesis sections 2.1.3, 3.3, 3.7):
 * the cables as unilateral visco-elastic springs (2.14)-(2.17), (2.24) between the pulley leave
   points and the platform anchors (:mod:`cdpr_sim.cables`);
 * the winches as position-controlled drives following theta_d, PT1 + dead time (3.10) or second
-  order (5.11) as the robot file says (cdpr_control.drive_models);
+  order (5.11) as the robot file says (cdpr_sim.drive_models);
 * the winch force sensors behind the pulleys: the forward pulley friction model (3.30)-(3.43)
-  (cdpr_control.friction), the sensor line (3.29), noise and AD quantisation, and the encoders.
+  (cdpr_control.model.friction), the sensor line (3.29), noise and AD quantisation, and the encoders.
 
 The physics runs on the plant's own parameters (:mod:`cdpr_sim.plant`), by default a robot that
 differs from the robot file as a real one does (geometry, cable stiffness and settlement, friction,
@@ -39,19 +39,21 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet
 
-from cdpr_control import cable, kernels
-from cdpr_control.drive_models import DriveModel
-from cdpr_control.friction import PulleyFriction, sensor_from_winch_force
-from cdpr_control.kinematics import cross, inverse_kinematics
-from cdpr_control.safety import all_finite
+from cdpr_control.model import cable
+from cdpr_control import kernels
+from cdpr_sim.drive_models import DriveModel
+from cdpr_control.model.friction import PulleyFriction, sensor_from_winch_force
+from cdpr_control.model.kinematics import cross, inverse_kinematics
+from cdpr_control.control.safety import all_finite
 
-from .cables import CableModel
-from .contacts import PlatformShape, add_obstacle, platform_collision_shape
-from .period import _winch_readings, compiled, measure as _measure_kernel, substep as _substep_kernel
-from .plant import KINDS, Settlement, build_plant
-from .platform import PlatformBody, kardan_angles
-from .sensors import Encoder, ForceSensor
-from .wrench import WrenchPulse
+from cdpr_sim.cables import CableModel
+from cdpr_sim.contacts import PlatformShape, add_obstacle, platform_collision_shape
+from cdpr_sim.period import (winch_readings_kernel, compiled, measure as _measure_kernel,
+    substep as _substep_kernel)
+from cdpr_sim.plant import KINDS, Settlement, build_plant
+from cdpr_sim.platform import PlatformBody, kardan_angles
+from cdpr_sim.sensors import Encoder, ForceSensor
+from cdpr_sim.wrench import WrenchPulse
 
 
 _ZERO6 = np.zeros(6)
@@ -145,7 +147,7 @@ def plant_of(robot, config: "SimConfig"):
 
 
 class Simulator:
-    """Cable robot simulator for robot (cdpr_control.robot.Robot) with SimConfig ``config``.
+    """Cable robot simulator for robot (cdpr_control.model.robot.Robot) with SimConfig ``config``.
 
     ``robot`` is the nominal robot file (the controller's model): the physics runs on the plant of
     ``config`` (``self.plant``, :mod:`cdpr_sim.plant`); the sensor readings apply the robot file's
@@ -157,7 +159,7 @@ class Simulator:
 
     ``fused`` (default True): a period runs as the compiled calls of :mod:`cdpr_sim.period` when
     the kernels are enabled (cdpr_control.kernels.ENABLED); False runs the readable path of method
-    calls and numpy expressions, the same numbers (tests/test_sim_fused_period.py).
+    calls and numpy expressions, the same numbers (tests/sim/test_sim_fused_period.py).
     """
 
     fused: bool = True
@@ -258,8 +260,8 @@ class Simulator:
         if mass <= 0.0:
             return None
         from cdpr_control.force_distribution import wrench_feasible     # a service call: import on use
-        from cdpr_control.program_check import payload_capacity
-        from cdpr_control.workspace import static_problem
+        from cdpr_control.motion.program_check import payload_capacity
+        from cdpr_control.model.workspace import static_problem
         robot, base = self.robot, self.base_robot
         x, _ = self._body.pose_and_twist()
         AT, w = static_problem(robot, x[None])
@@ -420,7 +422,7 @@ class Simulator:
         self._pending = (f, A.copy(), d.copy(), r, R)
         w_ext = self._external_wrench(self.t, R) if self._external else _ZERO6
         # friction and sensors run at the control rate with the period's mean winch velocity
-        thetadot, theta_true, theta_enc, thetadot_enc = _winch_readings(
+        thetadot, theta_true, theta_enc, thetadot_enc = winch_readings_kernel(
             theta, self._theta_prev, self.encoder_offset, self.encoder.resolution, self._theta_enc_prev, 1.0 / period)
         self._theta_prev = theta
         self._theta_enc_prev = theta_enc

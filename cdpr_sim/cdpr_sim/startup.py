@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_control.dynamics import gravity_wrench
+from cdpr_control.model.dynamics import gravity_wrench
 from cdpr_control.force_distribution.qp import quadratic_program
-from cdpr_control.friction import sensor_from_winch_force, winch_force_from_sensor
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.model.friction import sensor_from_winch_force, winch_force_from_sensor
+from cdpr_control.model.kinematics import inverse_kinematics
 
-from .simulator import SimConfig, home_calibration_offset, plant_of, pretension_lengths
+from cdpr_sim.simulator import SimConfig, home_calibration_offset, plant_of, pretension_lengths
 
 
 def startup_forces(robot, x, level: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_control.kinematics import cross
+from cdpr_control.model.kinematics import cross
 
 SHAPES = ("step", "rectangle", "ramp", "half_sine", "sine")
 

@@ -16,14 +16,14 @@ from importlib import resources
 import numpy as np
 import yaml
 
-from cdpr_control.admittance import AdmittanceController, settings_from
-from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.force_setpoint import ForceSetpointParams
-from cdpr_control.robot import load_robot
+from cdpr_control.control.admittance import AdmittanceController, settings_from
+from cdpr_control.control.loop import ControlLoopParams
+from cdpr_control.control.force_setpoint import ForceSetpointParams
+from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import ClosedLoopRun, HandGuiding, run
 from cdpr_sim.hand import Hand, Segment
 
-# the push sequence of the figure (and of tests/test_admittance_closed_loop.py)
+# the push sequence of the figure (and of tests/control/test_admittance_closed_loop.py)
 PUSHES = (Segment(0.2, (2.6, 0, 0, 0, 0, 0), "rectangle", 0.5), Segment(1.2, (-2.0, 0, 0, 0, 0, 0), "rectangle", 0.3),
           Segment(2.0, (13.0, 0, 0, 0, 0, 0), "half_sine", 0.5), Segment(3.0, (4.0, 0, 0, 0, 0, 0), "step"),
           Segment(5.0, release=True), Segment(6.0, (-4.5, 0, 0, 0, 0, 0), "rectangle", 1.0))

@@ -22,11 +22,11 @@ import numpy as np
 def bag_power(bag, robot, sensor: bool = False):
     """(PowerFlow, poses x (N, 6), forces f (N, m)) of a recorded run (cdpr_tools.bag.BagReader)."""
     from cdpr_control.analysis.energy import run_power
-    from cdpr_control.friction_compensation import FrictionCompensation
+    from cdpr_control.control.friction_compensation import FrictionCompensation
 
-    from .identify import bag_data
-    from .identify.experiments import TOPIC_FORCES
-    from .identify.friction import wrap_angles
+    from cdpr_tools.identify import bag_data
+    from cdpr_tools.identify.experiments import TOPIC_FORCES
+    from cdpr_tools.identify.friction import wrap_angles
 
     w = bag_data.winch_state(bag)
     x = bag_data.poses(bag, w.t)
@@ -44,17 +44,17 @@ def record_lift(bag_path, robot="ipanema3_mini", height: float = 0.1, velocity: 
                 seed: int = 1) -> Path:
     """Record with the simulator a lift of ``height`` m from home (and, with ``lower``, back down),
     IK-only control: a run with work done on (and by) the platform, for the energy analysis."""
-    from cdpr_control.kinematics import inverse_kinematics
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.kinematics import inverse_kinematics
+    from cdpr_control.model.robot import load_robot
 
-    from .identify.experiments import _run, smooth_moves
+    from cdpr_tools.identify.experiments import record_run, smooth_moves
 
     robot = load_robot(robot) if isinstance(robot, str) else robot
     top = np.array(robot.home, dtype=float)
     top[2] += height
     x_d = smooth_moves([robot.home, top, robot.home] if lower else [robot.home, top], velocity, pause, 1e-3)
     commands = inverse_kinematics(robot, x_d).q
-    return _run(robot, bag_path, commands, x_d, seed, None, level, (payload, (0.0, 0.0, 0.0)) if payload else None)
+    return record_run(robot, bag_path, commands, x_d, seed, None, level, (payload, (0.0, 0.0, 0.0)) if payload else None)
 
 
 def _report(label: str, flow) -> dict:
@@ -70,7 +70,7 @@ def _report(label: str, flow) -> dict:
 
 
 def main(argv=None) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
 
     p = argparse.ArgumentParser(prog="cdpr analyze energy",
                                 description="Energy model (4.9)-(4.14): a recorded run or a planned trajectory.")
@@ -102,7 +102,7 @@ def main(argv=None) -> int:
 
     results, flows = {}, {}
     if args.bag:
-        from .bag import BagReader
+        from cdpr_tools.bag import BagReader
 
         robot = load_robot(args.robot or "ipanema3_mini")
         flow, _, _ = bag_power(BagReader(args.bag), robot, args.sensor)

@@ -19,7 +19,7 @@ from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
 from cdpr_tools.bag.reader import BagReader, CorruptBagError
 from cdpr_tools.bag.recovery import reindex
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
-from cdpr_control.nodes.runner import spin, stop_on_signals
+from cdpr_control.ros.runner import spin, stop_on_signals
 from cdpr_tools.ros_graph import new_context
 
 

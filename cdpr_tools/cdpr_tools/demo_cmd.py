@@ -14,7 +14,7 @@ from datetime import datetime
 from pathlib import Path
 
 from cdpr_control import programs
-from cdpr_control.robot import load_robot
+from cdpr_control.model.robot import load_robot
 
 GRAPH = Path(__file__).parent / "graphs" / "closed_loop.yaml"
 BAGS = Path(__file__).resolve().parents[2] / "bags"

@@ -17,7 +17,7 @@ from geometry_msgs.msg import Point
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from cdpr_control.nodes.conversions import wrench_to_msg
+from cdpr_control.ros.conversions import wrench_to_msg
 from cdpr_sim.hand import Hand, Segment
 from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT, graph_node, spin_future, spin_until
 

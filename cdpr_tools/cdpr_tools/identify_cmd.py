@@ -107,7 +107,7 @@ def add_parser(sub) -> None:
 
 
 def run_friction(args) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import friction
 
@@ -131,7 +131,7 @@ def run_drive(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import drive
 
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
 
     model = args.model or load_robot(args.robot).drive.model
     data, fit = drive.identify(BagReader(args.bag), model)
@@ -144,7 +144,7 @@ def run_drive(args) -> int:
 
 
 def run_mass(args) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import mass
 
@@ -157,7 +157,7 @@ def run_mass(args) -> int:
 
 
 def run_eigenfrequency(args) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import eigenfrequency
 
@@ -175,7 +175,7 @@ def run_eigenfrequency(args) -> int:
 
 
 def run_stiffness(args) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import stiffness
 
@@ -190,7 +190,7 @@ def run_stiffness(args) -> int:
 
 
 def run_settlement(args) -> int:
-    from cdpr_control.robot import load_robot
+    from cdpr_control.model.robot import load_robot
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import settlement
 
@@ -232,7 +232,7 @@ def _lc_params(path):
         return None
     import yaml
 
-    from cdpr_control.load_compensation import LoadCompensationParams
+    from cdpr_control.control.load_compensation import LoadCompensationParams
 
     with open(path) as f:
         values = yaml.safe_load(f)["load_compensation"]["ros__parameters"]

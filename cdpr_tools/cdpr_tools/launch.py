@@ -7,7 +7,7 @@ remappings. Every node gets the same ``--ros-args`` in both modes:
 
 - ``composed``: one process, every node built with ``cli_args=<its ros args>`` in one context and
   spun by one executor; messages between the nodes are delivered in-process as Python objects
-  (cdpr_control.nodes.intraprocess) and over DDS only to subscribers outside the process
+  (cdpr_control.ros.intraprocess) and over DDS only to subscribers outside the process
   (``intra_process=False``: DDS for everything on an ``EventsExecutor``, about 24 us a hop);
 - ``processes``: one subprocess per node, ``main([module, --ros-args ...])``; DDS connects them, so
   they may as well run on other machines.
@@ -45,8 +45,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
-from cdpr_control.nodes.intraprocess import IntraProcess
-from cdpr_control.nodes.runner import spin
+from cdpr_control.ros.intraprocess import IntraProcess
+from cdpr_control.ros.runner import spin
 from cdpr_tools.ros_graph import _hidden_topic, keep_discovery_local, new_context
 
 MODES = ("composed", "processes")

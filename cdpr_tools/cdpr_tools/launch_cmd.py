@@ -17,7 +17,7 @@ import yaml
 
 from cdpr_tools.launch import MODES, Launcher, RecordSpec, select_nodes
 from cdpr_tools.launch_file import find_launch_file, load_launch_file
-from cdpr_control.nodes.runner import stop_on_signals
+from cdpr_control.ros.runner import stop_on_signals
 
 
 def add_parser(sub) -> None:

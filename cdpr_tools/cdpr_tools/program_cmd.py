@@ -4,10 +4,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from cdpr_control import programs
-from cdpr_control.gcode import parse_gcode
-from cdpr_control.gcode_program import GCodeError
-from cdpr_control.program_check import check_program
-from cdpr_control.robot import load_robot
+from cdpr_control.motion.gcode import parse_gcode
+from cdpr_control.motion.program import GCodeError
+from cdpr_control.motion.program_check import check_program
+from cdpr_control.model.robot import load_robot
 from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 
 

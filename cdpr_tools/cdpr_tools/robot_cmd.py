@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_control.robot import available_robots, load_robot
+from cdpr_control.model.robot import available_robots, load_robot
 
 
 def add_parser(sub) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_control.nodes.conversions import pose_from_msg
+from cdpr_control.ros.conversions import pose_from_msg
 
 TOPICS = {
     "setpoint": "setpoint",

@@ -36,7 +36,7 @@ def layout_file():
 def run(args) -> int:
     if args.snapshot:
         return snapshot(args.snapshot, args.timeout)
-    from cdpr_control.nodes.runner import run_node
+    from cdpr_control.ros.runner import run_node
     from cdpr_tools.nodes.foxglove_bridge import FoxgloveBridge
 
     ros_args = ["--ros-args", "-p", f"host:={args.host}", "-p", f"port:={args.port}",
@@ -55,7 +55,7 @@ def snapshot(path: str, timeout: float) -> int:
     """Draw the next marker array of the running graph to ``path``."""
     from visualization_msgs.msg import MarkerArray
 
-    from cdpr_control.nodes.qos import CONTROL
+    from cdpr_control.ros.qos import CONTROL
     from cdpr_tools.marker_plot import Scene, plot_markers
     from cdpr_tools.ros_graph import graph_node, spin_until
 

@@ -1,7 +1,7 @@
 """Failing: a node whose timer callback raises, to see the launcher end the launch and report it."""
 from rclpy.node import Node
 
-from cdpr_control.nodes.runner import run_node
+from cdpr_control.ros.runner import run_node
 
 
 class Failing(Node):

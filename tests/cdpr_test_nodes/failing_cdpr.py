@@ -2,7 +2,7 @@
 every message, to see the fault isolated: the node and the graph run on, the fault on /diagnostics."""
 from std_msgs.msg import Int32
 
-from cdpr_control.nodes.base import CdprNode, spin_node
+from cdpr_control.ros.base import CdprNode, spin_node
 
 
 class FailingCdpr(CdprNode):

@@ -13,7 +13,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 
-from cdpr_control.robot import load_robot
+from cdpr_control.model.robot import load_robot
 from cdpr_tools.demo_cmd import GRAPH
 from cdpr_tools.launch import Launcher, select_nodes
 from cdpr_tools.launch_file import load_launch_file

@@ -10,7 +10,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from cdpr_control.nodes.runner import spin
+from cdpr_control.ros.runner import spin
 from cdpr_tools.ros_graph import new_context
 
 TESTS_DIR = Path(__file__).resolve().parents[1]

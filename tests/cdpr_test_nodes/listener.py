@@ -2,7 +2,7 @@
 from rclpy.node import Node
 from std_msgs.msg import Int32, String
 
-from cdpr_control.nodes.runner import run_node
+from cdpr_control.ros.runner import run_node
 
 
 class Listener(Node):

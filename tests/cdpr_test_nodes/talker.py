@@ -3,7 +3,7 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from cdpr_control.nodes.runner import run_node
+from cdpr_control.ros.runner import run_node
 
 RATE_RANGE = (0.1, 1000.0)
 

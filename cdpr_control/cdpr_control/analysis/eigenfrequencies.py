@@ -2,7 +2,7 @@
 
 At every pose the cables carry the QP forces (3.27) of a tension level holding the platform (with
 payload) statically; the cable stiffness is the tangent of the progressive cable (2.16)-(2.17),
-(2.20) at those forces, K_x = K_g + K_c (2.22) (:mod:`cdpr_control.stiffness`). Reported per pose:
+(2.20) at those forces, K_x = K_g + K_c (2.22) (:mod:`cdpr_control.model.stiffness`). Reported per pose:
 
 * the per-axis eigenfrequencies (4.8), sqrt(K_x,jj / M_jj) / 2 pi (the thesis' definition, its
   Fig. 4.26 shows the z axis), and the coupled undamped modes of M xddot + K_x x = 0;
@@ -24,14 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import cable
-from ..dynamics import gravity_wrench, mass_matrix
-from ..force_distribution import quadratic_program
-from ..kinematics import inverse_kinematics
-from ..robot import load_robot
-from ..stiffness import cable_stiffness, eigenfrequencies, geometric_stiffness, modal_frequencies
-from ..workspace import workspace_grid
-from .energy import LEVELS
+from cdpr_control.model import cable
+from cdpr_control.model.dynamics import gravity_wrench, mass_matrix
+from cdpr_control.force_distribution import quadratic_program
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.model.robot import load_robot
+from cdpr_control.model.stiffness import (cable_stiffness, eigenfrequencies, geometric_stiffness,
+    modal_frequencies)
+from cdpr_control.model.workspace import workspace_grid
+from cdpr_control.analysis.energy import LEVELS
 
 AXES = ("x", "y", "z", "a", "b", "c")
 # Table 4.5: positions [m] of the eigenfrequency experiments on the IPAnema 3

@@ -1,11 +1,11 @@
 """Energy use of a planned trajectory or a recorded run, thesis section 4.4 (Fig. 4.31-4.35).
 
-The model is :mod:`cdpr_control.energy` ((4.9)-(4.14), table 4.6). Its inputs per sample are the
+The model is :mod:`cdpr_control.model.energy` ((4.9)-(4.14), table 4.6). Its inputs per sample are the
 forces at the platform f, the cable velocities thetadot and accelerations thetaddot and the wrap
 angles of the swivelling pulleys:
 
 * a planned trajectory (:func:`trajectory_power`): a G-code program interpolated jerk-limited
-  (:class:`cdpr_control.interpolation.Interpolator`), the wrench of the motion (2.33) with the
+  (:class:`cdpr_control.motion.interpolation.Interpolator`), the wrench of the motion (2.33) with the
   payload, the QP forces (3.27) at a tension level and the cable velocities and accelerations of
   the rigid kinematics (2.12)-(2.13): the elongation rate of the cables is left out (it changes
   only the elastic energy stored in them, and the QP's active-set switches would turn it into
@@ -25,13 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import platform_wrench
-from ..energy import PowerFlow, power_flow
-from ..force_distribution import quadratic_program
-from ..gcode import parse_gcode
-from ..interpolation import AxisLimits, Interpolator, Limits, ProgramState
-from ..kinematics import cable_accelerations, cable_velocities, inverse_kinematics, twist_from_pose_rates
-from ..programs import read as read_program
+from cdpr_control.model.dynamics import platform_wrench
+from cdpr_control.model.energy import PowerFlow, power_flow
+from cdpr_control.force_distribution import quadratic_program
+from cdpr_control.motion.gcode import parse_gcode
+from cdpr_control.motion.interpolation import AxisLimits, Interpolator, Limits, ProgramState
+from cdpr_control.model.kinematics import (cable_accelerations, cable_velocities, inverse_kinematics,
+    twist_from_pose_rates)
+from cdpr_control.programs import read as read_program
 
 LEVELS = {"minimal": 0.0, "medium": 0.5, "maximal": 1.0}     # f_ref of (3.27), section 4.4.3
 
@@ -166,7 +167,7 @@ def plot_winch_efficiency(robot, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..energy import winch_efficiency
+    from cdpr_control.model.energy import winch_efficiency
 
     v_max = robot.drive.v_max
     f = np.linspace(float(np.min(robot.cable.f_min)), float(np.max(robot.cable.f_max)), 120)

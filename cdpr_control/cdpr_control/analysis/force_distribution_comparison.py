@@ -1,7 +1,7 @@
 """Comparison of the cable force algorithms, thesis section 3.6.2, Tables 3.2 and 3.3.
 
 Table 3.2: every method along a trajectory through all points of the IPAnema 3 workspace grid
-(:func:`cdpr_control.workspace.serpentine_order`), per workspace set W_CF, W_ACF and
+(:func:`cdpr_control.model.workspace.serpentine_order`), per workspace set W_CF, W_ACF and
 W_ACF \\ W_CF: the mean cable force and the change rates xi_M and xi_RMS of the distribution.
 Table 3.3: mean cable forces over W_ACF for several platform masses m_p, QP with f_ref = f_min
 and f_ref = f_max relative to ACF.
@@ -30,10 +30,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..force_distribution import distribute
-from ..robot import load_robot
-from ..workspace import (WorkspaceGrid, plot_workspace, serpentine_order, static_problem,
-                         with_platform_mass, workspace_grid, workspace_hull)
+from cdpr_control.force_distribution import distribute
+from cdpr_control.model.robot import load_robot
+from cdpr_control.model.workspace import (WorkspaceGrid, plot_workspace, serpentine_order, static_problem,
+    with_platform_mass, workspace_grid, workspace_hull)
 
 # Table 3.2 of the thesis: (method, set) -> (mean force [N], xi_M [N/ms], xi_RMS [N/ms]).
 THESIS_TABLE_3_2 = {
@@ -262,7 +262,7 @@ def main(argv=None, progress=None) -> int:
 
 def plot_comparison_workspace(robot: str, mass: float, step: float, path, pulleys=None):
     """PNG of W_QP, W_ACF, W_CF on the grid and the hull of W_QP (Fig. 2.5/2.7 analogue)."""
-    from ..workspace import evaluate_workspace
+    from cdpr_control.model.workspace import evaluate_workspace
 
     r = with_platform_mass(load_robot(robot), mass)
     grid = workspace_grid(r, step)

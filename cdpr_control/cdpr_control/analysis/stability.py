@@ -30,15 +30,15 @@ from pathlib import Path
 import control
 import numpy as np
 
-from .. import cable
-from ..cable_force_control import CFCParams
-from ..dynamics import mass_matrix
-from ..kinematics import inverse_kinematics
-from ..ospc import AXES, OSPCParams
-from ..robot import load_robot
-from ..stiffness import cable_stiffness, geometric_stiffness
-from .eigenfrequencies import stiffness_map
-from .energy import LEVELS
+from cdpr_control.model import cable
+from cdpr_control.control.cable_force_control import CFCParams
+from cdpr_control.model.dynamics import mass_matrix
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.control.ospc import AXES, OSPCParams
+from cdpr_control.model.robot import load_robot
+from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
+from cdpr_control.analysis.eigenfrequencies import stiffness_map
+from cdpr_control.analysis.energy import LEVELS
 
 THESIS_CFC_MARGINS = {"gain_dB": 26.7, "phase_deg": 95.5}        # Fig. 3.11
 THESIS_OSPC_PHASE_MARGIN_105KG = 17.7                             # deg, z axis, Fig. 3.10

@@ -7,13 +7,13 @@ Algorithms (all take A^T, w, f_min, f_max, f_ref and return a DistributionResult
 For a controller at 1 kHz: ForceDistributor (warm start, workspace border behaviour).
 Workspace test: wrench_feasible(AT, w, f_min, f_max).
 """
-from .border import BorderPolicy, ForceDistributor
-from .closed_form import (advanced_closed_form, closed_form, closed_form_energy_efficient,
-                          improved_puncture, puncture)
-from .feasible_set import wrench_feasible
-from .methods import METHODS, distribute
-from .qp import BACKENDS, QPSolver, quadratic_program
-from .result import DistributionResult, Status
+from cdpr_control.force_distribution.border import BorderPolicy, ForceDistributor
+from cdpr_control.force_distribution.closed_form import (advanced_closed_form, closed_form,
+    closed_form_energy_efficient, improved_puncture, puncture)
+from cdpr_control.force_distribution.feasible_set import wrench_feasible
+from cdpr_control.force_distribution.methods import METHODS, distribute
+from cdpr_control.force_distribution.qp import BACKENDS, QPSolver, quadratic_program
+from cdpr_control.force_distribution.result import DistributionResult, Status
 
 __all__ = [
     "BACKENDS", "METHODS", "BorderPolicy", "DistributionResult", "ForceDistributor", "QPSolver",

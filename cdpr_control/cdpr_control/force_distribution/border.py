@@ -33,9 +33,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .methods import METHODS, distribute
-from .qp import DEFAULT_ITER_LIMIT, QPSolver, closed_form_one
-from .result import DistributionResult, Status, finish
+from cdpr_control.force_distribution.methods import METHODS, distribute
+from cdpr_control.force_distribution.qp import DEFAULT_ITER_LIMIT, QPSolver, closed_form_one
+from cdpr_control.force_distribution.result import DistributionResult, Status, finish
 
 _INF = 1e30       # DAQP's "no bound"
 

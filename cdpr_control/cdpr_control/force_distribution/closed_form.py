@@ -25,10 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .feasible_set import puncture as puncture_on_line
-from .nullspace import forces, nullspace, project_onto_fixed, reference_coordinates
-from .problem import as_batch
-from .result import DistributionResult
+from cdpr_control.force_distribution.feasible_set import puncture as puncture_on_line
+from cdpr_control.force_distribution.nullspace import (forces, nullspace, project_onto_fixed,
+    reference_coordinates)
+from cdpr_control.force_distribution.problem import as_batch
+from cdpr_control.force_distribution.result import DistributionResult
 
 
 def closed_form(AT, w, f_min, f_max, f_ref=None) -> DistributionResult:

@@ -18,8 +18,8 @@ import itertools
 
 import numpy as np
 
-from .nullspace import Nullspace, nullspace
-from .problem import as_batch
+from cdpr_control.force_distribution.nullspace import Nullspace, nullspace
+from cdpr_control.force_distribution.problem import as_batch
 
 
 def check_rank(r: int) -> None:

@@ -7,10 +7,10 @@ backend only matters for "qp" (see :mod:`.qp`).
 """
 from __future__ import annotations
 
-from .closed_form import (advanced_closed_form, closed_form, closed_form_energy_efficient,
-                          improved_puncture, puncture)
-from .qp import quadratic_program
-from .result import DistributionResult
+from cdpr_control.force_distribution.closed_form import (advanced_closed_form, closed_form,
+    closed_form_energy_efficient, improved_puncture, puncture)
+from cdpr_control.force_distribution.qp import quadratic_program
+from cdpr_control.force_distribution.result import DistributionResult
 
 METHODS = {
     "cf": closed_form,

@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .result import DistributionResult, finish, limit_tolerance
+from cdpr_control.force_distribution.result import DistributionResult, finish, limit_tolerance
 
 
 class Batch(NamedTuple):

@@ -27,10 +27,10 @@ import time
 import daqp
 import numpy as np
 
-from .feasible_set import project
-from .nullspace import forces, nullspace, reference_coordinates
-from .problem import as_batch
-from .result import DistributionResult, finish, limit_tolerance
+from cdpr_control.force_distribution.feasible_set import project
+from cdpr_control.force_distribution.nullspace import forces, nullspace, reference_coordinates
+from cdpr_control.force_distribution.problem import as_batch
+from cdpr_control.force_distribution.result import DistributionResult, finish, limit_tolerance
 
 BACKENDS = ("kernel", "daqp", "proxsuite", "qpsolvers")
 # DAQP iterations after which a pose counts as infeasible: the thesis observes the iteration

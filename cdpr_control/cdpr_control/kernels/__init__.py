@@ -30,22 +30,23 @@ import numpy as np
 
 # the numpy references, under names that the submodules of this package (kernels.friction) do not
 # shadow
-from .. import cable as np_cable
-from .. import dynamics as np_dynamics
-from .. import kinematics as np_kinematics
-from .control import cfc_period as _cfc_period
-from .control import pi_update as _pi_update
-from .control import widened_saturation_kernel
-from .friction import friction_platform_force, friction_sensor_force
-from .model import cable_lengths as _cable_lengths
-from .model import _AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q, _ROWS, elastic_cable_state, elastic_frozen, ik_packed
-from .model import secant_stiffness
-from .model import inverse_kinematics as _inverse_kinematics
-from .model import joint_command_step
-from .model import measured_wrench as _measured_wrench
-from .model import platform_wrench as _platform_wrench
-from .robot_data import RobotData, robot_data, vector
-from .setpoint import smith_step
+from cdpr_control.model import cable as np_cable
+from cdpr_control.model import dynamics as np_dynamics
+from cdpr_control.model import kinematics as np_kinematics
+from cdpr_control.kernels.control import cfc_period as _cfc_period
+from cdpr_control.kernels.control import pi_update as _pi_update
+from cdpr_control.kernels.control import widened_saturation_kernel
+from cdpr_control.kernels.friction import friction_platform_force, friction_sensor_force
+from cdpr_control.kernels.model import cable_lengths as _cable_lengths
+from cdpr_control.kernels.model import (_AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q, _ROWS, elastic_cable_state,
+    elastic_frozen, ik_packed)
+from cdpr_control.kernels.model import secant_stiffness
+from cdpr_control.kernels.model import inverse_kinematics as _inverse_kinematics
+from cdpr_control.kernels.model import joint_command_step
+from cdpr_control.kernels.model import measured_wrench as _measured_wrench
+from cdpr_control.kernels.model import platform_wrench as _platform_wrench
+from cdpr_control.kernels.robot_data import RobotData, robot_data, vector
+from cdpr_control.kernels.setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
@@ -192,17 +193,15 @@ def warm_up(robot=None) -> None:
         return
     f, ones = np.full(8, 100.0), np.ones(6)
     if not _warm["robot_free"]:
-        from ..cable_force_control import CFCParams
-
         pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
-        widened_saturation(CFCParams(), f, f, f)
+        widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0, np.empty(8), np.empty(8))
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
         cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, np.ones(11))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return
-    from ..friction import PulleyFriction
+    from cdpr_control.model.friction import PulleyFriction
 
     d = robot_data(robot)
     x, zero, f = vector(robot.home), np.zeros(6), np.full(robot.m, float(np.mean(robot.cable.f_min)))

@@ -1,4 +1,4 @@
-"""Compiled PI arithmetic of :class:`cdpr_control.pi_control.PIController` (OSPC (3.16), CFC (3.19)),
+"""Compiled PI arithmetic of :class:`cdpr_control.control.pi_control.PIController` (OSPC (3.16), CFC (3.19)),
 and one whole period of the cable force controller (3.19)-(3.23)."""
 from __future__ import annotations
 

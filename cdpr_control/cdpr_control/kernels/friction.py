@@ -1,14 +1,14 @@
 """Compiled pulley friction of one sample: the friction compensation (3.35), (3.43)-(3.44) and, for
 the simulated plant, its inverse, the platform's forces as the winch force sensor sees them
 (3.30)-(3.44), (3.36) (:func:`sensor_force_kernel`, :func:`friction_sensor_force`; the numpy
-reference is :meth:`cdpr_control.friction.PulleyFriction.sensor_force`). Both Dahl steps loop over
+reference is :meth:`cdpr_control.model.friction.PulleyFriction.sensor_force`). Both Dahl steps loop over
 the cables and share the direction step (:func:`_direction`), in this one file because numba's disk
 cache keeps a kernel's callees and renews it only when the kernel's own file changes.
 
-The functions of :mod:`cdpr_control.friction` that are written in the array subset numba compiles
+The functions of :mod:`cdpr_control.model.friction` that are written in the array subset numba compiles
 (the swivelling pulley's tables: the numpy reference itself), compiled, and the Dahl step as a loop
 over the cables (:func:`platform_force_kernel`), applied to a
-:class:`cdpr_control.friction.PulleyFriction`'s state. The tables depend on the wrap
+:class:`cdpr_control.model.friction.PulleyFriction`'s state. The tables depend on the wrap
 angle alone (the series' constants are fixed), and a robot holding or repeating a pose sees the same
 β_np every period: the last tables are kept for the last series while β's bytes repeat (comparing
 the bytes costs a fraction of the compiled call; bytes tell -0.0 from 0.0, so a kept table is
@@ -23,8 +23,8 @@ import functools
 import numba
 import numpy as np
 
-from .. import friction as np_friction
-from .robot_data import vector
+from cdpr_control.model import friction as np_friction
+from cdpr_control.kernels.robot_data import vector
 
 _tables = numba.njit(cache=True)(np_friction.last_pulley_tables)
 
@@ -33,7 +33,7 @@ _tables = numba.njit(cache=True)(np_friction.last_pulley_tables)
 _DIRECTION, _THETA_0, _F_0, _THETA, _F_D = 0, 1, 2, 3, 4
 if (_DIRECTION, _THETA_0, _F_0, _THETA, _F_D) != (np_friction.ROW_DIRECTION, np_friction.ROW_THETA_0,
                                                    np_friction.ROW_F_0, np_friction.ROW_THETA, np_friction.ROW_F_D):
-    raise ImportError("kernels.friction: the Dahl state rows differ from cdpr_control.friction.ROW_*")
+    raise ImportError("kernels.friction: the Dahl state rows differ from cdpr_control.model.friction.ROW_*")
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -60,7 +60,7 @@ def platform_force_kernel(f_w, theta, thetadot, alpha_table, gamma_table, sigma,
     The reference as whole-array expressions allocates a temporary per operation, several times the
     arithmetic on 8 numbers; this loop does the same operations in the same order on each element
     (numpy's scalar sign, maximum and exp, as numba compiles the reference's), so the same numbers,
-    bit for bit (tests/test_fast_paths_kwrap.py). NaN as in the reference: a NaN direction selects
+    bit for bit (tests/kernels/test_kernel_wrappers_fast_paths.py). NaN as in the reference: a NaN direction selects
     the s = 0 row, np.maximum keeps a NaN F_c.
     """
     m = state.shape[1]

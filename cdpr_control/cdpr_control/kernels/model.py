@@ -1,11 +1,11 @@
 """Compiled model core of one pose: inverse kinematics, platform wrench, elastic forward kinematics.
 
 * the inverse kinematics with swivelling pulleys (2.3)-(2.10): the same equations, in the same
-  order, as :func:`cdpr_control.kinematics.inverse_kinematics` (the readable numpy reference, which
+  order, as :func:`cdpr_control.model.kinematics.inverse_kinematics` (the readable numpy reference, which
   also handles batches), written as one loop over the cables;
 * the platform wrench (2.33), gravity minus the Newton-Euler w_dyn, as
-  :func:`cdpr_control.dynamics.platform_wrench`;
-* the numeric core of :meth:`cdpr_control.forward_kinematics.ForwardKinematics.elastic`
+  :func:`cdpr_control.model.dynamics.platform_wrench`;
+* the numeric core of :meth:`cdpr_control.model.forward_kinematics.ForwardKinematics.elastic`
   (pulleys='frozen'): the cable state q_hat, K_l of (3.7)/(2.15), and the Levenberg-Marquardt
   iterations of ``ForwardKinematics._solve`` on the frozen-pulley residual ``_frozen_residual``,
   step for step (same damping schedule, same stopping rules); the 6 x 6 normal equations are solved
@@ -22,8 +22,8 @@ import math
 import numba
 import numpy as np
 
-from ..kinematics import InverseKinematics
-from .robot_data import robot_data, vector
+from cdpr_control.model.kinematics import InverseKinematics
+from cdpr_control.kernels.robot_data import robot_data, vector
 
 # termination codes of elastic_frozen, in the order of forward_kinematics._TERMINATIONS
 CONVERGED, MAX_ITERATIONS, STALLED, NON_FINITE = 0, 1, 2, 3
@@ -249,7 +249,7 @@ def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
 @numba.njit(cache=True, error_model="numpy")
 def elastic_cable_state(theta, f, l_0, k0, k1, k2):
     """(q_hat, k_l) (m,): q_hat = theta + dq with dq = f (theta + l_0) / (k_spec - f) (3.7) and
-    the secant stiffness k_l = k_spec(f) / (q_hat + l_0) (2.14)-(2.16) (cdpr_control.cable)."""
+    the secant stiffness k_l = k_spec(f) / (q_hat + l_0) (2.14)-(2.16) (cdpr_control.model.cable)."""
     m = theta.shape[0]
     q_hat, k_l = np.empty(m), np.empty(m)
     for i in range(m):
@@ -301,7 +301,7 @@ def _frozen_residual(x, cT, b, q_free, k_l, res, JT, R, S, Rb):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _cholesky_solve(A, g, dx, L):
+def cholesky_solve(A, g, dx, L):
     """dx = A^-1 g for symmetric A (6, 6); False where A is not positive definite (dposv's info)."""
     n = A.shape[0]
     for j in range(n):
@@ -388,7 +388,7 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
     lam = _LAMBDA_START
     for it in range(1, max_iterations + 1):
         _normal_equations(JT, res, lam, A, g)
-        if not _cholesky_solve(A, g, dx, L):
+        if not cholesky_solve(A, g, dx, L):
             lam *= 10.0
             if lam > _LAMBDA_MAX:
                 return STALLED, it, math.sqrt(cost), x
@@ -397,7 +397,7 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
             if lam <= _LAMBDA_CONVERGED:
                 return CONVERGED, it, math.sqrt(cost), x
             _normal_equations(JT, res, 0.0, A, g)           # the undamped (Gauss-Newton) step
-            if _cholesky_solve(A, g, x_new, L) and math.sqrt(
+            if cholesky_solve(A, g, x_new, L) and math.sqrt(
                     x_new[0] ** 2 + x_new[1] ** 2 + x_new[2] ** 2 + x_new[3] ** 2 + x_new[4] ** 2
                     + x_new[5] ** 2) <= xtol:
                 return CONVERGED, it, math.sqrt(cost), x
@@ -421,7 +421,7 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
 # one call instead of the offset pose, joint_command_step and three numpy operations on 8 numbers
 # (call overhead at 1 kHz): the same operations in the same order (x_d + offset, the step of
 # joint_command_kernel, θ̇_d = Δθ / dt, θ_d + Δθ), so the same numbers, bit for bit
-# (tests/test_control_fast_paths.py). Here, beside joint_command_kernel, because numba's disk cache
+# (tests/kernels/test_force_distribution_joint_command_fast_paths.py). Here, beside joint_command_kernel, because numba's disk cache
 # keeps the callees of a kernel and renews it only when the kernel's own file changes.
 @numba.njit(cache=True, error_model="numpy")
 def joint_command_period(x_d, offset, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, dt, theta_next, velocity):

@@ -1,6 +1,6 @@
 """The robot's constants as plain contiguous arrays and floats, the arguments of the kernels.
 
-numba cannot take the :class:`cdpr_control.robot.Robot` dataclass; :func:`robot_data` flattens it
+numba cannot take the :class:`cdpr_control.model.robot.Robot` dataclass; :func:`robot_data` flattens it
 once per robot object (cached by identity, robots are immutable) into a :class:`RobotData`.
 
 numba compiles one machine-code version per combination of argument types, and an array's type
@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..kinematics import pulley_frames
+from cdpr_control.model.kinematics import pulley_frames
 
 
 class RobotData(NamedTuple):

@@ -1,8 +1,8 @@
 """Compiled Smith predictor period of the force set-point (3.24)-(3.26), section 3.6.1.
 
-:meth:`cdpr_control.wrench_setpoint.WrenchSetpoint.update` with a
-:class:`cdpr_control.filters.LowPass` on the disturbance, as one loop over the six axes: the same
-operations in the same order, so the same numbers (tests/test_kernels.py compares them).
+:meth:`cdpr_control.control.wrench_setpoint.WrenchSetpoint.update` with a
+:class:`cdpr_control.control.filters.LowPass` on the disturbance, as one loop over the six axes: the same
+operations in the same order, so the same numbers (tests/kernels/test_kernels.py compares them).
 """
 from __future__ import annotations
 

@@ -27,15 +27,15 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from cdpr_control.admittance import AdmittanceController, default_parameters, settings_from
-from cdpr_control.ospc import AXES
+from cdpr_control.control.admittance import AdmittanceController, default_parameters, settings_from
+from cdpr_control.control.ospc import AXES
 
-from .base import CdprNode, spin_node
-from .conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg, twist_from_msg,
-                          twist_to_msg, wrench_from_msg)
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL, STATUS
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg,
+    twist_from_msg, twist_to_msg, wrench_from_msg)
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL, STATUS
+from cdpr_control.ros.sync import StampSync
 
 _D = default_parameters()
 _DESCRIPTIONS = {

@@ -4,13 +4,13 @@ Subscribes ``force_distribution`` (f_d, limits), ``cable_forces`` (f at the plat
 ``winch/state`` (θ, for the free length l_t (2.14)); publishes ``cable_force_controller/state``
 (cdpr_msgs/ControllerState, ``output`` = Δq_CFC [m] per cable). Disabled, it publishes Δq_CFC = 0:
 the IK-only reference control of section 2.3.2. The computation, including the stiffness model
-of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.cable_force_control.CableForceControl`;
+of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.control.cable_force_control.CableForceControl`;
 Δq_0 comes from the home calibration (``home_forces``) or the mean of the first
-``calibration_window`` samples (:mod:`cdpr_control.calibration`), as in the forward kinematics.
+``calibration_window`` samples (:mod:`cdpr_control.model.calibration`), as in the forward kinematics.
 
 With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
 ``<force_controller>/state`` and ``setpoint`` (x_d, for the structure matrix A^T(x_d)) and runs
-:meth:`cdpr_control.hybrid_force_control.CFCCoupling.run`: Δq_CFC is held while that controller
+:meth:`cdpr_control.control.hybrid_force_control.CFCCoupling.run`: Δq_CFC is held while that controller
 makes or loses contact (states A-C); in D and R the CFC runs, its feed-forward through the moving
 average of ``T_MA`` except along the task axis, and the integral part along the task axis is
 handed over to x_t: published per period on ``cable_force_controller/hand_over``
@@ -29,16 +29,17 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from cdpr_control import kernels
-from cdpr_control.cable_force_control import CableForceControl, CFCParams
-from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
-from cdpr_control.safety import all_finite
+from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
+from cdpr_control.control.hybrid_force_control import (CFCCoupling, HPFCParams, parse_state, task_axis,
+    task_force_direction)
+from cdpr_control.control.safety import all_finite
 
-from .base import CdprNode, spin_node
-from .conversions import pose_from_msg
-from .mode import follow_mode
-from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import pose_from_msg
+from cdpr_control.ros.mode import follow_mode
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 _D = CFCParams()      # the defaults live in the dataclass (one source of truth)
 PARAMS = [

@@ -9,17 +9,17 @@ w_d = w + (I - G_w) w_dyn (3.26) with the measured disturbance saturated (sectio
 w_d = w_dyn with ``wrench_source = model`` (3.1). The tension level 0..1 sets
 f_ref = f_min + level (f_max - f_min) (3.27), ramped at ``tension_rate``: 0 is the minimal
 tension (QP), 0.5 the medium one (= ACF). The computation is
-:class:`cdpr_control.force_setpoint.ForceSetpoint`.
+:class:`cdpr_control.control.force_setpoint.ForceSetpoint`.
 
 With ``payload_input`` (read-only) it also subscribes ``load_compensation/payload``
 (geometry_msgs/InertiaStamped) and adds the identified payload's wrench (a point mass at its cog,
-:func:`cdpr_control.load_compensation.payload_wrench`) to the model wrench w_dyn, so that a heavy
+:func:`cdpr_control.control.load_compensation.payload_wrench`) to the model wrench w_dyn, so that a heavy
 payload is not clipped by the disturbance saturation and enters f_d also with ``wrench_source: model``.
 
 With ``force_controller`` (read-only) naming the hybrid force controller it also subscribes
 ``<force_controller>/state`` and, while that controller acts (states A-D, R), replaces the
 measured contact force along the task axis by the desired one in the wrench it distributes
-(section 5.1.2, :func:`cdpr_control.hybrid_force_control.expected_contact_wrench`), so the cables
+(section 5.1.2, :func:`cdpr_control.control.hybrid_force_control.expected_contact_wrench`), so the cables
 are planned for the contact being made and nothing of the contact stays in the wrench filter
 after the release.
 """
@@ -36,16 +36,17 @@ from rclpy.parameter import Parameter
 
 from cdpr_control import kernels
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
-from cdpr_control.force_setpoint import ForceSetpoint, ForceSetpointParams
-from cdpr_control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of, parse_state,
-                                               task_axis)
-from cdpr_control.load_compensation import payload_kinematics, payload_wrench_of_mass
+from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
+from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of,
+    parse_state, task_axis)
+from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
 
-from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg, wrench_to_msg
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
+    wrench_to_msg)
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "

@@ -5,10 +5,10 @@ warm start and the pose of the frozen pulley model of section 3.2); publishes ``
 (PoseStamped, x), ``platform/wrench`` (WrenchStamped, w about the platform origin, base frame) and
 ``forward_kinematics/diagnostics``. The elongation Δq_0 of the encoder calibration (3.7) comes from
 the home calibration (``home_forces``) or, without one, the mean of the first
-``calibration_window`` measured forces (:mod:`cdpr_control.calibration`). A solve that does not
+``calibration_window`` measured forces (:mod:`cdpr_control.model.calibration`). A solve that does not
 converge is published with ``converged = false`` (and reported on /diagnostics); the pose message
 then carries the last converged estimate. The computation is
-:class:`cdpr_control.forward_kinematics.PoseEstimator`.
+:class:`cdpr_control.control.pose_estimator.PoseEstimator`.
 """
 from __future__ import annotations
 
@@ -21,14 +21,15 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from sensor_msgs.msg import JointState
 
-from cdpr_control import forward_kinematics as fk
-from cdpr_control.safety import all_finite
+from cdpr_control.model import forward_kinematics as fk
+from cdpr_control.control.pose_estimator import PoseEstimator
+from cdpr_control.control.safety import all_finite
 
-from .base import CdprNode, spin_node
-from .conversions import pose_from_msg, pose_key, pose_to_msg, wrench_to_msg
-from .parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import pose_from_msg, pose_key, pose_to_msg, wrench_to_msg
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 TERMINATION = {
     fk.CONVERGED: ForwardKinematicsDiagnostics.CONVERGED,
@@ -37,7 +38,7 @@ TERMINATION = {
     fk.NON_FINITE: ForwardKinematicsDiagnostics.INVALID_INPUT,
 }
 
-_D = {k: v.default for k, v in inspect.signature(fk.PoseEstimator).parameters.items()}   # one source of truth
+_D = {k: v.default for k, v in inspect.signature(PoseEstimator).parameters.items()}   # one source of truth
 PARAMS = [
     ParamSpec("pulleys", _D["pulleys"], "pulley model in the iterations: frozen at x_d (section 3.2) or full",
               choices=("frozen", "full")),
@@ -49,7 +50,7 @@ PARAMS = [
 class ForwardKinematicsNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("forward_kinematics", **kwargs)
-        self.estimator = fk.PoseEstimator(self.robot)
+        self.estimator = PoseEstimator(self.robot)
         self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m),
                                    lambda v: startup_calibration(self.robot, v), self._apply)
         self.estimator.calibration = startup_calibration(self.robot, self.params.values)

@@ -10,7 +10,7 @@ and shifts the Dahl output by 50 ms (section 3.7.3): ``velocity_source = desired
 ``time_shift = 0.05``. With the encoder values (``measured``, the default here, deterministic in
 lockstep) no shift is needed. The friction parameters default to the robot file; ``cdpr identify
 friction`` writes a parameter file with identified ones. The computation is
-:class:`cdpr_control.friction_compensation.FrictionCompensation`.
+:class:`cdpr_control.control.friction_compensation.FrictionCompensation`.
 """
 from __future__ import annotations
 
@@ -19,15 +19,15 @@ from cdpr_msgs.msg import CableForces, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
-from cdpr_control.friction_compensation import FrictionCompensation, FrictionCompensationParams
+from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control import kernels
-from cdpr_control.safety import all_finite
+from cdpr_control.control.safety import all_finite
 
-from .base import CdprNode, spin_node
-from .conversions import pose_from_msg, pose_key
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import pose_from_msg, pose_key
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 
 

@@ -52,17 +52,17 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from cdpr_control.gcode import parse_gcode
-from cdpr_control.gcode_program import GCodeError, ParameterCommand
-from cdpr_control.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
-from cdpr_control.kinematics import twist_from_pose_rates
-from cdpr_control.program_check import check_program
+from cdpr_control.motion.gcode import parse_gcode
+from cdpr_control.motion.program import GCodeError, ParameterCommand
+from cdpr_control.motion.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
+from cdpr_control.model.kinematics import twist_from_pose_rates
+from cdpr_control.motion.program_check import check_program
 
-from .base import CdprNode, spin_node
-from .conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL, DIAGNOSTICS, STATUS
-from .sync import StampJumps, stamp_ns
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL, DIAGNOSTICS, STATUS
+from cdpr_control.ros.sync import StampJumps, stamp_ns
 
 PARAMS = [
     ParamSpec("v_max", 0.5, "translational path velocity limit |xdot[0:3]| [m/s]", range=(1e-4, 10.0)),

@@ -15,7 +15,7 @@ ControllerState fields (names x y z a b c, base frame):
 - ``reference``: F_d,0 [N] and 0 0 0; ``feedback``: the contact force vector F [N] and 0 0 0;
   ``error``: their difference (e_F = F_d - F is its component along the task z axis);
 - ``output``: x_d,HPFC + x_comp = [R_t [0 0 x_t] + x_comp; 0 0 0] [m, rad], x_comp = -F_ff / k_t z_t
-  the hand-over offset of section 5.1.2 (:class:`cdpr_control.hybrid_force_control.ContactHandOver`:
+  the hand-over offset of section 5.1.2 (:class:`cdpr_control.control.hybrid_force_control.ContactHandOver`:
   the contact force F_ff the cable force controller's feed-forward presses with in D and R, over
   the contact stiffness k_t measured in B); ``integrator``: the task z axis times the integral
   part of x_t; ``feedforward``: the position-controlled part of x_t (A, B, C, R);
@@ -27,7 +27,7 @@ handed over in a period is taken on x_t (F_a / k_t, :meth:`HybridForceControl.ab
 start of the next period, as the in-process loop does; its ``enabled`` (Δq_CFC applied) switches
 x_comp. Without that topic x_comp is 0 and nothing is handed over.
 
-The computation is :class:`cdpr_control.hybrid_force_control.HybridForceControl`.
+The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceControl`.
 """
 from __future__ import annotations
 
@@ -36,16 +36,16 @@ from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
-from cdpr_control.force_setpoint import ForceSetpointParams
-from cdpr_control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver, HPFCParams,
-                                               HybridForceControl, format_state)
-from cdpr_control.ospc import AXES
+from cdpr_control.control.force_setpoint import ForceSetpointParams
+from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver,
+    HPFCParams, HybridForceControl, format_state)
+from cdpr_control.control.ospc import AXES
 
-from .base import CdprNode, spin_node
-from .conversions import from_vector3, wrench_from_msg
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampSync, stamp_ns
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
 ABSORBING = (CONTACT, RELEASE)      # the states in which HybridForceControl.absorb takes a hand-over

@@ -3,7 +3,7 @@
 Subscribes ``setpoint``, ``cable_force_controller/state`` and one ``<name>/state``
 (cdpr_msgs/ControllerState, ``output`` = the 6-vector offset) per entry of ``offset_inputs``
 (``ospc`` by default; hybrid force control and load compensation join the same way, see
-:mod:`cdpr_control.offset_inputs`; admittance control replaces x_d on ``setpoint`` instead),
+:mod:`cdpr_control.control.offset_inputs`; admittance control replaces x_d on ``setpoint`` instead),
 synchronised per period in lockstep (every
 declared input is awaited, so every declared offset node must run); free-running, an offset input
 is used while younger than its deadline. For safety it also watches ``winch/state``,
@@ -18,7 +18,7 @@ Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets
 (also when a controller reports itself enabled or disabled), and the command is rate-limited to
 the drives' v_max. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
 input, and optionally force limits) hold θ_d (braking on the path at ``a_brake``, see
-:mod:`cdpr_control.joint_command`); the command is never NaN. Also holding: a required input
+:mod:`cdpr_control.control.joint_command`); the command is never NaN. Also holding: a required input
 (``setpoint``, ``cable_force_controller/state``) more than ``input_deadline`` periods behind the
 winch state (its producer stopped: the command then comes on each winch state while braking,
 instead of waiting for the dead input), and a set-point outside the wrench-feasible workspace: the
@@ -30,29 +30,30 @@ Invalid messages (lengths, non-finite values, frame) are dropped and reported (n
 from __future__ import annotations
 
 import numpy as np
-from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, ForwardKinematicsDiagnostics, OperationalSetpoint
+from cdpr_msgs.msg import (CableForces, ControllerState, ForceDistribution, ForwardKinematicsDiagnostics,
+    OperationalSetpoint)
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
-from cdpr_control.bumpless import Blend
+from cdpr_control.control.bumpless import Blend
 from cdpr_control.force_distribution import Status
-from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.joint_command import A_BRAKE, JointCommand
-from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
-from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
+from cdpr_control.control.loop import ControlLoopParams
+from cdpr_control.control.joint_command import A_BRAKE, JointCommand
+from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
+from cdpr_control.control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
 
 # holding faults after which a program cannot go on (its input is gone, or its path left the
 # workspace): reported with ``abort: True``, the G-code interpreter then fails the program; the
 # others (lag, FK not converged, non-finite values) hold while they last
 ABORTING = frozenset({STALE_INPUT, WORKSPACE})
 
-from .base import CdprNode, spin_node
-from .conversions import pose_from_msg, pose_key
-from .mode import mode_publisher, publish_mode
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampJumps, StampSync, input_problem, stamp_ns
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import pose_from_msg, pose_key
+from cdpr_control.ros.mode import mode_publisher, publish_mode
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampJumps, StampSync, input_problem, stamp_ns
 
 OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/state output (6 values) is added "
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)

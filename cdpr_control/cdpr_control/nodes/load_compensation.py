@@ -17,7 +17,7 @@ enabled or not:
 Service ``~/tare`` (std_srvs/Trigger): tare the estimate at a known state (at rest with the payload
 ``tare_payload`` on, e.g. empty at home after power-on); ``tare_at_start`` does it once by itself.
 
-The computation is :class:`cdpr_control.load_compensation.LoadCompensation`.
+The computation is :class:`cdpr_control.control.load_compensation.LoadCompensation`.
 """
 from __future__ import annotations
 
@@ -27,16 +27,16 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseStamped
 from std_srvs.srv import Trigger
 
-from cdpr_control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
-                                            LoadCompensationParams)
-from cdpr_control.safety import all_finite
-from cdpr_control.ospc import AXES
+from cdpr_control.control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS,
+    LoadCompensation, LoadCompensationParams)
+from cdpr_control.control.safety import all_finite
+from cdpr_control.control.ospc import AXES
 
-from .base import CdprNode, spin_node
-from .conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 D = LoadCompensationParams        # the defaults are the library's (one source)
 PARAMS = [

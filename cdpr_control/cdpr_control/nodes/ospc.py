@@ -16,17 +16,17 @@ from cdpr_msgs.msg import ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 
-from cdpr_control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
-from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
-from cdpr_control.safety import all_finite
-from cdpr_control.stability import check_force_control, planned_home_forces
+from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
+from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+from cdpr_control.control.safety import all_finite
+from cdpr_control.control.preconditions import check_force_control, planned_home_forces
 
-from .base import CdprNode, spin_node
-from .conversions import from_vector3, pose_from_msg, pose_key
-from .mode import follow_mode
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
-from .sync import StampSync
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
+from cdpr_control.ros.mode import follow_mode
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import StampSync
 
 _D = OSPCParams()     # the defaults live in the dataclass (one source of truth)
 PARAMS = [

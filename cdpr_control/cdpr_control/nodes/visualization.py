@@ -3,7 +3,7 @@
 Shows the frame (anchor points a_i and its bounding box), the pulleys, the cables coloured by force
 relative to [f_min, f_max] (blue at f_min, green between, red at f_max, magenta beyond a limit), the
 platform (hull of the B_i), the set-point x_d and the wrench w (force arrow), all in frame ``base``
-from :mod:`cdpr_control.scene`. Inputs: ``platform/pose`` (the estimate of the forward kinematics;
+from :mod:`cdpr_control.model.scene`. Inputs: ``platform/pose`` (the estimate of the forward kinematics;
 remap to ``ground_truth/pose`` to see the simulator's), ``cable_forces``, ``setpoint``,
 ``platform/wrench``.
 
@@ -27,13 +27,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cdpr_control import scene as sc
+from cdpr_control.model import scene as sc
 
-from .base import CdprNode, spin_node
-from .conversions import pose_from_msg, wrench_from_msg
-from .intraprocess import has_subscribers
-from .parameters import ParameterSet, ParamSpec
-from .qos import CONTROL
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.conversions import pose_from_msg, wrench_from_msg
+from cdpr_control.ros.intraprocess import has_subscribers
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
 
 FRAME = "base"
 PARAMS = [

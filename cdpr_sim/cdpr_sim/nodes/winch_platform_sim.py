@@ -42,18 +42,18 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from cdpr_control.nodes.base import CdprNode, spin_node
-from cdpr_control.nodes.intraprocess import has_subscribers
-from cdpr_control.nodes.conversions import pose_to_msg, twist_to_msg, wrench_from_msg, wrench_to_msg
-from cdpr_control.nodes.parameters import ParameterSet, ParamSpec
-from cdpr_control.nodes.qos import CONTROL
-from cdpr_control.nodes.sync import stamp_ns
-from cdpr_control.nodes.timing import DurationStats
-from cdpr_control.safety import all_finite
+from cdpr_control.ros.base import CdprNode, spin_node
+from cdpr_control.ros.intraprocess import has_subscribers
+from cdpr_control.ros.conversions import pose_to_msg, twist_to_msg, wrench_from_msg, wrench_to_msg
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.sync import stamp_ns
+from cdpr_control.ros.timing import DurationStats
+from cdpr_control.control.safety import all_finite
 
-from ..contacts import ContactMaterial, Cylinder, Plane, PlatformShape, default_tool
-from ..simulator import SimConfig, Simulator
-from ..startup import startup_state
+from cdpr_sim.contacts import ContactMaterial, Cylinder, Plane, PlatformShape, default_tool
+from cdpr_sim.simulator import SimConfig, Simulator
+from cdpr_sim.startup import startup_state
 
 #: /clock as ROS publishes it (rclcpp::ClockQoS; rclpy's TimeSource subscribes best effort, depth 1)
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -13,7 +13,7 @@ encoded once and looked up by their content afterwards.
 The bytes are XCDR1 little endian as ROS 2 uses it (see :mod:`.cdr`): what FastDDS writes, cut to
 the encoding, except that the alignment padding is zero, where FastCDR leaves whatever its buffer
 held (so rclpy's own bytes differ from call to call there; no reader looks at them).
-tests/test_bag_encode.py checks this on random messages of every type of the graph and of the
+tests/tools/test_bag_encode.py checks this on random messages of every type of the graph and of the
 interface packages around it. Types with fields this does not cover (wide strings, sequences and
 arrays of char or octet, long double, bounded strings and sequences, whose bounds rclpy enforces)
 get no encoder: :func:`serialize` then uses rclpy. Values are taken as rclpy takes them (for

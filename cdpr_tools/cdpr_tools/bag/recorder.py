@@ -6,7 +6,7 @@ time, since the EventsExecutor passes no message info). Hidden topics are left o
 for. Follows the node convention of docs/tools.md, so the launcher can compose it.
 
 Composed with the graph's nodes (one context), the recorder gets their messages in-process
-(cdpr_control.nodes.intraprocess), on the thread that runs the control loop, and the nodes need
+(cdpr_control.ros.intraprocess), on the thread that runs the control loop, and the nodes need
 not publish over DDS for it. So it does as little as it can there: a topic with a publisher in the
 process is subscribed to as message objects, each encoded once by the generated encoder of its type
 (:mod:`.encode`, a few us where rclpy's serialization takes 3-11), and the bytes are queued for the
@@ -23,8 +23,8 @@ from rclpy.clock import Clock, ClockType
 from cdpr_tools.bag.encode import encoder, serialize
 from cdpr_tools.bag.writer_process import BagWriterProcess
 from cdpr_tools.message_convert import message_class
-from cdpr_control.nodes.intraprocess import IntraProcess, IntraProcessNode
-from cdpr_control.nodes.runner import run_node
+from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode
+from cdpr_control.ros.runner import run_node
 from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 
 DEFAULT_QUEUE_DEPTH = 1000  # messages held per topic while the recorder is busy (1 s at 1 kHz)

@@ -178,7 +178,7 @@ class BagWriter:
 
         The MCAP Message records go into the chunk in one struct call each, with the chunk's
         message index, times and count and the file's statistics updated as ``mcap``'s
-        ``Writer.add_message`` does (mcap 1.6, pinned in constraints.txt; tests/test_bag_format.py
+        ``Writer.add_message`` does (mcap 1.6, pinned in constraints.txt; tests/tools/test_bag_format.py
         compares the two files byte for byte).
         """
         with self._lock:

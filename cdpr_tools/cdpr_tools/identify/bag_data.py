@@ -5,7 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .experiments import TOPIC_COMMAND, TOPIC_FORCES, TOPIC_POSE, TOPIC_SETPOINT, TOPIC_STATE
+from cdpr_tools.identify.experiments import (TOPIC_COMMAND, TOPIC_FORCES, TOPIC_POSE, TOPIC_SETPOINT,
+    TOPIC_STATE)
 
 _POSE_FIELDS = tuple(f"pose.position.{a}" for a in "xyz") + tuple(f"pose.orientation.{a}" for a in "xyzw")
 
@@ -43,7 +44,7 @@ def reference_forces(bag, t) -> np.ndarray:
 
 def poses(bag, t) -> np.ndarray:
     """Platform poses x (N, 6) at stamps t: ground_truth/pose, else the set-point x_d."""
-    from cdpr_control.nodes.conversions import quaternion_to_kardan
+    from cdpr_control.ros.conversions import quaternion_to_kardan
 
     topic = TOPIC_POSE if TOPIC_POSE in bag.topics else TOPIC_SETPOINT
     t_p, *cols = bag.series(topic, *_POSE_FIELDS, stamp="header")

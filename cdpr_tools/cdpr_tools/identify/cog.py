@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_control.kinematics import rotation_matrix, skew
+from cdpr_control.model.kinematics import rotation_matrix, skew
 
 
 def torque_regressor(x, xddot, m_p: float, gravity) -> np.ndarray:

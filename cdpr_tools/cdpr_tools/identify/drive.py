@@ -1,7 +1,7 @@
 """Drive dynamics from a recorded sweep: PT1 + dead time (3.10) or second order (5.11).
 
 The recorded commands theta_d (``winch/command``, stamp t_k, held over one period) drive
-cdpr_control.drive_models.DriveModel, the same exact discretisation the simulator runs; the
+cdpr_sim.drive_models.DriveModel, the same exact discretisation the simulator runs; the
 parameters minimise the squared difference of its theta_k+1 to the encoder's ``winch/state``
 stamped t_k+1 (least squares, trust region with T >= 0; the fractional dead time keeps the
 residual smooth in T_d). Only the winches whose command moves take part; every drive of a robot
@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from cdpr_control.drive_models import PT1_DEADTIME, SECOND_ORDER, DriveModel
+from cdpr_sim.drive_models import PT1_DEADTIME, SECOND_ORDER, DriveModel
 
-from . import bag_data
+from cdpr_tools.identify import bag_data
 
 # start values and lower bounds of the parameters per model
 _START = {PT1_DEADTIME: {"T_1": 0.01, "T_d": 0.002}, SECOND_ORDER: {"T_w": 0.01, "zeta": 0.7, "T_d": 0.002}}

@@ -20,12 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from cdpr_control import cable
-from cdpr_control.dynamics import mass_matrix
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.stiffness import eigenfrequencies, modal_frequencies, operational_stiffness
+from cdpr_control.model import cable
+from cdpr_control.model.dynamics import mass_matrix
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.model.stiffness import eigenfrequencies, modal_frequencies, operational_stiffness
 
-from . import bag_data
+from cdpr_tools.identify import bag_data
 
 
 @dataclass
@@ -84,8 +84,8 @@ def model_frequencies(robot, x, f):
 def identify(bag, robot, friction_params: dict | None = None, use_reference: bool = False,
              rest: float = 0.1) -> EigenFit:
     """Eigenfrequency of the z oscillation in ``bag``; the first ``rest`` s are the resting state."""
-    from .friction import load_data
-    from .mass import compensated_forces
+    from cdpr_tools.identify.friction import load_data
+    from cdpr_tools.identify.mass import compensated_forces
 
     data = load_data(bag, robot)
     x = bag_data.poses(bag, data.t)

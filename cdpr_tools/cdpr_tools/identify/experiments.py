@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.robot import load_robot
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.model.robot import load_robot
 
 TOPIC_STATE = "winch/state"
 TOPIC_COMMAND = "winch/command"
@@ -95,7 +95,7 @@ class _Recorder:
     """Writes SimOutputs and commands on the graph's topics (messages imported on use: ROS types)."""
 
     def __init__(self, bag, robot):
-        from cdpr_control.nodes.qos import CONTROL
+        from cdpr_control.ros.qos import CONTROL
 
         self.bag, self.robot, self.qos = bag, robot, CONTROL
         self.names = [f"cable_{i + 1}" for i in range(robot.m)]
@@ -109,7 +109,7 @@ class _Recorder:
         return h, ns
 
     def state(self, out) -> None:
-        from cdpr_control.nodes.conversions import pose_to_msg
+        from cdpr_control.ros.conversions import pose_to_msg
         from cdpr_msgs.msg import CableForces
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import JointState
@@ -124,7 +124,7 @@ class _Recorder:
         self.bag.write(TOPIC_POSE, None, PoseStamped(header=h, pose=pose_to_msg(out.x)), ns, qos=self.qos)
 
     def command(self, t: float, theta_d, x_d=None) -> None:
-        from cdpr_control.nodes.conversions import pose_to_msg
+        from cdpr_control.ros.conversions import pose_to_msg
         from cdpr_msgs.msg import OperationalSetpoint
         from sensor_msgs.msg import JointState
 
@@ -171,8 +171,8 @@ def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps
     return sim
 
 
-def _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, before_step=None,
-         substeps: int = 1, plant: str = "mismatched") -> Path:
+def record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, before_step=None,
+               substeps: int = 1, plant: str = "mismatched") -> Path:
     """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag.
 
     payload: (mass, centre of gravity) on the platform; before_step(sim, k): called before step k;
@@ -198,7 +198,7 @@ def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_st
     robot = load_robot(robot) if isinstance(robot, str) else robot
     x_d = friction_trajectory(robot.home, **trajectory)
     commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
-    return _run(robot, bag_path, commands, x_d, seed, noise_std, level)
+    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level)
 
 
 def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
@@ -211,7 +211,7 @@ def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=
     x_d = circle_trajectory(robot.home, **circle)
     commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
     payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
-    return _run(robot, bag_path, commands, x_d, seed, noise_std, level, payload)
+    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload)
 
 
 def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10.0, 0.0, 0.0, 0.0),
@@ -236,7 +236,7 @@ def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10
             sim.apply_pulse(wrench, shape="rectangle", duration=pulse)
 
     payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
-    return _run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps)
+    return record_run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps)
 
 
 def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.35, 0.15), hold: float = 0.35,
@@ -260,7 +260,7 @@ def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.
     for a, b in zip(targets[:-1], targets[1:]):
         s = 0.5 * (1.0 - np.cos(np.pi * np.arange(1, n_ramp + 1) / n_ramp))
         parts += [a + s[:, None] * (b - a), np.repeat(b[None], n_hold, axis=0)]
-    return _run(robot, bag_path, np.concatenate(parts), None, seed, None, level, plant=plant)
+    return record_run(robot, bag_path, np.concatenate(parts), None, seed, None, level, plant=plant)
 
 
 def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitude: float = 5e-4,
@@ -271,7 +271,7 @@ def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitud
     hold = inverse_kinematics(robot, robot.home).q            # the encoders read IK{home} at home
     commands = np.repeat(hold[None], int(round(duration / 1e-3)), axis=0)
     commands[:, cable] += amplitude * sweep(duration, f_start, f_end, 1e-3)
-    return _run(robot, bag_path, commands, None, seed, None, level)
+    return record_run(robot, bag_path, commands, None, seed, None, level)
 
 
 def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print) -> dict[str, Path]:
@@ -308,4 +308,4 @@ def record_settlement_run(bag_path, robot="ipanema3", payload: float = 64.0, res
         if n_rest <= k <= n_rest + 2 * n_ramp + n_hold:
             sim.set_payload(mass(k))
 
-    return _run(robot, bag_path, commands, None, seed, None, level, before_step=before_step, plant=plant)
+    return record_run(robot, bag_path, commands, None, seed, None, level, before_step=before_step, plant=plant)

@@ -4,7 +4,7 @@ For cable i the parameters p = (mu, sigma, F_pv, epsilon) minimise
 
     sum_k (Psi_PF(F_s,k, thetadot_k, theta_k, beta_np,k) + epsilon - F_np,k)^2          (3.45)
 
-with Psi_PF the friction model cdpr_control.friction.PulleyFriction.platform_force (3.30)-(3.44),
+with Psi_PF the friction model cdpr_control.model.friction.PulleyFriction.platform_force (3.30)-(3.44),
 run over the whole recording because the Dahl state (3.43) carries over from sample to sample.
 F_s, theta, thetadot come from ``winch/state``, the reference force at the platform F_np from
 ``ground_truth/cable_forces`` (the extra sensor of section 3.7.2), beta_np from the inverse
@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from cdpr_control.friction import PulleyFriction
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.model.friction import PulleyFriction
+from cdpr_control.model.kinematics import inverse_kinematics
 
-from . import bag_data
+from cdpr_tools.identify import bag_data
 
 # relative forward-difference steps of (mu, log sigma, F_pv)
 _STEPS = np.array([1e-3, 1e-3, 1e-3])

@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_control.control_loop import ControlLoopParams
-from cdpr_control.controller_params import control_loop_params
-from cdpr_control.load_compensation import LoadCompensationParams, LoadCompensationStage
-from cdpr_control.robot import load_robot
+from cdpr_control.control.loop import ControlLoopParams
+from cdpr_control.control.params import control_loop_params
+from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
+from cdpr_control.model.robot import load_robot
 
 CONFIGS = {
     "ik": (False, False, False, False), "ik_lc": (False, False, True, False), "ospc": (False, True, False, False),
@@ -175,8 +175,8 @@ def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40
     its start (Fig. 4.7; the estimate is tared empty before); ``program`` a shipped program name or
     a .gcode file."""
     from cdpr_control import programs
-    from cdpr_control.gcode import parse_gcode
-    from cdpr_control.interpolation import Interpolator
+    from cdpr_control.motion.gcode import parse_gcode
+    from cdpr_control.motion.interpolation import Interpolator
     from cdpr_sim.closed_loop import program as program_source
 
     robot = load_robot(robot) if isinstance(robot, str) else robot

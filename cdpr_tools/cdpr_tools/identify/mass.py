@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_control.friction_compensation import FrictionCompensation, FrictionCompensationParams
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
+from cdpr_control.model.kinematics import inverse_kinematics
 
-from . import bag_data, cog
+from cdpr_tools.identify import bag_data, cog
 
 
 @dataclass
@@ -74,7 +74,7 @@ def constant_speed_window(t, x_d, tolerance: float = 0.005):
 
 def identify(bag, robot, friction_params: dict | None = None, use_reference: bool = False) -> MassFit:
     """Mass of the platform from the circle run in ``bag``; use_reference: ground-truth forces instead."""
-    from .friction import load_data
+    from cdpr_tools.identify.friction import load_data
 
     data = load_data(bag, robot)
     dt = float(np.median(np.diff(data.t)))
@@ -96,7 +96,7 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
 
 def _setpoints(bag, t) -> np.ndarray:
     """x_d (N, 6) held from the set-points onto stamps t (needs the ``setpoint`` topic)."""
-    from cdpr_control.nodes.conversions import quaternion_to_kardan
+    from cdpr_control.ros.conversions import quaternion_to_kardan
 
     fields = [f"pose.position.{a}" for a in "xyz"] + [f"pose.orientation.{a}" for a in "xyzw"]
     t_p, *cols = bag.series(bag_data.TOPIC_SETPOINT, *fields, stamp="header")

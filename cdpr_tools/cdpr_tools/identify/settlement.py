@@ -7,7 +7,7 @@ IK{x}_i - e_i(f_i) (2.14), (2.17) up to the encoder reading theta_i and a consta
     s_i(t) = [IK{x(t)}_i - theta_i(t) - e_i(f_i(t))] - [the same before the payload],
 
 with x the tracker's pose (``ground_truth/pose``) and f the sensor forces through the friction
-compensation. The fit is :class:`cdpr_control.load_compensation.SettlementModel` run on the measured
+compensation. The fit is :class:`cdpr_control.control.load_compensation.SettlementModel` run on the measured
 forces: s_i grows towards ratio * l_t,i (f_i - f_settled,i) / k0 with time constant T and never
 shrinks; s is proportional to ratio, so ratio is linear least squares for each T of a grid and T the
 best of the grid. k0 and l_t are the robot file's: identify the stiffness first and pass that robot
@@ -21,11 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_control import cable
-from cdpr_control.kinematics import inverse_kinematics
-from cdpr_control.load_compensation import SettlementModel
+from cdpr_control.model import cable
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.control.load_compensation import SettlementModel
 
-from . import bag_data
+from cdpr_tools.identify import bag_data
 
 
 @dataclass
@@ -41,8 +41,8 @@ def identify(bag, robot, friction_params: dict | None = None, rest: float = 0.4,
              T_grid=None) -> SettlementFit:
     """Fit ratio and T of the settlement model to ``bag`` (:func:`experiments.record_settlement_run`);
     the first ``rest`` s (before the payload) are the settled reference."""
-    from .friction import load_data
-    from .mass import compensated_forces
+    from cdpr_tools.identify.friction import load_data
+    from cdpr_tools.identify.mass import compensated_forces
 
     data = load_data(bag, robot)
     dt = float(np.median(np.diff(data.t)))

@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from cdpr_control import cable
-from cdpr_control.kinematics import inverse_kinematics
+from cdpr_control.model import cable
+from cdpr_control.model.kinematics import inverse_kinematics
 
-from . import bag_data
+from cdpr_tools.identify import bag_data
 
 
 @dataclass
@@ -58,8 +58,8 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
              settle: float = 0.2, start=(20000.0, 0.0, 0.0), f_taut: float = 1.0,
              preload: bool = True) -> StiffnessFit:
     """Fit (2.16) to the resting samples of ``bag``; preload: leave out the first hold."""
-    from .friction import load_data
-    from .mass import compensated_forces
+    from cdpr_tools.identify.friction import load_data
+    from cdpr_tools.identify.mass import compensated_forces
 
     data = load_data(bag, robot)
     t_c, theta_d = bag_data.commands(bag)
@@ -102,12 +102,12 @@ def write_robot_file(robot_name_or_path, fit: StiffnessFit, out) -> "Path":
     """A copy of the robot file with the identified cable: k0, k1, k2 of (2.16) and l_0 + g_i l_t,i
     (the free-length correction of the fit, taken at the robot's home, where
     :func:`experiments.record_stiffness_run` records: l_t (1 + g) = q + l_0 + g l_t (2.14)).
-    The result loads with :func:`cdpr_control.robot.load_robot` (checked); comments are not kept."""
+    The result loads with :func:`cdpr_control.model.robot.load_robot` (checked); comments are not kept."""
     from pathlib import Path
 
     import yaml
 
-    from cdpr_control.robot import load_robot, robot_path
+    from cdpr_control.model.robot import load_robot, robot_path
 
     path = robot_path(robot_name_or_path)
     robot = load_robot(path)

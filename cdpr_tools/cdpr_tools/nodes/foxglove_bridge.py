@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 
-from cdpr_control.nodes.runner import run_node
+from cdpr_control.ros.runner import run_node
 from cdpr_tools.bag.cdr import trimmed
 from cdpr_tools.bag.schema import ENCODING, message_definition
 from cdpr_tools.message_convert import message_class

@@ -1,0 +1,201 @@
+"""Joint-space cable force control (CFC), thesis section 3.5.2, Fig. 3.12.
+
+Per cable: the measured force f is low-pass filtered (3.20), the error e_f = f_d - f (3.2) drives
+a PI controller (3.19) with saturation F_sat,n / F_sat,p and anti-windup, the feed-forward
+f_ff = f_d (3.22) is added, and the controller output f_c,out becomes a cable length through the
+linear stiffness estimate K_l = k_spec / l_t (2.15), minus the pre-tension Δq_0 (3.23):
+
+    Δq_CFC = K_l^-1(l_t) f_c,out - Δq_0 .
+
+Δq_CFC is the elongation commanded beyond the encoder calibration's pre-tension; the joint command
+shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.control.joint_command`).
+
+Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
+much softer than modelled) may pull harder, a cable close to f_max may release harder.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_control.model import cable
+from cdpr_control import kernels
+from cdpr_control.model.calibration import DEFAULT_WINDOW, StartupCalibration
+from cdpr_control.control.filters import LowPass
+from cdpr_control.control.pi_control import PIController
+
+
+@dataclass
+class CFCParams:
+    """Parameters of the cable force controller (defaults: table 3.1 where given)."""
+
+    K_p: float = 0.85            # -, proportional gain, table 3.1
+    T_i: float = 0.1             # s, integrator reset time, table 3.1
+    T_filter: float = 0.08       # s, PT1 of the force feedback (3.20), table 3.1 (T_1,r)
+    F_sat_n: float = 200.0       # N, negative saturation of the PI part (ASSUMPTION per robot)
+    F_sat_p: float = 200.0       # N, positive saturation of the PI part (ASSUMPTION per robot)
+    widen_band: float = 50.0     # N, distance to a force limit where widening starts
+    widen_factor: float = 3.0    # -, saturation multiplier reached at the limit
+    stiffness_model: str = "nonlinear"   # K_l of (3.23): "linear" (thesis, (2.15)) or "nonlinear" (2.17)
+
+    def validate(self) -> None:
+        checks = {
+            "K_p": self.K_p >= 0.0,
+            "T_i": self.T_i > 0.0,
+            "T_filter": self.T_filter >= 0.0,
+            "F_sat_n": self.F_sat_n >= 0.0,
+            "F_sat_p": self.F_sat_p >= 0.0,
+            "widen_band": self.widen_band > 0.0,
+            "widen_factor": self.widen_factor >= 1.0,
+            "stiffness_model": self.stiffness_model in ("linear", "nonlinear"),
+        }
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"invalid CFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
+
+
+def widened_saturation(params: CFCParams, f, f_min, f_max) -> tuple[np.ndarray, np.ndarray]:
+    """Saturation magnitudes (F_sat,n, F_sat,p) raised linearly as f enters the band at a limit."""
+    near_min = np.clip((f_min + params.widen_band - f) / params.widen_band, 0.0, 1.0)
+    near_max = np.clip((f - (f_max - params.widen_band)) / params.widen_band, 0.0, 1.0)
+    gain = params.widen_factor - 1.0
+    return params.F_sat_n * (1.0 + gain * near_max), params.F_sat_p * (1.0 + gain * near_min)
+
+
+class CableForceController:
+    """Per-cable PI with feed-forward, widened saturation, anti-windup and pre-tension (3.19)-(3.23)."""
+
+    def __init__(self, m: int, params: CFCParams, dt: float):
+        params.validate()
+        self.m = m
+        self.params = params
+        self.dt = dt
+        self.pi = PIController(m, params.K_p, params.T_i, params.F_sat_n, params.F_sat_p, dt)
+        self.dq_0: np.ndarray | None = None       # set by reset() before the first update
+        self.feedback_filter = LowPass(params.T_filter, dt)      # (3.20)
+        self.f_out = np.zeros(m)
+        self.dq_cfc = np.zeros(m)
+
+    def set_params(self, params: CFCParams) -> None:
+        """Apply new parameters live; the integrator state is kept."""
+        params.validate()
+        self.params = params
+        self.pi.set_gains(params.K_p, params.T_i)
+        self.pi.set_limits(params.F_sat_n, params.F_sat_p)
+        self.feedback_filter.set_time_constant(params.T_filter)
+
+    def reset(self, dq_0, f=None) -> None:
+        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration."""
+        self.dq_0 = np.asarray(dq_0, dtype=float).copy()
+        self.pi.reset()
+        self.feedback_filter.reset(f)
+
+    @property
+    def f_filtered(self) -> np.ndarray | None:
+        return self.feedback_filter.y
+
+    def filter(self, f: np.ndarray) -> np.ndarray:
+        """PT1 feedback filter (3.20)."""
+        return self.feedback_filter.update(f)
+
+    def update(self, f_d, f, k_l, f_min, f_max, f_ff=None) -> np.ndarray:
+        """One period: desired and measured forces [N], cable stiffness K_l [N/m] -> Δq_CFC [m].
+
+        k_l is the secant stiffness per cable, an array (the thesis' linear model) or a function of
+        the output force f_c,out (a non-linear model (2.17): then K_l^-1 f_c,out is the elongation).
+        f_ff: a feed-forward (3.22) other than f_d (hybrid force control, section 5.1.2); None: f_d.
+        """
+        if self.dq_0 is None:
+            raise RuntimeError("CableForceController.update before reset(dq_0)")
+        f_fb = self.filter(f)
+        e_f = f_d - f_fb                                            # (3.2)
+        saturation = kernels.widened_saturation if kernels.ENABLED else widened_saturation
+        sat_n, sat_p = saturation(self.params, f_fb, f_min, f_max)
+        u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
+        self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
+        stiffness = k_l(self.f_out) if callable(k_l) else k_l
+        self.dq_cfc = self.f_out / stiffness - self.dq_0            # (3.23)
+        return self.dq_cfc
+
+
+    def update_compiled(self, f_d, f, l_t, stiffness: tuple, f_min, f_max, f_ff=None) -> np.ndarray:
+        """:meth:`update` as one compiled call (kernels.cfc_period, the same arithmetic), once the
+        feedback filter has its first sample and while the PI integrates (not held); ``stiffness``
+        the model's constants (CableForceControl._stiffness_constants) instead of K_l."""
+        p, pi = self.params, self.pi
+        constants = np.array((self.feedback_filter.alpha, pi.dt, p.F_sat_n, p.F_sat_p, p.widen_band, p.widen_factor)
+                             + stiffness, dtype=float)
+        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = kernels.cfc_period(
+            f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
+            pi.integrator, pi.K_p, pi.T_i, constants)
+        return self.dq_cfc
+
+
+class CableForceControl:
+    """The CFC stage of the control loop for one robot: the controller plus its stiffness model.
+
+    K_l of (3.23) is the thesis' linear k_spec / l_t (2.15), or (default) the secant of the robot
+    file's non-linear cable (2.16)-(2.17), so that K_l^-1 f_c,out is the elongation the cable
+    really needs; with the linear model the integrator must make up the difference, which on the
+    IPAnema 3's progressive 6 mm cable exceeds a few hundred newtons of saturation range. Δq_0 is
+    the elongation of the encoder calibration's forces (:mod:`cdpr_control.model.calibration`: the home
+    calibration, else the mean of the first samples) in the same model, so that f = f_d commands
+    no change. Disabled, the output is zero (IK-only control).
+    """
+
+    def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True,
+                 calibration_window: int = DEFAULT_WINDOW):
+        self.robot = robot
+        self.controller = CableForceController(robot.m, params or CFCParams(), dt)
+        self.enabled = enabled
+        self.calibration = StartupCalibration(calibration_window)
+
+    @property
+    def params(self) -> CFCParams:
+        return self.controller.params
+
+    def set_params(self, params: CFCParams, enabled: bool | None = None) -> None:
+        model_changed = params.stiffness_model != self.params.stiffness_model
+        self.controller.set_params(params)
+        if model_changed and self.calibration.f_0 is not None:
+            self.controller.dq_0 = self._calibrated_dq_0()
+        if enabled is not None and enabled != self.enabled:
+            self.enabled = enabled
+            self.controller.pi.reset()           # bumpless: the integrator starts from zero
+
+    def _stiffness(self, l_t):
+        if self.params.stiffness_model == "linear":
+            return self.robot.cable.k_spec_nominal / l_t                       # (2.15)
+        return lambda f_out: kernels.cable_stiffness(self.robot, np.maximum(f_out, 0.0), l_t)   # (2.17)
+
+    def _elongation(self, f, l_t) -> np.ndarray:
+        k_l = self._stiffness(l_t)
+        return f / (k_l(f) if callable(k_l) else k_l)
+
+    def _calibrated_dq_0(self) -> np.ndarray:
+        c = self.calibration
+        return self._elongation(c.f_0, cable.total_free_length(self.robot, c.theta_0))
+
+    def update(self, f_d, f, theta, f_min, f_max, f_ff=None) -> np.ndarray:
+        """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23); f_ff a
+        feed-forward other than f_d (see :meth:`CableForceController.update`)."""
+        if not self.enabled:
+            return np.zeros(self.robot.m)
+        l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
+        c = self.controller
+        if self.calibration.update(f, theta) or c.dq_0 is None:
+            if c.dq_0 is None:
+                c.reset(self._calibrated_dq_0(), f=f)
+            else:
+                c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
+        if kernels.ENABLED and c.feedback_filter.y is not None and not c.pi.hold:
+            return c.update_compiled(f_d, f, l_t, self._stiffness_constants(), f_min, f_max, f_ff)
+        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff)
+
+    def _stiffness_constants(self) -> tuple[float, float, float, float, float]:
+        """The stiffness model of :meth:`_stiffness` for the compiled period: (linear 1/0, k_spec
+        nominal, k0, k1, k2)."""
+        c = self.robot.cable
+        return (float(self.params.stiffness_model == "linear"), float(c.k_spec_nominal), float(c.k0), float(c.k1),
+                float(c.k2))

@@ -1,0 +1,140 @@
+"""Cable force set-point stage, thesis section 3.6: wrench set-point (3.26) then f_d (3.27)-(3.28).
+
+Per period: the model wrench w_dyn of the desired motion (2.33); the measured wrench w enters
+through the Smith predictor (3.26), whose disturbance part w - w_dyn(t - T_d,w) is low-pass filtered
+(``T_wrench_filter``) and saturated (section 3.6.1): the filter acts on the disturbance only, so the
+anticipated inertia wrench reaches w_d without the filter's lag; the distribution is solved for A^T at x_d with the tension level's reference force. A change
+of the tension level is ramped (``tension_rate``, full range per second) so that the internal forces
+move smoothly and the platform does not.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_control import kernels
+from cdpr_control.control.filters import LowPass
+from cdpr_control.control.safety import all_finite
+from cdpr_control.force_distribution import (BACKENDS, METHODS, BorderPolicy, DistributionResult,
+    ForceDistributor)
+from cdpr_control.control.wrench_setpoint import WrenchSetpoint
+
+
+@dataclass
+class ForceSetpointParams:
+    method: str = "qp"
+    backend: str = "daqp"
+    tension_level: float = 0.0            # [0..1]: f_ref = f_min + level (f_max - f_min) (3.27)
+    tension_rate: float = 1.0             # 1/s, ramp of the tension level (0 = step)
+    f_min: np.ndarray | None = None       # (m,) N, None: robot file
+    f_max: np.ndarray | None = None       # (m,) N, None: robot file
+    overload_factor: float = 1.0          # f_max may rise to this multiple at the border (3.6.2)
+    overload_rate: float = 0.0            # 1/s, rate of the raise; 0 = instant
+    wrench_source: str = "measured"       # measured: (3.26); model: w_d = w_dyn (3.1)
+    T_d_w: float = 0.01                   # s, Smith predictor delay (3.25)
+    wrench_deviation_max: float = 3.0     # saturation of w - w_dyn(t - T_d,w) relative to m g (payloads up to 3 m_p)
+    T_wrench_filter: float = 0.3          # s, PT1 on the disturbance w - w_dyn(t - T_d,w) (0.08 s oscillates on IPAnema 3)
+
+    def validate(self, m: int) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(sorted(METHODS))}, got {self.method!r}")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        if self.wrench_source not in ("measured", "model"):
+            raise ValueError(f"wrench_source must be measured or model, got {self.wrench_source!r}")
+        if not 0.0 <= self.tension_level <= 1.0:
+            raise ValueError(f"tension_level must be in [0, 1], got {self.tension_level}")
+        for name in ("tension_rate", "overload_rate", "T_d_w", "wrench_deviation_max", "T_wrench_filter"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("f_min", "f_max"):
+            value = getattr(self, name)
+            if value is not None and (np.shape(value) != (m,) or not np.all(np.isfinite(value))):
+                raise ValueError(f"{name} needs {m} finite values")
+        BorderPolicy(overload_factor=self.overload_factor).validate()
+
+
+class ForceSetpoint:
+    def __init__(self, robot, dt: float, params: ForceSetpointParams | None = None):
+        self.robot = robot
+        self.dt = dt
+        self.distributor: ForceDistributor | None = None
+        self.smith = WrenchSetpoint(0.01, dt)
+        self.wrench_filter = LowPass(0.08, dt)
+        self.level: float | None = None          # tension level in effect (ramping to the target)
+        self.f_ref_override: np.ndarray | None = None
+        self.w_d: np.ndarray | None = None
+        self.set_params(params or ForceSetpointParams())
+        kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
+
+    def set_params(self, p: ForceSetpointParams) -> None:
+        p.validate(self.robot.m)
+        c = self.robot.cable
+        f_min = c.f_min if p.f_min is None else np.asarray(p.f_min, dtype=float)
+        f_max = c.f_max if p.f_max is None else np.asarray(p.f_max, dtype=float)
+        if np.any(f_min < 0) or np.any(f_min >= f_max):
+            raise ValueError("force limits need 0 <= f_min < f_max for every cable")
+        border = BorderPolicy(overload_factor=p.overload_factor, rate=p.overload_rate or None)
+        d = self.distributor
+        if d is None or (d.method, d.backend, d.border) != (p.method, p.backend, border) \
+                or not (np.array_equal(d.f_min, f_min) and np.array_equal(d.f_max, f_max)):
+            self.distributor = ForceDistributor(self.robot.m, f_min, f_max, method=p.method,
+                                                backend=p.backend, border=border)
+            if self.level is not None:
+                self._set_level(self.level)
+        self.params = p
+        self.f_ref_override = None               # a parameter change wins over an explicit f_ref
+        if p.T_d_w != self.smith.T_d_w:
+            self.smith.set_delay(p.T_d_w)
+        self.wrench_filter.set_time_constant(p.T_wrench_filter)
+        weight = self.robot.platform.mass * float(np.linalg.norm(self.robot.gravity))
+        radius = float(np.mean(np.linalg.norm(self.robot.b, axis=1)))
+        self.w_dist_max = p.wrench_deviation_max * weight * np.r_[np.ones(3), np.full(3, radius)]
+
+    def set_reference(self, f_ref) -> None:
+        """An explicit reference force per cable (service), within [f_min, f_max]."""
+        f_ref = np.asarray(f_ref, dtype=float)
+        d = self.distributor
+        if f_ref.shape != (self.robot.m,) or not np.all(np.isfinite(f_ref)) \
+                or np.any(f_ref < d.f_min) or np.any(f_ref > d.f_max):
+            raise ValueError(f"f_ref needs {self.robot.m} values within [f_min, f_max]")
+        self.f_ref_override = f_ref
+        d.set_reference(f_ref)
+
+    def _set_level(self, level: float) -> None:
+        self.level = level
+        d = self.distributor
+        d.set_reference(d.f_min + level * (d.f_max - d.f_min))
+
+    def _ramp_level(self) -> None:
+        target, rate = self.params.tension_level, self.params.tension_rate
+        if self.level is None or rate == 0.0:
+            self._set_level(target)
+        elif self.level != target:
+            step = rate * self.dt
+            self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
+
+    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None, w_dyn=None) -> DistributionResult:
+        """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
+
+        AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
+        known wrench beyond the platform's own (an identified payload, load_compensation): it is not
+        part of the saturated disturbance of (3.24), and the model-only set-point (3.1) includes it.
+        w_dyn: kernels.platform_wrench of x_d, ẋ_d, ẍ_d (2.33) when the caller has it (a node that
+        keeps it while the set-point repeats), else computed here; it is read, never written.
+        """
+        if self.f_ref_override is None:
+            self._ramp_level()
+        if w_dyn is None:
+            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)  # (2.33), A^T f = -w
+        if self.w_d is None:
+            self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
+        if self.params.wrench_source == "measured" and all_finite(w):
+            self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
+                                                  self.wrench_filter, w_model)  # filtered, saturated
+        else:
+            self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
+        if AT is None:
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
+        return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)

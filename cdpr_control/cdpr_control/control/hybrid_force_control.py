@@ -1,0 +1,562 @@
+"""Hybrid position and force control (HPFC), thesis section 5.1, Fig. 5.3 and Fig. 5.4.
+
+The CNC (the G-code interpolator) delivers the path x_d and the desired force F_d,0 (force axes
+U V W, base frame, the force the platform exerts on the environment). This module turns them and
+the measured wrench w into the position offset x_d,HPFC of (5.1),
+
+    θ_d = IK{x_d + x_d,HPFC} + Δq_d,CFC ,
+
+which the joint command adds like every other offset input (:mod:`cdpr_control.control.offset_inputs`).
+
+- Task frame (5.2): R_t has its z axis along F_d,0, so F_d,t = R_t^T F_d,0 = [0 0 F_d]; the
+  contact force F is the same projection of the measured contact force vector.
+- Contact force: the measured wrench minus the weight of the platform and of a known payload,
+  F_vec = -(w_F - (m_p + m_load) g) (w is the external wrench on the platform, A^T f = -w, (2.10);
+  the platform pushes the environment with the opposite of what the environment pushes it with),
+  tared when an approach starts (``tare``): what it reads then, if below F_th / 2, is taken for the
+  sensors' offsets and the weight model's error, not contact, and is subtracted until the next
+  approach (above F_th / 2 the platform is taken to touch already, and nothing is tared).
+- State machine of Fig. 5.4: A approach along the task z axis at v_max,HPFC until F >= F_th;
+  B brake to standstill; D closed-loop force control with the PID (5.3); C contact lost
+  (F < F_th in D): approach again. The output is x_t along the task z axis, x_d,HPFC = R_t [0 0 x_t].
+- Release (not in Fig. 5.4, see docs/hybrid_force_control.md): when the desired force falls below
+  F_th or the controller is disabled, x_t returns to zero at v_max,HPFC with the same
+  acceleration limit (state R), then the controller is idle (state I) and the platform is back
+  under pure position control at the programmed pose, without a jump.
+- PID (5.3) on e_F = F_d - F with output saturation |x_t| <= x_max and anti-windup (conditional
+  integration and clamping as :mod:`cdpr_control.control.pi_control`); the D part acts on the (low-pass
+  filtered) measured force only, so a step of F_d does not kick the output.
+- Section 5.1.2's changes of the cable force control (:class:`CFCCoupling`): paused in A-C,
+  running in D and R with its feed-forward through a moving average of T_MA,HPFC; the force
+  distribution's wrench carries the expected contact force (:func:`expected_contact_wrench`).
+
+Units: (5.3) is printed as x_t / e_F = K_p (1 + 1/(s T_i) + s T_d) with K_p = 22,000 N/m "gain
+(stiffness)" (table 5.1); a position per force is m/N, so the gain applied is 1 / K_p: the
+controller moves by the force error divided by the expected stiffness of robot and environment.
+Table 5.1's unit of T_d (s^-1) is read as s (a derivative time constant).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_control.control.filters import LowPass
+from cdpr_control.control.safety import all_finite
+
+IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
+STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
+STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "brake", LOST: "contact lost",
+               CONTACT: "force control", RELEASE: "release"}
+# The task z axis is not position-controlled (Fig. 5.2) while x_t acts: A-D and the release R.
+FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
+HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
+# The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
+# (CFCCoupling.contact_update, in ControlLoop and in the node cable_force_controller).
+CFC_PAUSED = (APPROACH, BRAKE, LOST)
+
+
+@dataclass
+class HPFCParams:
+    """Parameters of the hybrid position and force control (defaults: table 5.1, IPAnema 3)."""
+
+    K_p: float = 22000.0         # N/m, proportional gain (stiffness), table 5.1; output gain is 1/K_p
+    T_i: float = 2.6             # s, integrator reset time, table 5.1
+    T_d: float = 0.03            # s, derivative time constant, table 5.1
+    T_MA: float = 2.0            # s, moving average of the CFC's wrench input, table 5.1
+    F_th: float = 25.0           # N, threshold force of contact detection, table 5.1
+    v_max: float = 0.05          # m/s, maximal approach velocity, table 5.1
+    a_max: float = 0.5           # m/s^2, acceleration of x_t in A, B, C, R (ASSUMPTION: braking from
+                                 # 50 mm/s takes 0.1 s and 2.5 mm)
+    x_max: float = 0.1           # m, saturation of x_t, also the farthest approach (ASSUMPTION)
+    T_F: float = 0.05            # s, PT1 on the contact force (ASSUMPTION: sensor noise, D part)
+    payload: float = 0.0         # kg, known payload whose weight is no contact force
+    tare: bool = True            # zero the contact force at the start of an approach (reading < F_th / 2)
+
+    def validate(self) -> None:
+        checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
+                  "F_th": self.F_th > 0.0, "v_max": self.v_max > 0.0, "a_max": self.a_max > 0.0,
+                  "x_max": self.x_max > 0.0, "T_F": self.T_F >= 0.0, "payload": self.payload >= 0.0}
+        bad = [k for k, ok in checks.items() if not (ok and np.isfinite(getattr(self, k)))]
+        if bad:
+            raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
+
+
+def _clip(value: float, bound: float) -> float:
+    """value limited to [-bound, bound] (scalar; np.clip costs microseconds per call)."""
+    return max(-bound, min(bound, float(value)))
+
+
+def task_axis(F_d0, z_previous=None) -> np.ndarray:
+    """z axis of the task frame (3,): the direction of F_d,0 (5.2). F_d,0 = 0 has no direction:
+    then z_previous (the last task z axis) is kept, or e_z when there is none."""
+    F = np.asarray(F_d0, dtype=float)
+    norm = math.sqrt(float(F @ F))
+    if norm > 0.0 and math.isfinite(norm):
+        return F / norm
+    return np.array([0.0, 0.0, 1.0]) if z_previous is None else np.asarray(z_previous, dtype=float)
+
+
+def task_frame(F_d0, z_previous=None) -> np.ndarray:
+    """R_t (3, 3) of the task frame: z axis along F_d,0 (5.2), so that R_t^T F_d,0 = [0 0 |F_d,0|].
+
+    The x axis is the base axis least parallel to z, made orthogonal (deterministic, continuous
+    while F_d,0 turns by less than that axis); z as :func:`task_axis`. The controller itself needs
+    only the z axis: F_d = z_t . F_d,0, F = z_t . F_vec, x_d,HPFC = x_t z_t.
+    """
+    z = task_axis(F_d0, z_previous)
+    e = np.eye(3)[int(np.argmin(np.abs(z)))]
+    x = e - (e @ z) * z
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def contact_force(w, mass: float, gravity) -> np.ndarray:
+    """Force vector (3,) the platform exerts on the environment: -(w_F - m g) (section 5.1.2).
+
+    w is the measured wrench (6,) of (2.11) (external wrench on the platform, gravity included),
+    mass the platform's plus a known payload's [kg], gravity (3,) [m/s^2].
+    """
+    return -(np.asarray(w, dtype=float)[:3] - mass * np.asarray(gravity, dtype=float))
+
+
+def select_position_feedback(x_d, x, z_t) -> np.ndarray:
+    """The pose feedback for position control with the task z axis force-controlled (Fig. 5.2).
+
+    Raibert and Craig's selection matrix applied to the pose error: the returned x' gives
+    x_d - x' = (I - S) (x_d - x) with S = z_t z_t^T on the translation, so an operational-space
+    position controller does not act (and does not integrate) along the force direction.
+    """
+    x_d, x = np.asarray(x_d, dtype=float), np.asarray(x, dtype=float)
+    z = np.asarray(z_t, dtype=float)
+    out = x.copy()
+    out[:3] += z * (z @ (x_d[:3] - x[:3]))
+    return out
+
+
+class MovingAverage:
+    """Mean of the last N = max(1, round(T / dt)) samples of a vector signal (running sum, ring buffer).
+
+    The first sample (or :meth:`reset`) fills the window, so the output starts without transient.
+    """
+
+    def __init__(self, T: float, dt: float):
+        if not (T >= 0.0 and dt > 0.0):
+            raise ValueError(f"need T >= 0 s and dt > 0 s, got T={T}, dt={dt}")
+        self.dt = dt
+        self.n = max(1, int(round(T / dt)))
+        self.T = T
+        self.buffer: np.ndarray | None = None
+        self.y: np.ndarray | None = None
+
+    def reset(self, value=None) -> None:
+        if value is None:
+            self.buffer = self.y = None
+            return
+        value = np.array(value, dtype=float)
+        self.buffer = np.tile(value, (self.n, 1))
+        self.index = 0
+        self.sum = value * self.n
+        self.count = 0
+        self.y = value.copy()
+
+    def update(self, u) -> np.ndarray:
+        u = np.asarray(u, dtype=float)
+        if self.buffer is None:
+            self.reset(u)
+            return self.y
+        self.sum += u - self.buffer[self.index]
+        self.buffer[self.index] = u
+        self.index = (self.index + 1) % self.n
+        self.count += 1
+        if self.count >= self.n:                 # recompute now and then: no drift of the running sum
+            self.sum = self.buffer.sum(axis=0)
+            self.count = 0
+        self.y = self.sum / self.n
+        return self.y
+
+
+@dataclass
+class HPFCState:
+    """What one period computed (the content of ``hybrid_force_controller/state``)."""
+
+    state: str                   # I, A, B, C, D, R
+    active: bool                 # output in use (enabled, or releasing after a disable)
+    z_t: np.ndarray              # (3,) task z axis (direction of F_d,0) in the base frame
+    F_d0: np.ndarray             # (3,) desired force F_d,0 [N], base frame
+    F_vec: np.ndarray            # (3,) measured contact force vector (filtered) [N], base frame
+    F_d: float                   # desired force along z_t [N] (5.2)
+    F: float                     # measured contact force along z_t [N]
+    e_F: float                   # F_d - F [N]
+    x_t: float                   # offset along z_t [m]
+    v_t: float                   # its rate [m/s]
+    integrator: float            # integral part of x_t [m]
+    saturated: bool              # |x_t| at x_max
+    x: np.ndarray                # (6,) x_d,HPFC = [R_t [0 0 x_t]; 0 0 0] [m, rad]
+
+
+class HybridForceControl:
+    """The contact state machine of Fig. 5.4 with the PID (5.3): F_d,0 and w -> x_d,HPFC."""
+
+    def __init__(self, robot, dt: float, params: HPFCParams | None = None, enabled: bool = False):
+        self.robot = robot
+        self.dt = dt
+        self.enabled = enabled
+        self.state = IDLE
+        self.z_t = np.array([0.0, 0.0, 1.0])
+        self._z_t_of: bytes | None = None      # F_d,0 (its bytes) whose axis z_t is
+        self._F_d = 0.0                        # N, F_d of that F_d,0 (5.2)
+        self.x_t = 0.0
+        self.v_t = 0.0
+        self.integrator = 0.0
+        self.saturated = False
+        self.F_prev: float | None = None
+        self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
+        self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
+        self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
+        self.force_filter = LowPass(0.0, dt)
+        self.set_params(params or HPFCParams())
+
+    def set_params(self, params: HPFCParams) -> None:
+        """Apply new parameters live (the state and x_t are kept)."""
+        params.validate()
+        self.params = params
+        self.force_filter.set_time_constant(params.T_F)
+        self.mass = self.robot.platform.mass + params.payload
+        self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
+        self._weight = self.weight.tolist()
+
+    def _filter_force(self, w: list[float]) -> np.ndarray:
+        """self.force_filter (PT1) of the contact force -(w_F - m g) (:func:`contact_force`) of the
+        wrench w (6 floats), on floats (LowPass.update_floats)."""
+        self.force_filter.update_floats([-(a - b) for a, b in zip(w[:3], self._weight)])
+        return self.force_filter.y
+
+    def _enter(self, state: str) -> None:
+        """Leaving force control, the position-controlled x_t starts from rest (the PID's rate of
+        change, up to a force error over K_p per period, is no velocity to carry on with)."""
+        if self.state == CONTACT:
+            self.v_t = 0.0
+        self.state = state
+
+    def _move(self, v_target: float) -> None:
+        """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
+        dv = self.params.a_max * self.dt
+        self.v_t += _clip(v_target - self.v_t, dv)
+        self.x_t += self.v_t * self.dt
+
+    def _release(self) -> None:
+        """Back to x_t = 0 at most at v_max, braking in time (v^2 = 2 a |x_t|), no overshoot of 0."""
+        p = self.params
+        distance = abs(self.x_t)
+        v_stop = math.sqrt(2.0 * p.a_max * distance)
+        target = -math.copysign(min(p.v_max, v_stop), self.x_t)
+        self._move(target)
+        if self.x_t * (self.x_t - self.v_t * self.dt) <= 0.0 or distance < 1e-9:  # crossed or reached 0
+            self.x_t = self.v_t = 0.0
+        if self.x_t == 0.0:
+            self.state = IDLE
+
+    def update(self, F_d0, w) -> HPFCState:
+        """One period: desired force F_d,0 (3,) [N] and measured wrench w (6,) -> HPFCState."""
+        p, dt = self.params, self.dt
+        F_d0 = np.asarray(F_d0, dtype=float)
+        w = np.asarray(w, dtype=float)
+        if F_d0.shape != (3,) or not all_finite(F_d0.tolist()):
+            F_d0 = np.zeros(3)                                   # no valid demand: release
+        key = F_d0.tobytes()
+        if key != self._z_t_of:                                  # (the same F_d,0 has the same axis and F_d)
+            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
+            self._F_d = float(self.z_t @ F_d0)                   # (5.2): the z entry of R_t^T F_d,0
+        F_d = self._F_d
+        w_floats = w.tolist() if w.shape == (6,) else None
+        if w_floats is not None and all_finite(w_floats):
+            F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
+        else:                                                    # keep the last estimate
+            F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
+        if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
+            raw = float(self.z_t @ F_vec)
+            # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
+            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
+        F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
+        F = float(self.z_t @ F_vec)
+        e_F = F_d - F
+        dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
+        self.F_prev = F
+
+        wanted = self.enabled and F_d >= p.F_th
+        if not wanted:
+            if self.state not in (IDLE, RELEASE):
+                self._enter(RELEASE)
+        elif self.state in (IDLE, RELEASE):
+            self._enter(APPROACH)
+        if self.state == CONTACT and F < p.F_th:                 # Fig. 5.4: contact lost
+            self._enter(LOST)
+        if self.state in (APPROACH, LOST):
+            if F >= p.F_th:
+                self._enter(BRAKE)
+                self.contact = (self.x_t, F)             # where the contact was detected
+            else:
+                self._move(p.v_max)
+        if self.state == BRAKE:
+            # to standstill where the force is expected to reach F_d: (F_d - F) / K_p ahead, K_p
+            # being the effective stiffness (table 5.1), braking at a_max at the latest
+            ahead = max(0.0, F_d - F) / p.K_p
+            self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
+            if self.v_t == 0.0:                                  # standstill: closed-loop force control
+                self._enter(CONTACT)
+                x_c, F_c = self.contact                          # the stiffness met from contact to here
+                if self.x_t - x_c > 0.0 and F - F_c > 0.0:
+                    self.k_contact = (F - F_c) / (self.x_t - x_c)
+                # bumpless: the integral part takes over what the P part does not give (the D part
+                # of the contact transient is left out: it would stay in the integrator)
+                self.integrator = self.x_t - e_F / p.K_p
+        if self.state == CONTACT:
+            self._pid(e_F, dF)
+        elif self.state == RELEASE:
+            self._release()
+        if self.state in (APPROACH, LOST, BRAKE, RELEASE):
+            self.integrator = self.x_t                           # the position-controlled x_t
+            self.saturated = abs(self.x_t) >= p.x_max
+            if self.saturated:
+                self.x_t = _clip(self.x_t, p.x_max)
+                self.v_t = 0.0
+        x_t, (z_x, z_y, z_z) = self.x_t, self.z_t.tolist()
+        x = np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0])    # R_t [0 0 x_t]
+        # (F_vec: the array built above for this state alone)
+        return HPFCState(self.state, self.enabled or self.state != IDLE, self.z_t.copy(), F_d0.copy(),
+                         F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
+
+    def absorb(self, dx: float) -> None:
+        """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
+        the cable force controller's integral part along the task axis, see ``ControlLoop``): x_t
+        and its integral part move by dx, so the sum of both outputs does not change."""
+        if self.state in (CONTACT, RELEASE) and math.isfinite(dx):
+            self.x_t = _clip(self.x_t + dx, self.params.x_max)
+            if self.state == CONTACT:
+                self.integrator = _clip(self.integrator + dx, self.params.x_max)
+
+    def _pid(self, e_F: float, dF: float) -> None:
+        """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
+        p, dt = self.params, self.dt
+        pd = (e_F - p.T_d * dF) / p.K_p
+        candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
+        free = pd + candidate
+        blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
+        self.integrator = _clip(self.integrator if blocked else candidate, p.x_max)
+        x_t = pd + self.integrator
+        self.saturated = abs(x_t) > p.x_max
+        x_new = _clip(x_t, p.x_max)
+        self.v_t = (x_new - self.x_t) / dt
+        self.x_t = x_new
+
+
+def task_force_direction(AT, z_t) -> np.ndarray:
+    """a (m,): the cable forces' share in the force along the task z axis, a . f = z_t . (A^T f)_F
+    (A^T f is the cables' wrench on the platform, (2.10)); a force change orthogonal to a leaves
+    the contact force unchanged."""
+    return np.asarray(AT, dtype=float)[:3].T @ np.asarray(z_t, dtype=float)
+
+
+def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
+    """The correction (6,) that puts the expected contact reaction into the wrench of the force
+    distribution (3.26)-(3.28) in place of the measured one: w - (F_d - F) z_t (force part).
+
+    While the hybrid force controller acts (A-D, R) the environment is expected to push the platform
+    with -F_d z_t. The distribution then plans for the contact force being established, does not
+    step when the contact is made or lost (the sum w_F + (F - F_d) z_t does not contain the
+    contact's jump), and after the release (F_d < F_th) its wrench filter holds no memory of the
+    contact, so the CFC resuming in I does not press the platform down with the filtered remains
+    of the contact force. Idle (I): 0.
+    """
+    w = np.zeros(6)
+    if state is not None and state.state in FORCE_CONTROLLED:
+        w[:3] = -(state.F_d - state.F) * state.z_t
+    return w
+
+
+def expected_contact_wrench_of(state: str | None, F_d0, F_vec, z_t) -> np.ndarray:
+    """:func:`expected_contact_wrench` from the published state (``hybrid_force_controller/state``:
+    the state letter, reference F_d,0, feedback F_vec) and the task z axis z_t (3,)."""
+    z = np.asarray(z_t, dtype=float)
+    F_d0, F_vec = np.asarray(F_d0, dtype=float), np.asarray(F_vec, dtype=float)
+    w = np.zeros(6)
+    if state in FORCE_CONTROLLED and np.all(np.isfinite(np.r_[F_d0, F_vec, z])):
+        w[:3] = -(float(z @ F_d0) - float(z @ F_vec)) * z
+    return w
+
+
+class CFCCoupling:
+    """Section 5.1.2's changes of the cable force control under hybrid force control.
+
+    - The CFC is paused during contact establishment (A-C): its output Δq_CFC is held and its state
+      does not change, since the abruptly changing cable forces would destabilise it (thesis).
+    - In D and R it runs (:meth:`contact_update`, used by ``ControlLoop`` and the node
+      ``cable_force_controller``), its feed-forward through the moving average of T_MA,HPFC, the
+      thesis's filter "to slow down the control loop".
+    - :meth:`update` is the coupling without the structure matrix: it holds the CFC in D and R as
+      well; when the contact has ended (I) the set-point is blended from the one held at the pause
+      to the live one through the moving average, so the feed-forward f_d of (3.22) does not step
+      (:meth:`contact_update` uses it in I).
+
+    docs/hybrid_force_control.md has the variants tried and their figures.
+    """
+
+    def __init__(self, T_MA: float, dt: float):
+        self.dt = dt
+        self.average = MovingAverage(T_MA, dt)
+        self.weight = 0.0                       # share of the filtered set-point, 0..1
+        self.share = 1.0                        # share of the contact force handed over (contact_update)
+        self.paused = False                     # the CFC paused in the last period (run)
+
+    def set_time_constant(self, T_MA: float) -> None:
+        if max(1, int(round(T_MA / self.dt))) != self.average.n:
+            last = self.average.y
+            self.average = MovingAverage(T_MA, self.dt)
+            self.average.reset(last)
+
+    def update(self, state: str, f_d) -> tuple[np.ndarray, bool]:
+        """-> (the set-point for the CFC, paused)."""
+        f_d = np.asarray(f_d, dtype=float)
+        if state in FORCE_CONTROLLED:
+            if self.average.y is None or self.weight == 0.0:
+                self.average.reset(f_d)             # the set-point at the pause, held
+            self.weight = 1.0
+            return self.average.y.copy(), True
+        if self.weight > 0.0:
+            self.weight = max(0.0, self.weight - self.dt / max(self.average.T, self.dt))
+        if self.weight == 0.0:
+            self.average.reset(None)
+            return f_d, False
+        filtered = self.average.update(f_d)
+        return self.weight * filtered + (1.0 - self.weight) * f_d, False
+
+
+    def contact_update(self, state: str, f_d, F_c: float, a) -> tuple[np.ndarray, np.ndarray, bool, float]:
+        """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
+        wrench with the expected contact force, :func:`expected_contact_wrench`), F_c the expected
+        contact force as that wrench carries it, a of :func:`task_force_direction`
+        -> (set-point of the error (3.2), feed-forward (3.22), paused, F_ff).
+
+        - A-C: paused, the set-point of the pause held (thesis).
+        - D and R: the error acts on the live f_d (off a it goes there from the one held within
+          HAND_OVER_TIME, so the resumed CFC does not step). The feed-forward starts from the one held and
+          follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
+          control loop"), except along a, where it goes to the live f_d within HAND_OVER_TIME: its
+          contact force F_ff (F_c times the share handed over) is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
+          the contact stiffness), so nothing of the contact force stays in Δq_CFC after the contact.
+        - I: the feed-forward returns to the live set-point through the average as in
+          :meth:`update`, again live along a.
+        """
+        f_d = np.asarray(f_d, dtype=float)
+        if state == IDLE and self.weight == 0.0:     # idle, ramped out: f_d passes, whatever a is
+            self.average.reset(None)
+            return f_d, f_d, False, float(F_c)
+        a = np.asarray(a, dtype=float)
+        aa = float(a @ a)
+
+        def live_along_a(f):
+            return f + a * (a @ (f_d - f)) / aa if aa > 0.0 else f
+
+        if state in CFC_PAUSED:
+            if self.average.y is None or self.weight == 0.0:
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+            self.weight = 1.0
+            self.share = 0.0
+            return self.hold.copy(), self.hold.copy(), True, 0.0
+        if state in (CONTACT, RELEASE):
+            if self.average.y is None or self.weight == 0.0:  # enabled in contact: no pause before
+                self.average.reset(f_d)
+                self.hold = f_d.copy()
+                self.share = 0.0
+            self.weight = 1.0
+            # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
+            self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+            y = self.average.update(f_d).copy()
+            target = self.hold + self.share * (f_d - self.hold)
+            f_err = target
+            if aa > 0.0:
+                y += a * (a @ (target - y)) / aa
+                f_err = target + a * (a @ (f_d - target)) / aa      # live along a
+            return f_err, y, False, float(self.share * F_c)
+        out, _ = self.update(state, f_d)
+        out = live_along_a(out)
+        return out, out, False, float(F_c)
+
+
+    def run(self, state: str, f_d, F_c: float, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float, float]:
+        """:meth:`contact_update` and what it does to the cable force controller (a
+        :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
+        before that controller's update of the period: f the measured cable forces (m,) [N]
+        -> (set-point, feed-forward, paused, F_ff, F_a).
+
+        - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
+          integral part takes the proportional part's step.
+        - In D and R the integral part along a (the cable forces that change the contact force) is
+          handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
+          integrator this period (the hybrid force controller takes F_a / k_t on x_t,
+          :meth:`HybridForceControl.absorb`), so the PID (5.3) owns the steady contact force and
+          nothing of it stays in Δq_CFC when the contact ends.
+        """
+        a = np.asarray(a, dtype=float)
+        f_set, f_ff, paused, F_ff = self.contact_update(state, f_d, F_c, a)
+        c = controller
+        if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
+            c.feedback_filter.reset(f)
+            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
+        self.paused = paused
+        F_a = 0.0
+        aa = float(a @ a) if not paused and state in (CONTACT, RELEASE) else 0.0
+        if aa > 0.0:
+            share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
+            c.pi.integrator = c.pi.integrator - share * a
+            F_a = share * aa                            # the cables press with a . f along z_t
+        return f_set, f_ff, paused, F_ff, F_a
+
+
+class ContactHandOver:
+    """The hand-over offset x_comp of section 5.1.2 for the node graph, where the hybrid force
+    controller, not the cable force controller, publishes it (``ControlLoop._hpfc_cfc`` computes
+    the same from :meth:`CFCCoupling.contact_update`'s F_ff).
+
+    The CFC's feed-forward presses along z_t with F_ff = share F_c: F_c the expected contact force
+    F_d through the PT1 of the force distribution's wrench filter (T_c, so F_ff is what f_d
+    carries), share ramped from 0 over HAND_OVER_TIME from the start of D or R (0 while the CFC is
+    paused, A-C), all of F_c in I. x_comp = -F_ff / k_t z_t lifts the position offset by what that
+    press pushes the robot, k_t the contact stiffness measured in B (else K_p); 0 while the CFC's
+    output is not applied.
+    """
+
+    def __init__(self, T_c: float, dt: float):
+        self.dt = dt
+        self.filter = LowPass(T_c, dt)
+        self.share = 1.0
+
+    def set_time_constant(self, T_c: float) -> None:
+        self.filter.set_time_constant(T_c)
+
+    def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
+        """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]."""
+        F_c, = self.filter.update_floats((state.F_d if state.state in FORCE_CONTROLLED else 0.0,))
+        if state.state in CFC_PAUSED:
+            self.share = 0.0
+        elif state.state in (CONTACT, RELEASE):
+            self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+        F_ff = self.share * F_c if state.state in (CONTACT, RELEASE) else (0.0 if state.state in CFC_PAUSED else F_c)
+        x_comp = np.zeros(6)
+        if F_ff != 0.0 and cfc_on and math.isfinite(F_ff) and k_t > 0.0:
+            x_comp[:3] = -F_ff / k_t * state.z_t
+        return x_comp
+
+
+def format_state(controller: str, state: str) -> str:
+    """The ``controller`` field of the HPFC's ControllerState: ``<name>:<state>``."""
+    return f"{controller}:{state}"
+
+
+def parse_state(controller_field: str) -> str | None:
+    """The state letter of a ``<name>:<state>`` controller field, None when it carries none."""
+    _, sep, state = controller_field.rpartition(":")
+    return state if sep and state in STATES else None

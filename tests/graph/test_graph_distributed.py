@@ -1,0 +1,188 @@
+"""The closed loop of graphs/closed_loop.yaml across process and host boundaries.
+
+- A composed graph (in-process delivery) still shows every loop topic to a node in another process.
+- The simulator and the controllers in two processes that find each other only through DDS close
+  the lockstep loop: every winch state is answered by a winch command with its stamp.
+- The same with the two processes in two network namespaces joined by a veth pair (a network of
+  two hosts, UDP only), created by the test; skipped where the machine does not allow namespaces.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import uuid
+
+import pytest
+
+from cdpr_tools.demo_cmd import GRAPH
+
+STARTUP_S = 150.0    # wall time for both parts to start, discover each other and answer N periods
+PERIODS = 200        # winch states the probe must see answered by winch commands
+LOOP_TOPICS = {      # one message per control period each
+    "/winch/state": "sensor_msgs/msg/JointState", "/winch/command": "sensor_msgs/msg/JointState",
+    "/setpoint": "cdpr_msgs/msg/OperationalSetpoint", "/cable_forces": "cdpr_msgs/msg/CableForces",
+    "/platform/pose": "geometry_msgs/msg/PoseStamped", "/platform/wrench": "geometry_msgs/msg/WrenchStamped",
+    "/forward_kinematics/diagnostics": "cdpr_msgs/msg/ForwardKinematicsDiagnostics",
+    "/force_distribution": "cdpr_msgs/msg/ForceDistribution",
+    "/cable_force_controller/state": "cdpr_msgs/msg/ControllerState", "/ospc/state": "cdpr_msgs/msg/ControllerState",
+    "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
+}
+# A probe in a process of its own: counts the stamps of the loop topics until PERIODS winch states
+# were answered, then prints a JSON summary. argv: timeout [s], periods, topics (JSON name -> type).
+PROBE = r"""
+import json, sys, threading, time
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from cdpr_control.ros.qos import CONTROL
+from cdpr_control.ros.runner import spin
+from cdpr_tools.message_convert import message_class
+from cdpr_tools.ros_graph import new_context
+
+timeout, periods, topics = float(sys.argv[1]), int(sys.argv[2]), json.loads(sys.argv[3])
+context = new_context()
+node = Node("distributed_probe", context=context, start_parameter_services=False)
+stamps = {topic: [] for topic in topics}
+
+def keeper(topic):
+    return lambda m: stamps[topic].append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
+
+for topic, type_name in topics.items():
+    node.create_subscription(message_class(type_name), topic, keeper(topic), CONTROL)
+executor = EventsExecutor(context=context)
+executor.add_node(node)
+stop = threading.Event()
+threading.Thread(target=spin, args=(executor, stop), daemon=True).start()
+answered = lambda: set(stamps["/winch/state"]) & set(stamps["/winch/command"])
+deadline = time.monotonic() + timeout
+while time.monotonic() < deadline and len(answered()) < periods:
+    time.sleep(0.05)
+stop.set()
+time.sleep(0.3)
+print(json.dumps({"answered": sorted(answered()), "counts": {t: len(s) for t, s in stamps.items()}}), flush=True)
+"""
+
+
+def python_env(**extra) -> dict:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), "PYTHONUNBUFFERED": "1", **extra}
+
+
+def launch_part(*select: str, prefix=(), env=None) -> subprocess.Popen:
+    """``cdpr launch closed_loop.yaml <select>`` (composed) in a process of its own."""
+    cmd = [*prefix, sys.executable, "-c", "import sys; from cdpr_tools.cli import main; sys.exit(main(sys.argv[1:]))",
+           "launch", str(GRAPH), *select]
+    return subprocess.Popen(cmd, env=env or python_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+
+
+def probe(topics: dict, prefix=(), env=None) -> dict:
+    done = subprocess.run([*prefix, sys.executable, "-c", PROBE, str(STARTUP_S), str(PERIODS), json.dumps(topics)],
+                          env=env or python_env(), capture_output=True, text=True, timeout=STARTUP_S + 60)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def stop(*processes: subprocess.Popen) -> str:
+    output = []
+    for p in processes:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGINT)
+    for p in processes:
+        try:
+            out, _ = p.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            out, _ = p.communicate()
+        output.append(out or "")
+    return "\n".join(output)
+
+
+def check_loop_closed(result: dict, log: str) -> None:
+    answered = result["answered"]
+    assert len(answered) >= PERIODS, f"only {len(answered)} periods answered; launch output:\n{log[-3000:]}"
+    # lockstep: the simulator advanced because the commands came back, one period at a time
+    assert answered[-1] - answered[0] >= (PERIODS - 1) * 1_000_000
+
+
+def test_a_node_in_another_process_sees_every_topic_of_a_composed_graph():
+    graph = launch_part()
+    try:
+        result = probe(LOOP_TOPICS)
+    finally:
+        log = stop(graph)
+    check_loop_closed(result, log)
+    missing = [t for t, n in result["counts"].items() if n == 0]
+    assert not missing, f"no message on {missing} outside the composed graph"
+
+
+def test_simulator_and_controllers_in_two_processes_close_the_loop_over_dds():
+    sim = launch_part("--only", "winch_platform_sim")
+    controllers = launch_part("--exclude", "winch_platform_sim")
+    try:
+        result = probe({t: LOOP_TOPICS[t] for t in ("/winch/state", "/winch/command")})
+    finally:
+        log = stop(sim, controllers)
+    check_loop_closed(result, log)
+
+
+def _ip(*args: str) -> None:
+    subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
+
+
+@pytest.fixture
+def two_hosts():
+    """Two network namespaces joined by a veth pair: (name, address) of each."""
+    if shutil.which("ip") is None:
+        pytest.skip("iproute2 (ip) is not installed: cannot create network namespaces")
+    tag = uuid.uuid4().hex[:6]
+    hosts = [(f"cdpr_a_{tag}", "10.231.0.1"), (f"cdpr_b_{tag}", "10.231.0.2")]
+    veth = (f"va{tag}", f"vb{tag}")
+    made = []
+    try:
+        for name, _ in hosts:
+            _ip("netns", "add", name)
+            made.append(name)
+        _ip("link", "add", veth[0], "type", "veth", "peer", "name", veth[1])
+        for (name, address), dev in zip(hosts, veth):
+            _ip("link", "set", dev, "netns", name)
+            _ip("-n", name, "addr", "add", f"{address}/24", "dev", dev)
+            _ip("-n", name, "link", "set", dev, "up", "multicast", "on")
+            _ip("-n", name, "link", "set", "lo", "up")
+            _ip("-n", name, "route", "add", "224.0.0.0/4", "dev", dev)  # DDS discovery multicast
+    except (subprocess.CalledProcessError, PermissionError) as exc:
+        for name in made:
+            subprocess.run(["ip", "netns", "del", name], capture_output=True)
+        detail = exc.stderr.strip() if isinstance(exc, subprocess.CalledProcessError) else str(exc)
+        pytest.skip(f"network namespaces are not permitted here ({detail})")
+    yield hosts
+    for name in made:
+        subprocess.run(["ip", "netns", "del", name], capture_output=True)
+
+
+def host_env(peer: str) -> dict:
+    """The environment of a process on one of the two hosts: UDP over the veth only (no shared
+    memory between the "hosts"), discovery beyond localhost, ``peer`` the other host's address."""
+    return python_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=peer,
+                      FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
+
+
+def split_over_hosts(two_hosts):
+    """The simulator on host A, the controllers on host B: (sim, controllers, prefix and env on A)."""
+    (host_a, address_a), (host_b, address_b) = two_hosts
+    in_a, in_b = ("ip", "netns", "exec", host_a), ("ip", "netns", "exec", host_b)
+    sim = launch_part("--only", "winch_platform_sim", prefix=in_a, env=host_env(address_b))
+    controllers = launch_part("--exclude", "winch_platform_sim", prefix=in_b, env=host_env(address_a))
+    return sim, controllers, in_a, host_env(address_b)
+
+
+def test_simulator_and_controllers_on_two_hosts_joined_by_a_veth_pair(two_hosts):
+    sim, controllers, in_a, env_a = split_over_hosts(two_hosts)
+    try:
+        # the probe on host A sees the commands that crossed from host B
+        result = probe({t: LOOP_TOPICS[t] for t in ("/winch/state", "/winch/command")}, prefix=in_a, env=env_a)
+    finally:
+        log = stop(sim, controllers)
+    check_loop_closed(result, log)

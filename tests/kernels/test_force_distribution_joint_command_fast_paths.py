@@ -1,0 +1,184 @@
+"""The per-period fast paths of the force distribution and joint command give the same numbers, bit for
+bit, as the computation they replace: the compiled joint command period (kernels.model.joint_command_period), the model
+wrench handed to ForceSetpoint, and the nodes' values kept while their set-point repeats."""
+import numpy as np
+import pytest
+
+from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
+rclpy = import_or_skip("rclpy")
+from cdpr_control import kernels  # noqa: E402
+from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams  # noqa: E402
+from cdpr_control.control.joint_command import JointCommand  # noqa: E402
+from cdpr_control.kernels.model import joint_command_period  # noqa: E402
+from cdpr_control.kernels.robot_data import robot_data  # noqa: E402
+from cdpr_control.model.kinematics import inverse_kinematics  # noqa: E402
+from cdpr_control.control.load_compensation import payload_wrench  # noqa: E402
+from warm_robots import robot  # noqa: E402,F401  (the fixture)
+
+DT = 1e-3
+
+
+def same_bits(a, b) -> bool:
+    """Equal bit for bit (-0.0 is not 0.0, a NaN equals the same NaN)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _poses(robot, n, rng, scale=0.03):
+    return [robot.home + rng.uniform(-scale, scale, 6) * np.r_[1, 1, 1, 0.3, 0.3, 0.3] for _ in range(n)]
+
+
+def test_joint_command_period_is_the_step_it_replaces(robot):  # noqa: F811
+    """x_d + offset, model.joint_command_step, Δθ / dt and θ_d + Δθ: the same bits in one call."""
+    rng = np.random.default_rng(3)
+    d = robot_data(robot)
+    m = robot.m
+    for x_d in _poses(robot, 50, rng):
+        offset = rng.uniform(-2e-3, 2e-3, 6)
+        dq = rng.uniform(-1e-3, 1e-3, m)
+        theta_d = inverse_kinematics(robot, x_d).q + rng.uniform(-5e-3, 5e-3, m)
+        for step in (1e-4, 1.0):                          # rate-limited and free
+            theta_next, velocity = np.empty(m), np.empty(m)
+            assert joint_command_period(x_d, offset, d.a, d.b, d.R_A, d.r_p, d.pulleys, dq, theta_d, step, DT,
+                                        theta_next, velocity)
+            delta = kernels.joint_command_step(robot, x_d + offset, dq, theta_d, step)
+            assert same_bits(velocity, delta / DT) and same_bits(theta_next, theta_d + delta)
+    bad = np.full(6, np.nan)
+    assert not joint_command_period(bad, np.zeros(6), d.a, d.b, d.R_A, d.r_p, d.pulleys, np.zeros(m),
+                                    np.zeros(m), 1.0, DT, np.empty(m), np.empty(m))
+
+
+def _step_reference(jc, x_d, offset, dq):
+    """JointCommand.update's general path (model.joint_command_step), as before the compiled period."""
+    delta = kernels.joint_command_step(jc.robot, x_d + offset, dq, jc.theta_d, jc.v_max * jc.dt)
+    return jc.theta_d + delta, delta / jc.dt
+
+
+@pytest.mark.skipif(not kernels.ENABLED, reason="CDPR_KERNELS=0: JointCommand runs the numpy reference")
+def test_joint_command_update_with_one_offset_is_the_general_path(robot):  # noqa: F811
+    rng = np.random.default_rng(4)
+    jc = JointCommand(robot, DT)
+    jc.reset(inverse_kinematics(robot, robot.home).q)
+    for x_d in _poses(robot, 30, rng, scale=0.002):
+        offset, dq = rng.uniform(-1e-3, 1e-3, 6), rng.uniform(-1e-4, 1e-4, robot.m)
+        theta_ref, velocity_ref = _step_reference(jc, x_d, offset, dq)
+        theta_d = jc.update(x_d, [offset], dq)
+        assert same_bits(theta_d, theta_ref) and same_bits(jc.theta_d, theta_ref)
+        assert same_bits(jc.velocity, velocity_ref) and not jc.held
+        theta_d[:] = 0.0                                  # the caller's copy, not the state
+        assert same_bits(jc.theta_d, theta_ref)
+    velocity = jc.velocity.copy()
+    jc.update(np.full(6, np.nan), [np.zeros(6)], np.zeros(robot.m))     # not finite: brakes on the path
+    assert jc.held and np.all(np.abs(jc.velocity) <= np.abs(velocity))
+
+
+def test_force_setpoint_with_the_callers_model_wrench(robot):  # noqa: F811
+    """ForceSetpoint.update with w_dyn (and A^T) from the caller: the same result as computing them."""
+    rng = np.random.default_rng(5)
+    params = ForceSetpointParams(tension_level=0.2)
+    a, b = ForceSetpoint(robot, DT, params), ForceSetpoint(robot, DT, params)
+    weight = np.r_[robot.platform.mass * robot.gravity, 0, 0, 0]
+    for x_d in _poses(robot, 40, rng, scale=0.01):
+        xdot_d, xddot_d = rng.uniform(-0.1, 0.1, 6), rng.uniform(-1, 1, 6)
+        w = -weight + rng.normal(0, 0.5, 6)
+        w_model = payload_wrench(robot, x_d, xdot_d, xddot_d, 0.5)
+        ra = a.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
+        w_dyn = kernels.platform_wrench(robot, x_d, xdot_d, xddot_d)
+        AT, = kernels.inverse_kinematics_fields(robot, x_d, "AT")
+        rb = b.update(x_d, xdot_d, xddot_d, w, AT, w_model, w_dyn)
+        assert same_bits(a.w_d, b.w_d) and same_bits(ra.f, rb.f)
+        assert (ra.status, ra.residual, ra.iterations) == (rb.status, rb.residual, rb.iterations)
+
+
+# --- the nodes: values kept while the set-point repeats ------------------------------------------
+
+@pytest.fixture(scope="module")
+def context():
+    rclpy.init()
+    yield
+    rclpy.shutdown()
+
+
+def _setpoint(x_d, xdot_d, xddot_d):
+    from cdpr_msgs.msg import OperationalSetpoint
+    from cdpr_control.ros.conversions import accel_to_msg, pose_to_msg, twist_to_msg
+    return OperationalSetpoint(pose=pose_to_msg(x_d), velocity=twist_to_msg(xdot_d), acceleration=accel_to_msg(xddot_d))
+
+
+def _signed_zero_pose(pose):
+    """The pose with +0.0 in place of -0.0 and the other way round (the same value, other bits)."""
+    for v in (pose.position, pose.orientation):
+        for name in ("x", "y", "z") + (("w",) if hasattr(v, "w") else ()):
+            if getattr(v, name) == 0.0:
+                setattr(v, name, -getattr(v, name))
+    return pose
+
+
+def test_force_distribution_node_is_the_stage_period_by_period(context):
+    """The node (set-point values kept while they repeat, the message built field by field) against the
+    stage fed the message conversions every period: the same messages, bit for bit."""
+    from cdpr_msgs.msg import ForceDistribution
+    from geometry_msgs.msg import Inertia, InertiaStamped, WrenchStamped
+    from rclpy.parameter import Parameter
+
+    from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
+        wrench_to_msg)
+    from cdpr_control.nodes.force_distribution import ForceDistributionNode
+
+    node = ForceDistributionNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini"),
+                                                      Parameter("payload_input", value=True)])
+    try:
+        robot = node.robot
+        reference = ForceSetpoint(robot, node.dt, node.stage.params)
+        out = []
+        node.publisher.publish = out.append
+        rng = np.random.default_rng(6)
+        weight = np.r_[robot.platform.mass * robot.gravity, 0, 0, 0]
+        x_d, xdot_d, xddot_d = robot.home.copy(), np.zeros(6), np.zeros(6)
+        mass = 0.0
+        for k in range(60):
+            if k % 7 == 3:                                 # the set-point moves now and then
+                x_d = x_d + rng.uniform(-1e-3, 1e-3, 6) * np.r_[1, 1, 1, 0.1, 0.1, 0.1]
+                xdot_d, xddot_d = rng.uniform(-0.05, 0.05, 6), rng.uniform(-0.5, 0.5, 6)
+            if k % 5 == 0:                                 # the payload estimate now and then
+                mass = float(rng.uniform(0.0, 0.3))
+            sp = _setpoint(x_d, xdot_d, xddot_d)
+            if k % 11 == 10:
+                _signed_zero_pose(sp.pose)
+            w = -weight + rng.normal(0, 0.3, 6)
+            msgs = {"setpoint": sp, "wrench": WrenchStamped(wrench=wrench_to_msg(w))}
+            if k not in (17, 31):       # (an optional input: missing while the set-point moves, back unchanged)
+                msgs["payload"] = InertiaStamped(inertia=Inertia(m=mass))
+            node._cycle(msgs, k * 1_000_000)
+            px, pv, pa = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+            w_model = payload_wrench(robot, px, pv, pa, mass, (0.0, 0.0, 0.0)) if "payload" in msgs else None
+            res = reference.update(px, pv, pa, wrench_from_msg(msgs["wrench"].wrench), w_model=w_model)
+            expected = ForceDistribution(
+                header=node.header(k * 1_000_000), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(),
+                f_min=res.f_min.tolist(), f_max=res.f_max.tolist(), w_d=wrench_to_msg(reference.w_d),
+                method=res.method, status=int(res.status), max_violation=float(res.max_violation),
+                residual=float(res.residual), iterations=int(res.iterations), solve_time=0.0)
+            out[-1].solve_time = 0.0                       # (a wall-clock measurement)
+            assert repr(out[-1]) == repr(expected), f"period {k}"
+            assert out[-1] == expected
+    finally:
+        node.destroy_node()
+
+
+def test_joint_command_node_keeps_x_d_only_for_the_same_bits(context):
+    from rclpy.parameter import Parameter
+
+    from cdpr_control.ros.conversions import pose_from_msg, pose_to_msg
+    from cdpr_control.nodes.joint_command import JointCommandNode
+
+    node = JointCommandNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini")])
+    try:
+        pose = pose_to_msg(np.r_[0.01, 0.0, 0.02, 0.0, 0.0, 0.0])
+        first = node._setpoint_pose(pose)
+        assert node._setpoint_pose(pose_to_msg(np.r_[0.01, 0.0, 0.02, 0.0, 0.0, 0.0])) is first
+        flipped = node._setpoint_pose(_signed_zero_pose(pose))
+        assert flipped is not first and same_bits(flipped, pose_from_msg(pose))
+        pose = pose_to_msg(np.r_[0.01, 0.0, 0.021, 0.0, 0.0, 0.0])
+        assert same_bits(node._setpoint_pose(pose), pose_from_msg(pose))
+    finally:
+        node.destroy_node()
