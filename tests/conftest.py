@@ -20,3 +20,15 @@ def friction_bag(tmp_path_factory):
     return experiments.record_friction_run(
         tmp_path_factory.mktemp("identification") / "friction", "ipanema3_mini", seed=3,
         amplitudes=(0.0005, 0.002, 0.005), pause=0.05, fast_amplitude=0.01, fast_velocities=(0.2, 0.4))
+
+
+@pytest.fixture(scope="module", params=("ipanema3_mini", "ipanema3"))
+def robot(request):
+    """Each shipped robot (thesis tables 2.1-2.4) with the compiled kernels loaded for it, for the
+    tests that hold on both; a module with a robot of its own defines its own ``robot``."""
+    from cdpr_control import kernels
+    from cdpr_control.model.robot import load_robot
+
+    robot = load_robot(request.param)
+    kernels.warm_up(robot)
+    return robot

@@ -13,7 +13,6 @@ from cdpr_control.kernels.model import joint_command_period  # noqa: E402
 from cdpr_control.kernels.robot_data import robot_data  # noqa: E402
 from cdpr_control.model.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.control.load_compensation import payload_wrench  # noqa: E402
-from warm_robots import robot  # noqa: E402,F401  (the fixture)
 
 DT = 1e-3
 

@@ -18,13 +18,6 @@ def _forget_tables():
     kfriction._last_tables = (None, b"", (), None, None)
 
 
-@pytest.fixture(params=["ipanema3_mini", "ipanema3"])
-def robot(request):
-    robot = load_robot(request.param)
-    kernels.warm_up(robot)
-    return robot
-
-
 def _betas(robot, rng):
     """A sequence of wrap angles: repeats, a change, the same values again, a sign of zero flipped."""
     beta = kernels.inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).beta.copy()

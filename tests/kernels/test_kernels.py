@@ -19,8 +19,6 @@ from cdpr_control.model.friction import PulleyFriction, winch_force_from_sensor
 from cdpr_control.control.joint_command import JointCommand
 from cdpr_control.kernels import model as fk_kernels
 from cdpr_control.control.pi_control import PIController
-from warm_robots import robot  # noqa: F401  (the fixture)
-
 
 
 def test_the_kernels_are_enabled_and_numpy_reference_switches_them_off():

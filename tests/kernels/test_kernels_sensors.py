@@ -15,8 +15,6 @@ from cdpr_control.model import kinematics
 from cdpr_control.model.friction import PulleyFriction
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator, compiled
-from warm_robots import robot  # noqa: F401  (the fixture)
-
 
 
 def _friction_inputs(robot, n=700, v_eps=1e-7):

@@ -23,7 +23,6 @@ from cdpr_control.control.load_compensation import (COG_DECIMATION, REFERENCE_FR
     LoadCompensationParams, MovingAverage, compensating_wrench, cable_stiffness_model, compliance,
     mass_estimate, secant_offset, twist_to_pose_offset)
 from cdpr_control.control.safety import all_finite
-from warm_robots import robot  # noqa: F401  (the fixture)
 
 
 def same(a, b) -> bool:

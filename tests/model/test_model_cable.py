@@ -7,13 +7,6 @@ import pytest
 from cdpr_control.model import cable
 from cdpr_control.model.robot import load_robot
 
-ROBOTS = ["ipanema3", "ipanema3_mini"]
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    return load_robot(request.param)
-
 
 def test_total_free_length_adds_l0(robot):
     q = np.linspace(1.0, 2.0, robot.m)

@@ -11,13 +11,6 @@ from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.model.robot import load_robot
 from poses import random_poses
 
-ROBOTS = ["ipanema3", "ipanema3_mini"]
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    return load_robot(request.param)
-
 
 def equilibrium(robot, x):
     """Cable forces balancing the platform weight at x (A^T f = -w, (2.10)) around the mid force,

@@ -9,15 +9,7 @@ from scipy.optimize import brentq
 from cdpr_control.model.kinematics import (cable_accelerations, cable_velocities, inverse_kinematics,
     kardan_rate_matrix, pulley_frames, rotation_matrix, skew, structure_matrix_derivative,
     twist_from_pose_rates)
-from cdpr_control.model.robot import load_robot
 from poses import random_poses
-
-ROBOTS = ["ipanema3", "ipanema3_mini"]
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    return load_robot(request.param)
 
 
 def rel_err(a, b):

@@ -7,17 +7,9 @@ import pytest
 from cdpr_control.model import cable
 from cdpr_control.model.dynamics import mass_matrix
 from cdpr_control.model.kinematics import inverse_kinematics, kardan_rate_matrix
-from cdpr_control.model.robot import load_robot
 from poses import random_poses
 from cdpr_control.model.stiffness import (cable_stiffness, eigenfrequencies, geometric_stiffness,
     modal_frequencies, operational_stiffness)
-
-ROBOTS = ["ipanema3", "ipanema3_mini"]
-
-
-@pytest.fixture(scope="module", params=ROBOTS)
-def robot(request):
-    return load_robot(request.param)
 
 
 def kardan_map(x):

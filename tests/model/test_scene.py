@@ -6,12 +6,6 @@ from scipy.spatial import ConvexHull
 
 from cdpr_control.model import scene as sc
 from cdpr_control.model.kinematics import inverse_kinematics, rotation_matrix
-from cdpr_control.model.robot import load_robot
-
-
-@pytest.fixture(params=["ipanema3_mini", "ipanema3"])
-def robot(request):
-    return load_robot(request.param)
 
 
 def pose(robot):
