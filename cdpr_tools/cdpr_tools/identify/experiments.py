@@ -28,11 +28,13 @@ import numpy as np
 from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.model.robot import load_robot
 
-TOPIC_STATE = "winch/state"
-TOPIC_COMMAND = "winch/command"
-TOPIC_FORCES = "ground_truth/cable_forces"
-TOPIC_POSE = "ground_truth/pose"
-TOPIC_SETPOINT = "setpoint"
+# fully qualified, as rosbag2 and the project's recorder (`cdpr launch --record`, `cdpr bag record`)
+# name the graph's topics: the identification reads the bags a robot records
+TOPIC_STATE = "/winch/state"
+TOPIC_COMMAND = "/winch/command"
+TOPIC_FORCES = "/ground_truth/cable_forces"
+TOPIC_POSE = "/ground_truth/pose"
+TOPIC_SETPOINT = "/setpoint"
 
 
 def smooth_moves(waypoints, velocity, pause: float, dt: float) -> np.ndarray:
