@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 from mcap_ros2._dynamic import generate_dynamic
+from rclpy import node as rclpy_node
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 from websockets.sync.client import connect
@@ -180,3 +181,60 @@ def test_the_shipped_layout_shows_topics_the_graph_publishes(live):
     def leaves(node):
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
     assert sorted(leaves(layout["layout"])) == sorted(panels)
+
+
+def test_the_bridge_subscribes_only_while_a_client_watches():
+    """Unwatched the bridge costs the graph nothing: topics are advertised, but the ROS subscription
+    exists only while a client subscribes to the channel, and is dropped when the last one
+    unsubscribes or disconnects (the publisher's matched-subscription count, over DDS, says so)."""
+    from cdpr_test_nodes.graph import Spinner, wait_for
+
+    graph, view = Spinner(), Spinner()
+    try:
+        talker = graph.add(_Talker)
+        bridge = view.add(FoxgloveBridge, parameter_overrides=[Parameter("port", value=0),
+                                                               Parameter("discovery_period", value=0.1),
+                                                               Parameter("topics", value=["/lazy_a", "/lazy_b"])])
+        pub_a, pub_b = talker.pubs
+        with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=SUBPROTOCOLS, open_timeout=10) as ws:
+            client = Client(ws)
+            client.receive(lambda: {"/lazy_a", "/lazy_b"} <= set(client.channels))
+            assert bridge.subscribed_topics() == []
+            assert pub_a.get_subscription_count() == 0 and pub_b.get_subscription_count() == 0
+
+            client.subscribe(1, "/lazy_a")
+            client.receive(lambda: len(client.messages.get(1, [])) >= 3)
+            assert all(isinstance(m.data, str) and m.data.startswith("a") for _, m in client.messages[1])
+            assert bridge.subscribed_topics() == ["/lazy_a"]
+            wait_for(lambda: pub_a.get_subscription_count() == 1, what="the bridge's subscription to /lazy_a")
+            assert pub_b.get_subscription_count() == 0
+
+            ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [1]}))
+            wait_for(lambda: bridge.subscribed_topics() == [], what="the subscription dropped")
+            wait_for(lambda: pub_a.get_subscription_count() == 0, what="/lazy_a unmatched")
+
+            client.subscribe(2, "/lazy_b")
+            wait_for(lambda: bridge.subscribed_topics() == ["/lazy_b"], what="the subscription to /lazy_b")
+        # the client disconnected: its channels are unsubscribed
+        wait_for(lambda: bridge.subscribed_topics() == [], what="the subscription dropped on disconnect")
+        wait_for(lambda: pub_b.get_subscription_count() == 0, what="/lazy_b unmatched")
+    finally:
+        for spinner in (view, graph):
+            spinner.close()
+
+
+class _Talker(rclpy_node.Node):
+    """Publishes /lazy_a and /lazy_b (std_msgs/String) every 20 ms."""
+
+    def __init__(self, **kwargs):
+        from std_msgs.msg import String
+
+        super().__init__("lazy_talker", **kwargs)
+        self.pubs = (self.create_publisher(String, "/lazy_a", 10), self.create_publisher(String, "/lazy_b", 10))
+        self.k = 0
+
+        def tick():
+            self.k += 1
+            self.pubs[0].publish(String(data=f"a{self.k}"))
+            self.pubs[1].publish(String(data=f"b{self.k}"))
+        self.create_timer(0.02, tick)

@@ -4,8 +4,14 @@ Built on the Foxglove SDK (``foxglove-sdk``). Like the bag recorder, it subscrib
 they appear (serialized, QoS adapted to the publishers' offers) and offers each as a channel with
 the schema the bag writer stores (encoding ``ros2msg``, :func:`cdpr_tools.bag.schema.message_definition`)
 and the CDR payload as the middleware delivered it (padding cut, :func:`cdpr_tools.bag.cdr.trimmed`),
-so Foxglove decodes live data exactly as it decodes our bags. A message is forwarded only while a
-client is subscribed to its channel. Log times are the node's clock (sim time with ``use_sim_time``).
+so Foxglove decodes live data exactly as it decodes our bags. Log times are the node's clock (sim
+time with ``use_sim_time``).
+
+Unwatched, it costs the graph nothing: a topic is *advertised* as soon as it appears, but the bridge
+subscribes to it over ROS only when the first Foxglove client subscribes to its channel, and drops
+that subscription when the last client unsubscribes or disconnects (as Foxglove's own
+foxglove_bridge does). With no client connected the bridge has no subscription in the graph, so no
+publisher of the loop serializes or sends anything for it.
 
 Parameters of the other nodes are offered too (Foxglove's Parameters panel): ``/node.name``, read
 and set through the standard parameter services (rcl_interfaces), so a rejected value keeps the
@@ -22,6 +28,7 @@ import foxglove
 from foxglove.websocket import Capability, ServerListener
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -35,6 +42,7 @@ from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 DEFAULT_PORT = 8765  # Foxglove's default for a live connection
 SERVICE_TIMEOUT = 2.0  # s a node may take to answer a parameter request
 DISCOVERY_PERIOD = 0.5  # s between looks for new topics (default of ``discovery_period``)
+WATCH_PERIOD = 0.05  # s at most from a client's subscribe to the bridge's ROS subscription
 
 
 class FoxgloveBridge(Node):
@@ -45,7 +53,14 @@ class FoxgloveBridge(Node):
         self.declare_parameter("port", DEFAULT_PORT, ParameterDescriptor(
             description="WebSocket port; 0: any free port", read_only=True))
         self.channels: dict[str, foxglove.Channel] = {}
+        self._offered: dict[str, tuple] = {}          # topic -> (message class, forward callback)
         self._raw_subscriptions: dict[str, object] = {}
+        self._watchers: dict[str, int] = {}           # topic -> clients subscribed to its channel
+        self._watch_lock = threading.Lock()           # the server's threads count, the node's thread subscribes
+        self._watch_changed = threading.Event()
+        # the EventsExecutor has no guard conditions: a steady timer in the bridge's own process
+        # looks at the flag the server's threads set (20 cheap wake-ups a second; nothing in the graph)
+        self.create_timer(WATCH_PERIOD, self._subscribe_watched, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._lock = threading.Lock()  # parameter requests come on the server's threads
         self._param_clients: dict[str, AsyncParameterClient] = {}
         self.fox = foxglove.Context()  # channels of this bridge only (several bridges in one process)
@@ -72,10 +87,39 @@ class FoxgloveBridge(Node):
                 channel.log(trimmed(type_name, data), log_time=clock.now().nanoseconds)
 
         self.channels[topic] = channel
-        self._raw_subscriptions[topic] = self.create_subscription(msg_class, topic, forward,
-                                                              adapted_qos(self, topic), raw=True)
+        self._offered[topic] = (msg_class, forward)
         self.get_logger().debug(f"offering {topic} [{type_name}]")
+        self._watch_changed.set()     # a client may have subscribed before the topic was offered
         return True
+
+    # -- subscriptions while watched -----------------------------------------------------------------
+    def watch(self, topic: str, delta: int) -> None:
+        """A client subscribed (+1) to or left (-1) ``topic``'s channel (on a server thread)."""
+        with self._watch_lock:
+            self._watchers[topic] = max(0, self._watchers.get(topic, 0) + delta)
+        self._watch_changed.set()
+
+    def _subscribe_watched(self) -> None:
+        """On the node's executor: a ROS subscription for every watched offered topic, none for the others."""
+        if not self._watch_changed.is_set():
+            return
+        self._watch_changed.clear()
+        with self._watch_lock:
+            watched = {t for t, n in self._watchers.items() if n > 0}
+        for topic in list(self._raw_subscriptions):
+            if topic not in watched:
+                self.destroy_subscription(self._raw_subscriptions.pop(topic))
+                self.get_logger().debug(f"unsubscribed {topic}: no client watches it")
+        for topic in watched - set(self._raw_subscriptions):
+            if topic in self._offered:
+                msg_class, forward = self._offered[topic]
+                self._raw_subscriptions[topic] = self.create_subscription(
+                    msg_class, topic, forward, adapted_qos(self, topic), raw=True)
+                self.get_logger().debug(f"subscribed {topic} for a client")
+
+    def subscribed_topics(self) -> list[str]:
+        """The topics the bridge subscribes to in the graph now (the watched ones)."""
+        return sorted(self._raw_subscriptions)
 
     # -- parameters of the graph's nodes ------------------------------------------------------------
     def _client(self, node: str) -> AsyncParameterClient:
@@ -146,10 +190,17 @@ class FoxgloveBridge(Node):
 
 
 class _Listener(ServerListener):
-    """The server's callbacks (foxglove.websocket.ServerListener protocol) for parameters."""
+    """The server's callbacks (foxglove.websocket.ServerListener protocol): channel subscriptions and
+    parameters."""
 
     def __init__(self, bridge: FoxgloveBridge):
         self.bridge = bridge
+
+    def on_subscribe(self, client, channel):
+        self.bridge.watch(channel.topic, +1)
+
+    def on_unsubscribe(self, client, channel):     # also called for each channel of a client that disconnects
+        self.bridge.watch(channel.topic, -1)
 
     def on_get_parameters(self, client, param_names, request_id=None):
         return self.bridge.get_parameters(list(param_names))
