@@ -367,9 +367,19 @@ class GCodeInterpreterNode(CdprNode):
             self._abort(f"no winch/state for {self.values['state_timeout']:g} s (the simulator or the drives stopped)",
                         brake=False)
 
+    def _clock_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _sim_clock_ns(self) -> int | None:
+        """Simulated time once /clock runs (nothing may be stamped ahead of it), else None."""
+        if not self.get_parameter("use_sim_time").value:
+            return None
+        now = self._clock_ns()
+        return now if now > 0 else None
+
     def _on_state(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)                           # (only the stamp is used here)
-        problem = self.state_jumps.check("winch/state", stamp, lambda: self.get_clock().now().nanoseconds)
+        problem = self.state_jumps.check("winch/state", stamp, self._clock_ns, self._sim_clock_ns)
         if problem is not None:
             self.input_fault("winch/state", problem)
             return

@@ -130,7 +130,8 @@ class JointCommandNode(CdprNode):
 
         def keep(msg):
             t = stamp_ns(msg)
-            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync._reference)
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync.reference,
+                                                                          self.sync.clock)
             if problem is not None:
                 self.input_fault(topic, problem)
                 return
