@@ -334,8 +334,13 @@ class _Walk:
         while pos < self.size:
             pos = self._record(pos)
         self._close_pending()
+        found = self.found
+        if not found.complete and not (found.damage and found.damage[-1].end == self.size):
+            # cut at a record boundary: whatever came after the cut is gone
+            found.damage.append(Damage(found.path.name, self.size, self.size, 0 if self.after_data_end else None,
+                                       "the end of the file: it stops without its footer (cut off?)"))
         self._unknown_channels()
-        return self.found
+        return found
 
     def _record(self, pos: int) -> int:
         """Read the record at ``pos``; where the walk goes on."""
