@@ -146,9 +146,10 @@ class McapLayout:
 
 
 # -- one chunk -------------------------------------------------------------------------------
-def decode_chunk(buf, offset: int) -> tuple[ChunkRef, list]:
+def decode_chunk(buf, offset: int, parse: bool = True) -> tuple[ChunkRef, list]:
     """The chunk record at ``offset`` of ``buf``: its reference and its records (schemas, channels,
-    messages), or :class:`ChunkError` when its structure, compression or CRC is bad."""
+    messages; ``parse=False``: none, the check only), or :class:`ChunkError` when its structure,
+    compression or CRC is bad."""
     if len(buf) - offset < _HEAD.size + _CHUNK.size:
         raise ChunkError("shorter than a chunk header")
     opcode, length = _HEAD.unpack_from(buf, offset)
@@ -172,6 +173,8 @@ def decode_chunk(buf, offset: int) -> tuple[ChunkRef, list]:
     data = _decompress(bytes(buf[pos:end]), compression, size)
     if crc != 0 and zlib.crc32(data) != crc:
         raise ChunkError("CRC of its records does not match")
+    if not parse:
+        return ChunkRef(offset, end - offset, start_time, end_time), []
     records = _chunk_records(data)
     # the times in the header are not under the CRC: the messages' own times order the chunks
     times = [r.log_time for r in records if isinstance(r, Message)]
@@ -288,7 +291,7 @@ def _through_summary(path: Path, stream, summary, metadata) -> McapLayout | None
                 or _CHUNK.unpack_from(buf, _HEAD.size)[:2] != (index.message_start_time, index.message_end_time):
             return None                                           # the index points elsewhere: walk the file
         try:
-            ref, _ = decode_chunk(buf, 0)
+            ref, _ = decode_chunk(buf, 0, parse=False)   # (its header's times are the index's, checked above)
         except ChunkError as exc:
             lost = _indexed_counts(stream, index)
             if lost is None:
@@ -423,7 +426,7 @@ class _Walk:
                 break
             if _consistent_end(self.buf, pos) is not None:
                 try:
-                    decode_chunk(self.buf, pos)
+                    decode_chunk(self.buf, pos, parse=False)
                     return pos
                 except ChunkError:
                     pass
