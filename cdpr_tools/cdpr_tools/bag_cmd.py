@@ -223,12 +223,12 @@ def run_play(args) -> int:
                 print(f"published {player.published} of {bag.message_count} messages, then: {exc}", file=sys.stderr)
                 return 1
         print(f"published {count} messages" + (" (stopped)" if stop.is_set() else ""))
-        if bag.damage:
-            for damage in bag.damage:
-                print(f"skipped: {damage}", file=sys.stderr)
+        if bag.damage:                         # (each was warned about before playing; again at the end)
             counted, unknown = bag.lost_messages
             print(f"error: {len(bag.damage)} damaged part(s) of {bag.path} were skipped: {counted} messages lost"
                   + (f", and an unknown number in {unknown} part(s)" if unknown else ""), file=sys.stderr)
+            for damage in bag.damage:
+                print(f"  {damage}", file=sys.stderr)
             return 1
     finally:
         context.try_shutdown()

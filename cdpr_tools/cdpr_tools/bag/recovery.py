@@ -358,7 +358,7 @@ class _Walk:
             return self.size
         allowed = _SUMMARY_RECORDS if self.after_data_end else _DATA_RECORDS
         if opcode not in allowed or end > self.size:
-            return self._skip(pos, self._next_chunk(pos + 1), "unreadable bytes")
+            return self._skip(pos, self._next_chunk(pos + 1), "an unreadable part")
         if opcode == Opcode.MESSAGE_INDEX and self.pending is not None:
             self._count_index(pos, end)
             return end
