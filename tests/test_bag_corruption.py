@@ -239,3 +239,43 @@ def test_a_file_with_damaged_magic_is_refused_by_reader_play_and_reindex(origina
     assert "not an MCAP file" in err and "cannot repair" in err and "Traceback" not in err
     assert (bag / "run_0.mcap").read_bytes()[5:] == data[5:]        # left as it was
     assert not (bag / "run_0.mcap.orig").exists()
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+@pytest.mark.parametrize("damage", [bit_flip_in_records, zeroed(4096), truncated])
+def test_compressed_chunks_lose_only_what_is_damaged(tmp_path, compression, damage):
+    """The same for chunks compressed inside the file (a damaged one fails to decompress or its CRC)."""
+    path = tmp_path / "run"
+    with BagWriter(path, chunk_size=CHUNK, compression=compression) as bag:
+        for i in range(600):
+            bag.write("/winch/state", None, JointState(position=[float(i)] * 8), log_time(i))
+    data = (path / "run_0.mcap").read_bytes()
+    with open(path / "run_0.mcap", "rb") as f:
+        indexes = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+    chunks = [(c.chunk_start_offset, c.chunk_length,
+               {log_time(i) for i in range(600) if c.message_start_time <= log_time(i) <= c.message_end_time})
+              for c in indexes]
+    bad, survive = damage(data, chunks, 0.5)
+    (path / "run_0.mcap").write_bytes(bad)
+    bag = BagReader(path)
+    assert [m.log_time_ns for m in bag.messages()] == sorted(survive)
+    assert bag.damage and 0 < len(survive) < 600
+    assert [m.msg.position[0] for m in bag.messages()] == [t / 1e6 - 1 for t in sorted(survive)]
+
+
+def test_messages_whose_channel_record_is_lost_are_counted_lost(original, tmp_path, capsys):
+    """No summary (cut) and the first chunk, which holds the channel records, damaged: the other
+    chunks' messages cannot be decoded, and they are reported lost, not passed on undecodable."""
+    path, data, chunks = original
+    bad, _ = bit_flip_in_records(data, chunks, 0.0)
+    bad, _ = truncated(bad, chunks, 0.9)
+    bag_path = tmp_path / "run"
+    shutil.copytree(path, bag_path)
+    (bag_path / "run_0.mcap").write_bytes(bad)
+    bag = BagReader(bag_path)
+    assert bag.message_count == 0 and list(bag.messages()) == []
+    intact = sum(len(times) for offset, length, times in chunks[1:] if offset + length <= len(bad))
+    lost = [d for d in bag.damage if "channel record" in d.what]
+    assert sum(d.lost for d in lost) == intact > 0
+    assert cdpr(["bag", "reindex", str(bag_path)]) == 1
+    assert "cannot repair" in capsys.readouterr().err

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import heapq
 import io
+import mmap
 import os
 import struct
 import zlib
@@ -475,9 +476,8 @@ def _consistent_end(buf, pos: int) -> int | None:
 
 
 def _walk(path: Path) -> McapLayout:
-    with open(path, "rb") as stream:
-        buf = stream.read()
-    return _Walk(path, buf).run()
+    with open(path, "rb") as stream, mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+        return _Walk(path, buf).run()      # (mapped: a large file is not read into memory at once)
 
 
 # -- rebuilding ------------------------------------------------------------------------------
