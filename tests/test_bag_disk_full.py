@@ -73,10 +73,12 @@ def test_writer_stops_at_its_last_complete_chunk_and_counts_what_is_on_disk(tmp_
     written, bag, error = fill(tmp_path / "run", room)
     assert "No space left on device" in str(error) and str(bag.mcap_path) in str(error)
     assert f"{bag.messages_on_disk} messages are on disk" in str(error)
-    assert (tmp_path / "run" / "run_0.mcap").stat().st_size <= room   # cut back, not grown
+    size = (tmp_path / "run" / "run_0.mcap").stat().st_size
+    assert size <= room                                                 # cut back, not grown
     on_disk = BagReader(tmp_path / "run")
     assert 0 < on_disk.message_count == bag.messages_on_disk < written
-    assert not on_disk.damage, "the file ends at a record boundary: nothing half-written to skip"
+    # the file ends at a record boundary: nothing half-written to skip, only the missing footer
+    assert [(d.start, d.end) for d in on_disk.damage] == [(size, size)]
     # every message up to the last complete chunk, in order
     assert [m.msg.position[0] for m in on_disk.messages()] == [float(k) for k in range(on_disk.message_count)]
     info = yaml.safe_load((tmp_path / "run" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
@@ -86,6 +88,26 @@ def test_writer_stops_at_its_last_complete_chunk_and_counts_what_is_on_disk(tmp_
     bag.close()                                                          # and closing is quiet
     reindex(tmp_path / "run")                                            # with room again: whole
     assert BagReader(tmp_path / "run").message_count == on_disk.message_count
+
+
+def test_a_disk_full_while_closing_keeps_the_chunks_before(tmp_path):
+    """The last chunk and the summary no longer fit: the bag ends at its last flushed chunk."""
+    def write_all(bag) -> None:
+        for k in range(300):
+            bag.write("/winch/state", None, JointState(position=[float(k)] * 8), 1_000_000 * (k + 1))
+    with BagWriter(tmp_path / "whole.mcap", chunk_size=CHUNK) as bag:
+        write_all(bag)
+    room = (tmp_path / "whole.mcap").stat().st_size - 200
+    bag = BagWriter(tmp_path / "run", chunk_size=CHUNK,
+                    opener=lambda p, mode: io.BufferedWriter(FullDisk(p, room)))
+    write_all(bag)
+    with pytest.raises(BagWriteError, match="No space left"):
+        bag.close()
+    on_disk = BagReader(tmp_path / "run")
+    assert 0 < on_disk.message_count == bag.messages_on_disk < 300
+    assert [m.msg.position[0] for m in on_disk.messages()] == [float(k) for k in range(on_disk.message_count)]
+    size = (tmp_path / "run" / "run_0.mcap").stat().st_size
+    assert size <= room and [(d.start, d.end) for d in on_disk.damage] == [(size, size)]
 
 
 def test_a_disk_full_before_the_header_fails_at_open(tmp_path):

@@ -118,7 +118,7 @@ class BagWriter:
         self._pending_bytes = 0
         self._last_flush = time.monotonic()
         self._flushed = {"count": 0, "times": _Times(), "counts": {}}   # what is on disk
-        self._on_disk(self._stream.flush)                                # the header, so the file is MCAP
+        self._on_disk(lambda: None)                                      # the header, so the file is MCAP
         self._on_disk(self._write_metadata_file)
 
     # -- topics ------------------------------------------------------------------------------
@@ -270,10 +270,12 @@ class BagWriter:
         self._on_disk(self._write_metadata_file)
 
     def _on_disk(self, write) -> None:
-        """Run ``write`` (which ends in a flush of the .mcap stream or writes metadata.yaml); on an
-        OSError stop the bag at its last complete chunk (:meth:`_fail`)."""
+        """Run ``write`` and flush the .mcap stream, so that what it holds so far is on disk and
+        complete; on an OSError stop the bag at the last such point (:meth:`_fail`)."""
         try:
             write()
+            if not self._stream.closed:
+                self._stream.flush()
         except OSError as exc:
             self._fail(exc)
         if not self._stream.closed:
