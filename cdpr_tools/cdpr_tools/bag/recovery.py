@@ -1,8 +1,9 @@
 """Reading MCAP files chunk by chunk, so that damage costs only the chunks it hits.
 
 :func:`layout` finds the intact chunks of a file: through its summary's chunk index when the
-summary is readable and matches the file, otherwise by a linear walk over the records (a recording
-cut off by a crash has no summary; a damaged file may have a wrong one). Every chunk is checked
+summary is readable, matches its CRC and matches the file, otherwise by a linear walk over the
+records (a recording cut off by a crash has no summary; a damaged file may have a wrong one; the
+summary's chunk index then still tells what a damaged part held). Every chunk is checked
 (structure, decompression, CRC of its records) before it counts; a damaged one is skipped and
 reported as a :class:`Damage` (file offset, messages lost as far as the chunk index or the message
 index records after the chunk tell, otherwise unknown), and the walk goes on with the next chunk:
@@ -43,6 +44,7 @@ _HEAD = struct.Struct("<BQ")             # every record: opcode, content length
 _CHUNK = struct.Struct("<QQQII")         # chunk: start, end, uncompressed size, CRC, compression length
 _MESSAGE = struct.Struct("<HIQQ")        # message: channel id, sequence, log time, publish time
 _MESSAGE_INDEX = struct.Struct("<HI")    # message index: channel id, entries length (16 bytes each)
+_FOOTER = struct.Struct("<BQQQI")        # footer: opcode, length, summary start, summary offset start, CRC
 _COMPRESSIONS = ("", "zstd", "lz4")
 # records a data section holds outside chunks, and those of the summary section after DATA_END
 # (a message outside a chunk is not read: rosbag2 and this writer always chunk; it is reported)
@@ -254,7 +256,10 @@ def layout(path: str | os.PathLike) -> McapLayout:
 
 
 def _summary(stream):
-    """The file's summary and metadata records, or (None, None) when it has no readable summary."""
+    """The file's summary and metadata records, or (None, None) when it has no readable summary
+    (or one whose CRC in the footer does not match it)."""
+    if not _summary_crc_matches(stream):
+        return None, None
     try:
         stream.seek(0)
         reader = make_reader(stream)
@@ -265,6 +270,20 @@ def _summary(stream):
     if summary is None or summary.statistics is None or not summary.chunk_indexes and summary.statistics.message_count:
         return None, None
     return summary, metadata
+
+
+def _summary_crc_matches(stream) -> bool:
+    """False when the footer's summary CRC (over the summary section and the footer up to the CRC)
+    does not match; True when it does, or when there is no footer to check (mcap decides then)."""
+    size = stream.seek(0, os.SEEK_END)
+    if size < len(MAGIC) * 2 + _FOOTER.size:
+        return True
+    stream.seek(size - len(MAGIC) - _FOOTER.size)
+    opcode, _, summary_start, _, crc = _FOOTER.unpack(stream.read(_FOOTER.size))
+    if opcode != Opcode.FOOTER or crc == 0 or not len(MAGIC) <= summary_start <= size - len(MAGIC) - _FOOTER.size:
+        return True
+    stream.seek(summary_start)
+    return zlib.crc32(stream.read(size - len(MAGIC) - 4 - summary_start)) == crc
 
 
 def _lost_by_index(found: McapLayout, summary, stream) -> None:
