@@ -74,6 +74,8 @@ def run(args) -> int:
             launcher.stop()
     if launcher.recorder is not None:
         print(f"[launch] bag {launcher.recorder.writer.path}: {launcher.recorder.writer.message_count} messages")
+        if launcher.recorder.writer.failed:      # (disk full: the count above is what the bag holds)
+            launcher.errors.append(f"recording: {launcher.recorder.writer.failed}")
     if launcher.errors:
         print("[launch] stopped with errors: " + "; ".join(launcher.errors))
         return 1

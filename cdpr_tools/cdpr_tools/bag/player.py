@@ -6,6 +6,7 @@ published at a fixed rate with the bag time, so nodes with ``use_sim_time`` foll
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Iterable
@@ -31,10 +32,10 @@ class BagPlayer:
 
     def __init__(self, node: Node, bag: BagReader, *, rate: float = 1.0, topics: Iterable[str] | None = None,
                  start_offset: float = 0.0, clock_hz: float = 0.0, loop: bool = False):
-        if rate <= 0:
-            raise ValueError(f"rate must be positive, got {rate}")
-        if start_offset < 0:
-            raise ValueError(f"start offset must not be negative, got {start_offset}")
+        if not (rate > 0 and math.isfinite(rate)):
+            raise ValueError(f"rate must be a finite number > 0, got {rate}")
+        if not (start_offset >= 0 and math.isfinite(start_offset)):
+            raise ValueError(f"start offset must be a finite number >= 0, got {start_offset}")
         self.node, self.bag, self.rate, self.loop = node, bag, rate, loop
         self.topics = sorted(topics) if topics else list(bag.topics)
         unknown = sorted(set(self.topics) - set(bag.topics))

@@ -12,6 +12,11 @@ promises: chunks are bounded in size (``chunk_size``) and in time (``flush_inter
 goes to the operating system as soon as it is complete, and metadata.yaml is written when the bag
 opens and updated after every chunk. Such a file lacks its summary section; :class:`BagReader`
 then scans it linearly and ``cdpr bag reindex`` rebuilds summary and metadata.
+
+A write that fails (disk full, quota, file size limit: any OSError) stops the bag for good: the
+file is cut back to its last complete chunk, metadata.yaml counts what that holds
+(:attr:`BagWriter.messages_on_disk`), and :class:`BagWriteError` says so. The file then reads like
+one cut off by a crash, and ``cdpr bag reindex`` completes it once there is room.
 """
 from __future__ import annotations
 
@@ -43,6 +48,10 @@ _MESSAGE = struct.Struct("<BQHIQQ")
 _MESSAGE_FIELDS = 2 + 4 + 8 + 8
 
 
+class BagWriteError(OSError):
+    """Writing the bag failed (disk full, ...); the bag was stopped at its last complete chunk."""
+
+
 @dataclass
 class _Channel:
     id: int
@@ -68,14 +77,15 @@ class BagWriter:
 
     ``path`` ending in ``.mcap``: that one file. Any other path: a rosbag2 bag directory
     ``path/`` with ``path/<name>_0.mcap`` and ``path/metadata.yaml``, as ``ros2 bag record -s mcap
-    -o path`` makes it. Existing bags are never overwritten.
+    -o path`` makes it. Existing bags are never overwritten. ``opener(path, "wb")`` opens the
+    .mcap file (``open``; tests pass one whose file fails as a full disk does).
 
     >>> with BagWriter("bags/run1") as bag:
     ...     bag.write("/chatter", "std_msgs/msg/String", String(data="hi"), log_time_ns=t)
     """
 
     def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20,
-                 flush_interval: float = 1.0):
+                 flush_interval: float = 1.0, opener=open):
         path = Path(path)
         if path.suffix == ".mcap":
             self.directory, self.mcap_path = None, path
@@ -92,12 +102,14 @@ class BagWriter:
         self.compression = compression
         self.chunk_size = chunk_size
         self.flush_interval = flush_interval
-        self._stream = open(self.mcap_path, "wb")
+        self._stream = opener(self.mcap_path, "wb")
         # the chunks are cut here (_maybe_flush), by size and by age, not by the mcap writer
         self._mcap = Writer(self._stream, chunk_size=1 << 62, compression=_COMPRESSION[compression],
                             index_types=IndexType.ALL, use_chunking=True, use_statistics=True,
                             use_summary_offsets=True)
         self._mcap.start(profile="ros2", library="cdpr_tools bag writer (rosbag2 layout)")
+        self.failed: str | None = None   # why writing stopped (BagWriteError), if it did
+        self._good_size = 0              # bytes of the file that hold complete records
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
         self._times = _Times()
@@ -106,7 +118,8 @@ class BagWriter:
         self._pending_bytes = 0
         self._last_flush = time.monotonic()
         self._flushed = {"count": 0, "times": _Times(), "counts": {}}   # what is on disk
-        self._write_metadata_file()
+        self._on_disk(lambda: None)                                      # the header, so the file is MCAP
+        self._on_disk(self._write_metadata_file)
 
     # -- topics ------------------------------------------------------------------------------
     def add_topic(self, topic: str, type_name: str, qos: Any = None, type_description_hash: str | None = None) -> None:
@@ -118,9 +131,14 @@ class BagWriter:
         with self._lock:
             self._add_topic(topic, type_name, qos, type_description_hash)
 
-    def _add_topic(self, topic: str, type_name: str, qos: Any, type_description_hash: str | None) -> _Channel:
+    def _check_open(self) -> None:
+        if self.failed is not None:
+            raise BagWriteError(self.failed)
         if self._closed:
             raise ValueError(f"bag {self.path} is closed")
+
+    def _add_topic(self, topic: str, type_name: str, qos: Any, type_description_hash: str | None) -> _Channel:
+        self._check_open()
         if topic in self._channels:
             channel = self._channels[topic]
             if channel.type != type_name:
@@ -157,6 +175,7 @@ class BagWriter:
             type_name = type_name or type_name_of(data)
             data, exact = serialize(data, type_name), True
         with self._lock:
+            self._check_open()
             channel = self._channels.get(topic)
             if channel is None or (type_name is not None and type_name != channel.type):
                 if type_name is None:
@@ -182,8 +201,7 @@ class BagWriter:
         compares the two files byte for byte).
         """
         with self._lock:
-            if self._closed:
-                raise ValueError(f"bag {self.path} is closed")
+            self._check_open()
             channels, times, chunk_size = self._channels, self._times, self.chunk_size
             stats = self._mcap._Writer__statistics
             counts = stats.channel_message_counts
@@ -244,12 +262,47 @@ class BagWriter:
             self._flush()
 
     def _flush(self) -> None:
-        self._mcap.flush()              # ends the chunk and flushes the stream: on disk despite SIGKILL
+        self._on_disk(self._mcap.flush)  # ends the chunk and flushes the stream: on disk despite SIGKILL
         self._pending_bytes = 0
         self._last_flush = time.monotonic()
         self._flushed = {"count": self.message_count, "times": _Times(self._times.start, self._times.end),
                          "counts": {t: c.count for t, c in self._channels.items()}}
-        self._write_metadata_file()
+        self._on_disk(self._write_metadata_file)
+
+    def _on_disk(self, write) -> None:
+        """Run ``write`` and flush the .mcap stream, so that what it holds so far is on disk and
+        complete; on an OSError stop the bag at the last such point (:meth:`_fail`)."""
+        try:
+            write()
+            if not self._stream.closed:
+                self._stream.flush()
+        except OSError as exc:
+            self._fail(exc)
+        if not self._stream.closed:
+            self._good_size = self._stream.tell()
+
+    def _fail(self, exc: OSError) -> None:
+        """Stop for good: cut the file back to its last complete record, count what it holds in
+        metadata.yaml (best effort: the disk may still be full), raise BagWriteError."""
+        self._closed = True
+        try:
+            self._stream.close()                # may write more of the broken chunk: cut below
+        except OSError:
+            pass
+        os.truncate(self.mcap_path, self._good_size)
+        try:
+            self._write_metadata_file()
+        except OSError:
+            (self.directory / ".metadata.yaml.tmp").unlink(missing_ok=True)
+        self.failed = (f"writing {self.mcap_path} failed ({exc.strerror or exc}): recording stopped; "
+                       f"{self.messages_on_disk} messages are on disk (the file ends at its last complete "
+                       "chunk; `cdpr bag reindex` adds its index once there is room)")
+        raise BagWriteError(self.failed) from exc
+
+    @property
+    def messages_on_disk(self) -> int:
+        """Messages in the complete chunks on disk (all of them once the bag is closed)."""
+        return self._flushed["count"]
 
     @property
     def message_count(self) -> int:
@@ -275,13 +328,15 @@ class BagWriter:
         with self._lock:
             if self._closed:
                 return
-            self._closed = True
             metadata = self.metadata()
             self._mcap.add_metadata("rosbag2", {"serialized_metadata": _yaml(metadata),
                                                 "ROS_DISTRO": metadata["ros_distro"]})
-            self._mcap.finish()
-            self._stream.close()
-            self._write_metadata_file(metadata)
+            self._on_disk(self._mcap.finish)      # the last chunk, summary and footer
+            self._on_disk(self._stream.close)
+            self._closed = True
+            self._flushed = {"count": self.message_count, "times": self._times,
+                             "counts": {t: c.count for t, c in self._channels.items()}}
+            self._on_disk(lambda: self._write_metadata_file(metadata))
 
     def _write_metadata_file(self, metadata: dict | None = None) -> None:
         """metadata.yaml of a bag directory, replaced atomically (a crash leaves the old or the new)."""
