@@ -26,7 +26,7 @@ ROSDEP_KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "pyth
                "qpsolvers": "python3-qpsolvers-pip"}
 # Python modules without one: module -> the PyPI distribution pinned in requirements.txt
 PIP_ONLY = {"ruckig": "ruckig", "daqp": "daqp", "proxsuite": "proxsuite", "control": "control",
-            "mcap": "mcap", "foxglove": "foxglove-sdk"}
+            "mcap": "mcap", "foxglove": "foxglove-sdk", "zstandard": "zstandard", "lz4": "lz4"}
 
 
 def imported_modules(package: str) -> set[str]:
