@@ -6,6 +6,9 @@ import random
 # concurrent test runs on one machine do not see each other's nodes.
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+# `cdpr` commands called in a test discover the graph themselves unless the test starts the graph
+# daemon (and stops it) itself: tests/test_cli_daemon.py
+os.environ.setdefault("CDPR_NO_DAEMON", "1")
 
 
 import pytest  # noqa: E402
