@@ -44,7 +44,7 @@ def run_status(args) -> int:
     try:
         s = client.status(path)
     except client.DaemonUnavailable as exc:
-        print(f"The daemon is not running ({exc}; socket {path})")
+        print(f"The daemon is not running ({path}: {exc})" if client.daemon_pid(path) else "The daemon is not running")
         return 1
     print(f"The daemon is running: pid {s['pid']}, up {s['uptime']:.1f} s, served {s['served']} commands "
           f"({s['running']} running), {s['nodes']} nodes known\n"
