@@ -169,8 +169,8 @@ def run_echo(args) -> int:
             printed = 0
             while limit is None or printed < limit:
                 if not spin_until(node, lambda: bool(received), None if limit is None else args.timeout):
-                    raise TimeoutError(f"no message on {topic} within {args.timeout:g} s "
-                                       f"({node.count_publishers(topic)} publishers)")
+                    raise TimeoutError(f"no message on {topic} within {args.timeout:g} s; "
+                                       f"it has {node.count_publishers(topic)} publisher(s)")
                 _print_message(received.pop(0), args.field)
                 printed += 1
         finally:

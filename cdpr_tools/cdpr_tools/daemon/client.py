@@ -184,7 +184,7 @@ def start_daemon(path: Path, idle_timeout: float = IDLE_TIMEOUT) -> Connection:
         with open(log, "w") as out:
             process = subprocess.Popen(
                 [sys.executable, "-m", SERVER_MODULE, str(path), "--idle-timeout", f"{idle_timeout:g}"],
-                stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, cwd="/", start_new_session=True)
+                stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         deadline = time.monotonic() + START_TIMEOUT
         while time.monotonic() < deadline:
             with contextlib.suppress(FileNotFoundError, ConnectionRefusedError):
