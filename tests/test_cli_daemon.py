@@ -34,6 +34,7 @@ SILENT = "/daemon_test/silent"  # a publisher that never publishes
 UNPUBLISHED = "/daemon_test/unpublished"  # a subscription only
 TRIES = 20
 ANSWER_BOUND = 0.5  # s: a command the daemon answers, beyond the interpreter's own start
+REPEATS = 3  # measurements of a try whose answer exceeds ANSWER_BOUND (a scheduler stall)
 NO_HANG = 60.0  # s: a command still running after this hangs (every wait in it is bounded by --timeout)
 SIM_PERIOD_NS = 10_000_000  # the simulated graph's step: 10 ms of simulated time per message
 
@@ -123,12 +124,12 @@ def interpreter_start(env: dict) -> float:
 
 
 def status(env: dict) -> dict:
-    """The running daemon's pid and count of commands served (a failure when none runs)."""
+    """The running daemon's pid, count of commands served and running (a failure when none runs)."""
     result = cdpr(env, "daemon", "status")
     assert result.returncode == 0, result.stdout + result.stderr
-    match = re.search(r"pid (\d+), up [\d.]+ s, served (\d+) commands", result.stdout)
+    match = re.search(r"pid (\d+), up [\d.]+ s, served (\d+) commands \((\d+) running\)", result.stdout)
     assert match, result.stdout
-    return {"pid": int(match[1]), "served": int(match[2])}
+    return {"pid": int(match[1]), "served": int(match[2]), "running": int(match[3])}
 
 
 def test_first_command_starts_the_daemon_and_later_ones_answer_in_half_a_second(env):
@@ -136,27 +137,58 @@ def test_first_command_starts_the_daemon_and_later_ones_answer_in_half_a_second(
     within 0.5 s of the interpreter's own start, and the daemon served every one of them.
 
     Why this cannot flake on a busy machine: each answer is compared with the time the same
-    interpreter needs, measured just before, to start and import the `cdpr` command (0.1-0.25 s
+    interpreter needs, measured just before, to start and import the `cdpr` command (0.1-0.45 s
     here, most of a command's wall time under load); what remains is the daemon's round trip
-    (about 20 ms; without the daemon, discovery takes 1.4-6 s, far beyond the bound). The daemon's
-    counter proves the command did not discover the graph itself, and a command that hangs fails
-    by the subprocess timeout instead of stalling the suite.
+    (median 16 ms at a load of 17 on 2 cores; discovering the graph instead takes 1.4-6 s). A
+    scheduler stall of either process can still hit one pair, so a try whose pair exceeds the
+    bound is measured again, up to REPEATS times, and counts with its best pair (as `timeit`
+    takes the minimum): a command that discovers the graph exceeds it in every repeat. The
+    daemon's counter proves that no command discovered the graph itself, and a command that
+    hangs fails by the subprocess timeout instead of stalling the suite.
     """
     assert cdpr(env, "daemon", "status").returncode == 1  # not running before the first command
     first = cdpr(env, "param", "get", TALKER, "rate", "--timeout", "30")
     assert (first.returncode, first.stdout) == (0, "Double value is: 20.0\n"), first.stderr
     served = status(env)["served"]
     assert served >= 1
-    excess = []
+    runs, excess = 0, []
     for _ in range(TRIES):
         for argv, expected in ((("param", "get", TALKER, "greeting"), "String value is: hello\n"),
                                (("topic", "echo", LATCHED, "--once"), "data: ik_only\n---\n")):
-            baseline = interpreter_start(env)
-            result, elapsed = timed(env, *argv)
-            assert (result.returncode, result.stdout, result.stderr) == (0, expected, ""), argv
-            excess.append(elapsed - baseline)
-    assert status(env)["served"] == served + 2 * TRIES  # every answer came from the daemon
-    assert max(excess) < ANSWER_BOUND, f"answers took {sorted(excess)[-3:]} s beyond the interpreter's start"
+            best = float("inf")
+            for _ in range(REPEATS):
+                baseline = interpreter_start(env)
+                result, elapsed = timed(env, *argv)
+                runs += 1
+                assert (result.returncode, result.stdout, result.stderr) == (0, expected, ""), argv
+                best = min(best, elapsed - baseline)
+                if best < ANSWER_BOUND:
+                    break
+            excess.append(best)
+    assert status(env)["served"] == served + runs  # every answer came from the daemon
+    excess.sort()
+    print(f"{runs} answers for {len(excess)} tries, beyond the interpreter's start: "
+          f"median {excess[len(excess) // 2]:.3f} s, max {excess[-1]:.3f} s")
+    assert excess[-1] < ANSWER_BOUND, f"answers took {excess[-3:]} s beyond the interpreter's start"
+
+
+def test_concurrent_commands_get_their_own_output(env):
+    """A command waiting in the daemon holds up no other, nor mixes its output into another's."""
+    waiting = subprocess.Popen([sys.executable, "-m", "cdpr_tools.cli", "topic", "echo", SILENT, "--once",
+                                "--timeout", "10"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + NO_HANG
+        while status(env)["running"] == 0:  # until the echo waits in the daemon
+            assert time.monotonic() < deadline and waiting.poll() is None, waiting.communicate()
+            time.sleep(0.1)
+        result = cdpr(env, "param", "get", TALKER, "greeting")
+        assert (result.returncode, result.stdout, result.stderr) == (0, "String value is: hello\n", "")
+        assert waiting.poll() is None  # answered while the echo still waits for its 10 s
+        out, err = waiting.communicate(timeout=NO_HANG)
+        assert waiting.returncode == 1 and out == "" and f"no message on {SILENT} within 10 s" in err
+    finally:
+        waiting.kill()
+        waiting.wait()
 
 
 def test_daemon_answers_as_the_direct_path_does(env):
@@ -253,6 +285,11 @@ def hz(capfd, topic: str, *extra: str) -> tuple[float, str]:
 def test_hz_says_wall_time_without_clock(graph, capfd):  # before sim_graph publishes /clock
     rate, clock = hz(capfd, "/chatter")
     assert clock == "wall time" and rate > 0
+
+
+def test_bad_idle_timeout_is_refused(capfd):
+    assert cli.main(["daemon", "start", "--idle-timeout", "0"]) == 1
+    assert capfd.readouterr().err == "cdpr daemon: error: --idle-timeout must be > 0 s, got 0\n"
 
 
 @pytest.fixture(scope="module")

@@ -77,7 +77,7 @@ def answer(argv: list[str]) -> int | None:
         return None
     try:
         return _run(argv)
-    except DaemonUnavailable as exc:
+    except (DaemonUnavailable, OSError, ValueError) as exc:  # ValueError: a reply that is no JSON
         print(f"cdpr: graph daemon: {exc}; answering without it", file=sys.stderr)
         return None
 
