@@ -84,7 +84,8 @@ def add_parser(sub) -> None:
     clock = hz.add_mutually_exclusive_group()
     clock.add_argument("--use-sim-time", action="store_true",
                        help="measure in simulated time (default when /clock has a publisher)")
-    clock.add_argument("--wall-time", action="store_true", help="measure in wall-clock time even when /clock is published")
+    clock.add_argument("--wall-time", action="store_true",
+                       help="measure in wall-clock time even when /clock is published")
     _timeout(hz)
     hz.set_defaults(run=run_hz)
 

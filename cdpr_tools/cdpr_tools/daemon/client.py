@@ -73,13 +73,18 @@ def pid_path(path: Path) -> Path:
 def answer(argv: list[str]) -> int | None:
     """Run command line ``argv`` in the daemon (started if need be): its exit status, having printed
     its output; None when the daemon does not answer this command and it is to run here."""
-    if len(argv) < 2 or argv[1] not in SERVED_VERBS.get(argv[0], ()) or disabled(argv):
+    if len(argv) < 2 or argv[1] not in SERVED_VERBS.get(argv[0], ()) or disabled(argv) or _asks_help(argv):
         return None
     try:
         return _run(argv)
     except (DaemonUnavailable, OSError, ValueError) as exc:  # ValueError: a reply that is no JSON
         print(f"cdpr: graph daemon: {exc}; answering without it", file=sys.stderr)
         return None
+
+
+def _asks_help(argv: list[str]) -> bool:
+    """Help needs no graph (nor a daemon started for it)."""
+    return "-h" in argv or "--help" in argv
 
 
 def _run(argv: list[str]) -> int | None:
