@@ -27,6 +27,7 @@ from std_msgs.msg import Header, String
 from cdpr_test_nodes.graph import Spinner, subprocess_env
 from cdpr_test_nodes.talker import Talker
 from cdpr_tools import cli
+from cdpr_tools.daemon import client
 
 TALKER = "daemon_talker"
 LATCHED = "/daemon_test/mode"
@@ -285,6 +286,26 @@ def hz(capfd, topic: str, *extra: str) -> tuple[float, str]:
 def test_hz_says_wall_time_without_clock(graph, capfd):  # before sim_graph publishes /clock
     rate, clock = hz(capfd, "/chatter")
     assert clock == "wall time" and rate > 0
+
+
+def test_one_socket_per_domain_and_discovery_range_in_a_private_directory(tmp_path, monkeypatch, capfd):
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    local = client.socket_path()
+    assert local.parent == tmp_path / "cdpr" and local.name.startswith("daemon-domain42-localhost-")
+    assert local.parent.stat().st_mode & 0o777 == 0o700
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    assert client.socket_path().name.startswith("daemon-domain42-subnet-")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "7")
+    assert client.socket_path().name.startswith("daemon-domain7-subnet-")
+    local.parent.chmod(0o777)  # others could plant a socket there: not used
+    with pytest.raises(client.DaemonUnavailable, match="open to others"):
+        client.socket_path()
+    monkeypatch.delenv("CDPR_NO_DAEMON", raising=False)  # a command then says so and runs without it
+    assert cli.main(["node", "list", "--spin-time", "0.1"]) == 0
+    assert capfd.readouterr().err == (f"cdpr: graph daemon: {local.parent} belongs to someone else or is open to "
+                                      "others; answering without it\n")
 
 
 def test_bad_idle_timeout_is_refused(capfd):
