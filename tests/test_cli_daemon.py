@@ -238,23 +238,57 @@ def test_echo_once_without_the_daemon_fails_within_its_timeout(env):
     assert elapsed >= 8.0
 
 
+def _socket_of(env: dict) -> Path:
+    """The daemon socket of `cdpr` processes run with ``env``."""
+    keys = ("XDG_RUNTIME_DIR", "ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "RMW_IMPLEMENTATION", "ROS_STATIC_PEERS")
+    saved = {k: os.environ.get(k) for k in keys}
+    os.environ.update({k: env[k] for k in keys if k in env})
+    try:
+        return client.socket_path()
+    finally:
+        for k, v in saved.items():
+            os.environ.pop(k, None) if v is None else os.environ.__setitem__(k, v)
+
+
 def test_dead_daemon_is_replaced(env):
-    dead = status(env)["pid"]
-    os.kill(dead, signal.SIGKILL)  # its socket file stays, with nobody listening
+    """A socket file that nobody listens on (its daemon died) is replaced by a new daemon.
+
+    The daemon that died is simulated without ROS (a socket bound and closed by a process that
+    is gone): killing a real one leaves its DDS participant in the others' discovery for its lease
+    time, which would slow the test graph for the tests after this one.
+    """
+    path = _socket_of(env)
+    assert cdpr(env, "daemon", "stop").returncode == 0  # the earlier tests' daemon, if any
+    subprocess.run([sys.executable, "-c", f"import socket; socket.socket(socket.AF_UNIX).bind({str(path)!r})"],
+                   check=True, timeout=NO_HANG)
+    assert path.is_socket()
     result = cdpr(env, "param", "get", TALKER, "frame", "--timeout", "30")
     assert (result.returncode, result.stdout) == (0, "String value is: base\n"), result.stderr
-    assert status(env)["pid"] != dead
+    assert status(env)["served"] == 1  # a new daemon
 
 
 def test_hung_daemon_is_replaced(env):
-    hung = status(env)["pid"]
-    os.kill(hung, signal.SIGSTOP)  # accepts connections (the kernel does), answers nothing
+    """A daemon that accepts connections but answers nothing is killed and replaced.
+
+    Simulated without ROS (see above): a process named like the daemon that listens on its socket.
+    """
+    path = _socket_of(env)
+    assert cdpr(env, "daemon", "stop").returncode == 0  # the earlier tests' daemon, if any
+    hung = subprocess.Popen([sys.executable, "-c", "import socket, sys, time; s = socket.socket(socket.AF_UNIX); "
+                             "s.bind(sys.argv[1]); s.listen(); time.sleep(600)", str(path), client.SERVER_MODULE])
     try:
+        deadline = time.monotonic() + NO_HANG
+        while not path.exists():
+            assert time.monotonic() < deadline and hung.poll() is None
+            time.sleep(0.05)
+        client.pid_path(path).write_text(str(hung.pid))
         result = cdpr(env, "param", "get", TALKER, "frame", "--timeout", "30")
         assert (result.returncode, result.stdout) == (0, "String value is: base\n"), result.stderr
-        assert status(env)["pid"] != hung
+        assert hung.wait(timeout=NO_HANG) == -signal.SIGKILL
+        assert status(env)["served"] == 1  # a new daemon
     finally:
-        _kill(hung)
+        hung.kill()
+        hung.wait()
 
 
 def test_idle_daemon_exits_by_itself(env):
