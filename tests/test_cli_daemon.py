@@ -53,6 +53,14 @@ class Latcher(Node):
         self.create_subscription(String, UNPUBLISHED, lambda _msg: None, 10)
 
 
+class PausedClock(Node):
+    """A /clock publisher that publishes nothing (a paused simulation or bag)."""
+
+    def __init__(self, **kwargs):
+        super().__init__("daemon_paused_clock", **kwargs)
+        self.clock = self.create_publisher(Clock, "/clock", 10)
+
+
 class SimClock(Node):
     """A simulated graph: every tick advances simulated time by 10 ms, publishes it on /clock and
     then a stamped and an unstamped message (100 Hz in simulated time, whatever the wall rate)."""
@@ -308,20 +316,6 @@ def test_idle_daemon_exits_by_itself(env):
         shutil.rmtree(own["XDG_RUNTIME_DIR"], ignore_errors=True)
 
 
-def hz(capfd, topic: str, *extra: str) -> tuple[float, str]:
-    rc = cli.main(["topic", "hz", topic, "--duration", "3", "--timeout", "30", *extra])
-    out = capfd.readouterr().out
-    assert rc == 0, out
-    match = re.match(r"average rate: ([\d.]+) \(([^)]*)\)", out)
-    assert match, out
-    return float(match[1]), match[2]
-
-
-def test_hz_says_wall_time_without_clock(graph, capfd):  # before sim_graph publishes /clock
-    rate, clock = hz(capfd, "/chatter")
-    assert clock == "wall time" and rate > 0
-
-
 def test_one_socket_per_domain_and_discovery_range_in_a_private_directory(tmp_path, monkeypatch, capfd):
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
     monkeypatch.setenv("ROS_DOMAIN_ID", "42")
@@ -345,6 +339,27 @@ def test_one_socket_per_domain_and_discovery_range_in_a_private_directory(tmp_pa
 def test_bad_idle_timeout_is_refused(capfd):
     assert cli.main(["daemon", "start", "--idle-timeout", "0"]) == 1
     assert capfd.readouterr().err == "cdpr daemon: error: --idle-timeout must be > 0 s, got 0\n"
+
+
+def hz(capfd, topic: str, *extra: str) -> tuple[float, str]:
+    rc = cli.main(["topic", "hz", topic, "--duration", "3", "--timeout", "30", *extra])
+    out = capfd.readouterr().out
+    assert rc == 0, out
+    match = re.match(r"average rate: ([\d.]+) \(([^)]*)\)", out)
+    assert match, out
+    return float(match[1]), match[2]
+
+
+def test_hz_says_wall_time_without_clock(graph, capfd):  # before sim_graph publishes /clock
+    rate, clock = hz(capfd, "/chatter")
+    assert clock == "wall time" and rate > 0
+
+
+def test_hz_in_sim_time_without_a_clock_message_says_so(graph, capfd):
+    graph.add(PausedClock)  # stays in the graph: the simulated graph below publishes /clock too
+    rc = cli.main(["topic", "hz", "/chatter", "--duration", "1", "--timeout", "8", "--use-sim-time"])
+    assert rc == 1 and capfd.readouterr().err == (
+        "cdpr topic: error: /clock has a publisher but sent no time within 8 s; --wall-time measures without it\n")
 
 
 @pytest.fixture(scope="module")

@@ -234,6 +234,9 @@ def _hz_clock(node, args, msg_class) -> tuple[str, Callable[[bytes, dict], int |
         latest[0] = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
 
     node.create_subscription(Clock, "/clock", on_clock, adapted_qos(node, "/clock", 1))
+    if not spin_until(node, lambda: latest[0] is not None, args.timeout):  # a paused clock counts nothing
+        raise TimeoutError(f"/clock has a publisher but sent no time within {args.timeout:g} s; "
+                           "--wall-time measures without it")
     return "sim time, /clock on arrival", lambda _data, _info: latest[0]
 
 
