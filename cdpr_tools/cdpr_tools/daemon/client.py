@@ -108,11 +108,18 @@ def _run(argv: list[str]) -> int | None:
                 print(f"cdpr: graph daemon stopped answering during the command (log: {log_path(path)})",
                       file=sys.stderr)
                 return 1
-            sys.stdout.write(reply["stdout"])
-            sys.stdout.flush()
-            sys.stderr.write(reply["stderr"])
+            _write(reply["stdout"], reply["stderr"])
             return int(reply["rc"])
     return None
+
+
+def _write(out: str, err: str) -> None:
+    try:
+        sys.stdout.write(out)
+        sys.stdout.flush()
+    except BrokenPipeError:  # `| head` has what it wanted; the exit status still tells
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    sys.stderr.write(err)
 
 
 class Connection:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import io
 import json
 import os
@@ -91,6 +92,8 @@ class GraphDaemon:
 
     def __init__(self, path: Path, idle_timeout: float):
         self.path, self.idle_timeout = path, idle_timeout
+        for command in SERVED_VERBS:  # imported now, so that no command waits for it (ACCEPT_TIMEOUT)
+            importlib.import_module(f"cdpr_tools.{command}_cmd")
         self.context = new_context()
         self.node = Node(f"_cdpr_daemon_{os.getpid()}", context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
