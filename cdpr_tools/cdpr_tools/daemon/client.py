@@ -89,28 +89,33 @@ def _asks_help(argv: list[str]) -> bool:
 
 def _run(argv: list[str]) -> int | None:
     path = socket_path()
-    for attempt in range(2):
-        with connect(path, start=True) as conn:
-            try:
-                reply = conn.request({"argv": argv}, ACCEPT_TIMEOUT)
-            except TimeoutError:
-                if attempt:
-                    raise DaemonUnavailable("it accepts no commands") from None
-                _kill_hung(path)
-                continue
-            if not reply.get("accepted"):
-                return None
-            try:
-                while "rc" not in reply:
-                    reply = conn.receive(ALIVE_TIMEOUT)
-            except (TimeoutError, ConnectionError):
-                # the command may have had its effect (a parameter set): not run again here
-                print(f"cdpr: graph daemon stopped answering during the command (log: {log_path(path)})",
-                      file=sys.stderr)
-                return 1
-            _write(reply["stdout"], reply["stderr"])
-            return int(reply["rc"])
-    return None
+    try:
+        return _ask(path, argv)
+    except TimeoutError:  # it took the connection but not the command: hung
+        _kill_hung(path)
+    try:
+        return _ask(path, argv)
+    except TimeoutError:
+        raise DaemonUnavailable("it accepts no commands") from None
+
+
+def _ask(path: Path, argv: list[str]) -> int | None:
+    """Hand ``argv`` to the daemon at ``path`` (started if none listens): as ``answer``;
+    ``TimeoutError`` when the daemon does not accept it within ACCEPT_TIMEOUT."""
+    with connect(path, start=True) as conn:
+        reply = conn.request({"argv": argv}, ACCEPT_TIMEOUT)
+        if not reply.get("accepted"):
+            return None
+        try:
+            while "rc" not in reply:
+                reply = conn.receive(ALIVE_TIMEOUT)
+        except (TimeoutError, ConnectionError):
+            # the command may have had its effect (a parameter set): not run again here
+            print(f"cdpr: graph daemon stopped answering during the command (log: {log_path(path)})",
+                  file=sys.stderr)
+            return 1
+    _write(reply["stdout"], reply["stderr"])
+    return int(reply["rc"])
 
 
 def _write(out: str, err: str) -> None:
