@@ -7,6 +7,9 @@ import random
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
 SESSION_DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
+# `cdpr` commands called in a test discover the graph themselves unless the test starts the graph
+# daemon (and stops it) itself: tests/tools/test_cli_daemon.py
+os.environ.setdefault("CDPR_NO_DAEMON", "1")
 
 
 import pytest  # noqa: E402

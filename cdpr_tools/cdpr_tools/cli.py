@@ -1,7 +1,9 @@
 """The ``cdpr`` command: one entry point for the project's tools.
 
 Each sub-command lives in its own module and registers itself through ``add_parser(subparsers)``;
-this file only assembles them, so ``cdpr --help`` lists what exists.
+this file only assembles them, so ``cdpr --help`` lists what exists. A command line naming a
+command imports only that command's module; one the graph daemon answers (``cdpr_tools.daemon``)
+is handed to it before anything of ROS is imported here.
 """
 from __future__ import annotations
 
@@ -11,18 +13,23 @@ import os
 import sys
 
 from cdpr_tools import progress
+from cdpr_tools.daemon import client as daemon_client
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
-COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "bag", "launch", "view", "plot", "identify", "analyze", "bench")
+COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "node", "bag", "launch", "view", "plot", "identify",
+            "analyze", "bench", "daemon")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or, when ``argv`` starts with a command, of that one only
+    (importing every command's module costs about a second; `cdpr param get` needs one)."""
     parser = argparse.ArgumentParser(
         prog="cdpr",
         description="Tools for the cdpr cable robot stack (ROS 2 Jazzy).",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
+    names = argv[:1] if argv and argv[0] in COMMANDS else COMMANDS
+    for name in names:
         importlib.import_module(f"cdpr_tools.{name}_cmd").add_parser(sub)
     return parser
 
@@ -30,8 +37,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     # ROS 2 discovery stays on this machine unless the user says otherwise
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    answered = daemon_client.answer(argv)
+    if answered is not None:
+        return answered
+    args = build_parser(argv).parse_args(argv)
     progress.enable()  # long commands show how far they are (stderr)
+    return run(args)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run parsed command ``args``: its exit status; an error is a message, not a traceback."""
     try:
         return int(args.run(args) or 0)
     except KeyboardInterrupt:

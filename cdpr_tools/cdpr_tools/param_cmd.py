@@ -3,7 +3,9 @@
 The commands call ``<node>/list_parameters``, ``get_parameters``, ``set_parameters`` and
 ``describe_parameters`` (rcl_interfaces), as ``ros2 param`` does, so they work on any ROS 2 node
 and ``ros2 param`` works on ours. ``dump`` prints (``load`` reads) the standard parameter file
-layout ``/node: {ros__parameters: {...}}``.
+layout ``/node: {ros__parameters: {...}}``. ``list``, ``get``, ``set``, ``describe`` and ``dump``
+(to the terminal) run in the graph daemon, which keeps the graph and each node's parameter
+clients (``cdpr daemon``); ``--no-daemon`` or CDPR_NO_DAEMON=1 runs them here.
 """
 from __future__ import annotations
 
@@ -16,13 +18,14 @@ import yaml
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.parameter import Parameter, get_parameter_value, parameter_value_to_python
-from rclpy.parameter_client import AsyncParameterClient
 
+from cdpr_tools.daemon.client import add_no_daemon
 from cdpr_tools.ros_graph import (
     DISCOVERY_TIMEOUT,
     find_node,
     graph_node,
     node_names,
+    parameter_client,
     settle,
     spin_future,
     spin_until,
@@ -104,6 +107,7 @@ def add_parser(sub) -> None:
 def _common(p) -> None:
     p.add_argument("--timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
                    help=f"wait up to SEC seconds for the node and its answers (default {DISCOVERY_TIMEOUT:g})")
+    add_no_daemon(p)
 
 
 class _Remote:
@@ -112,7 +116,7 @@ class _Remote:
     def __init__(self, node, name: str, timeout: float):
         self.name = find_node(node, name, timeout)
         self.node, self.timeout = node, timeout
-        self.client = AsyncParameterClient(node, self.name)
+        self.client = parameter_client(node, self.name)
         if not spin_until(node, self.client.services_are_ready, timeout):
             raise TimeoutError(f"node {self.name} offers no parameter services (started without them?)")
 
