@@ -40,8 +40,9 @@ def add_parser(sub) -> None:
     r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
     r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
     r.add_argument("--stop-after", type=_seconds, metavar="SEC", help="stop recording after SEC seconds")
-    r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
-                   help="compress each MCAP chunk (default none); every reader of MCAP decompresses it")
+    r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="zstd",
+                   help="compress each MCAP chunk (default zstd, in the writer process); every reader of "
+                        "MCAP decompresses it")
     r.set_defaults(run=run_record)
 
     i = verbs.add_parser("info", help="print a bag's duration, topics, types and counts",

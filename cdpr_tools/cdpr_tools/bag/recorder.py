@@ -46,8 +46,9 @@ class BagRecorder(IntraProcessNode):
         self.declare_parameter("output", "", ParameterDescriptor(
             description="bag directory (or .mcap file); empty: bags/rosbag2_<date>-<time>", read_only=True))
         self.declare_parameter("queue_depth", DEFAULT_QUEUE_DEPTH, ParameterDescriptor(read_only=True))
-        self.declare_parameter("compression", "none", ParameterDescriptor(
-            description="chunk compression of the MCAP file: none, zstd or lz4 (as rosbag2's mcap storage)",
+        self.declare_parameter("compression", "zstd", ParameterDescriptor(
+            description="chunk compression of the MCAP file: zstd (default: a fifth of the size, compressed "
+                        "in the writer process), lz4 or none (as rosbag2's mcap storage)",
             read_only=True))
         output = self.get_parameter("output").value or default_bag_name()
         self.depth = self.get_parameter("queue_depth").value

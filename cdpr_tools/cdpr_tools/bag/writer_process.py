@@ -63,7 +63,7 @@ class BagWriterProcess:
     >>> bag.close()
     """
 
-    def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20,
+    def __init__(self, path: str | os.PathLike, *, compression: str = "zstd", chunk_size: int = 1 << 20,
                  flush_interval: float = 1.0, batch: int = BATCH):
         self.batch = batch
         # the parent's sys.path: the child imports the same cdpr_tools, however the parent found it
