@@ -21,7 +21,8 @@ from cdpr_tools.bag.reader import BagReader, CorruptBagError
 from cdpr_tools.bag.recovery import RepairError, reindex
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
 from cdpr_control.ros.runner import spin, stop_on_signals
-from cdpr_tools.ros_graph import new_context
+from cdpr_tools.progress import Progress
+from cdpr_tools.ros_graph import fully_qualified, new_context
 
 
 def add_parser(sub) -> None:
@@ -64,6 +65,8 @@ def add_parser(sub) -> None:
     y.add_argument("-d", "--delay", type=_seconds, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
     y.add_argument("--wait-for-subscribers", type=_seconds, default=0.0, metavar="SEC",
                    help="wait up to SEC seconds until every topic has a subscriber")
+    y.add_argument("--remap", nargs="+", type=_remap, default=[], metavar="FROM:=TO",
+                   help="publish bag topic FROM on topic TO (as ros2 bag play --remap)")
     y.set_defaults(run=run_play)
 
     x = verbs.add_parser("reindex", help="rebuild the index and metadata.yaml of a bag cut off by a crash",
@@ -202,6 +205,23 @@ def _stamp(ns: int | None) -> str:
     return f"{wall:%b %d %Y %H:%M:%S}.{nsec:09d} ({sec}.{nsec:09d})"
 
 
+def _play_progress():
+    """bag play's progress on stderr (about once a second): bag time played of the bag's span."""
+    shown = Progress("bag play")
+
+    def update(done_s: float, total_s: float) -> None:
+        shown.update(done_s / total_s if total_s > 0 else 1.0, f"{done_s:.1f} of {total_s:.1f} s of the bag")
+    return update
+
+
+def _remap(text: str) -> tuple[str, str]:
+    """FROM:=TO (topic names, made fully qualified) for --remap."""
+    source, sep, target = text.partition(":=")
+    if not sep or not source.strip() or not target.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not FROM:=TO (e.g. /winch/state:=/replay/winch/state)")
+    return fully_qualified(source.strip()), fully_qualified(target.strip())
+
+
 def run_play(args) -> int:
     bag = BagReader(args.bag)
     context = new_context()
@@ -210,7 +230,8 @@ def run_play(args) -> int:
         with stop_on_signals(stop):
             node = Node("bag_player", context=context, start_parameter_services=False)
             player = BagPlayer(node, bag, rate=args.rate, topics=args.topics, start_offset=args.start_offset,
-                               clock_hz=args.clock, loop=args.loop)
+                               clock_hz=args.clock, loop=args.loop, remap=dict(args.remap),
+                               progress=_play_progress())
             if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(args.wait_for_subscribers, stop):
                 print("not every topic has a subscriber; playing anyway", flush=True)
             if args.delay > 0:

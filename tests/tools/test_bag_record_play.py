@@ -257,3 +257,21 @@ def test_cdpr_bag_record_and_info(tmp_path, spinners, capfd):
     info = capfd.readouterr().out
     assert "Storage id:        mcap" in info
     assert f"Topic: /rec_me | Type: std_msgs/msg/String | Count: {len(numbers)} |" in info
+
+
+def test_play_remaps_topics(tmp_path, spinners, capfd):
+    """--remap FROM:=TO publishes the bag's FROM on TO (as ros2 bag play --remap); a FROM the bag
+    does not have is refused naming the bag's topics."""
+    expected = write_playback_bag(tmp_path / "play")
+    collector = spinners().add(Collector, topics={"/replay/p1": String, "/p1": String})
+    rc = cli.main(["bag", "play", str(tmp_path / "play"), "--rate", "4", "--topics", "/p1",
+                   "--remap", "p1:=/replay/p1", "--wait-for-subscribers", "15"])
+    assert rc == 0
+    wait_for(lambda: collector.count("/replay/p1") == 20, what="the remapped messages")
+    assert [m.data for m in collector.messages("/replay/p1")] == expected["/p1"]
+    assert collector.count("/p1") == 0
+    capfd.readouterr()
+    assert cli.main(["bag", "play", str(tmp_path / "play"), "--remap", "/nope:=/x"]) != 0
+    assert "/nope" in capfd.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["bag", "play", str(tmp_path / "play"), "--remap", "p1=/x"])
