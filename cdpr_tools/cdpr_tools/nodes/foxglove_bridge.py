@@ -15,7 +15,11 @@ publisher of the loop serializes or sends anything for it.
 
 Parameters of the other nodes are offered too (Foxglove's Parameters panel): ``/node.name``, read
 and set through the standard parameter services (rcl_interfaces), so a rejected value keeps the
-node's old one, as with ``cdpr param set``.
+node's old one, as with ``cdpr param set``. The graph's services (but the parameter services) are
+offered to Foxglove's Service Call panel (request and response in CDR, schemas ``ros2msg`` from the
+.srv file), e.g. ``/sim/apply_wrench`` and ``/sim/set_payload``; and a client may publish (Foxglove's
+Publish panel, capability ``clientPublish``): the bridge creates a ROS publisher of the advertised
+type for each channel a client advertises and passes its CDR messages on.
 
 Parameters: ``host``, ``port`` (0: any free port; the bound one is in :attr:`FoxgloveBridge.port`),
 ``topics`` (empty: all), ``exclude`` (regex), ``include_hidden_topics``, ``discovery_period`` [s].
@@ -32,10 +36,11 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.serialization import deserialize_message, serialize_message
 
 from cdpr_control.ros.runner import run_node
 from cdpr_tools.bag.cdr import trimmed
-from cdpr_tools.bag.schema import ENCODING, message_definition
+from cdpr_tools.bag.schema import ENCODING, message_definition, service_definitions
 from cdpr_tools.message_convert import message_class
 from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 
@@ -64,12 +69,17 @@ class FoxgloveBridge(Node):
         self._lock = threading.Lock()  # parameter requests come on the server's threads
         self._param_clients: dict[str, AsyncParameterClient] = {}
         self.fox = foxglove.Context()  # channels of this bridge only (several bridges in one process)
+        self.service_clients: dict[str, object] = {}   # service name -> rclpy client (None: not offered)
+        self.client_publishers: dict[tuple[int, int], object] = {}   # (client id, channel id) -> publisher
         self.server = foxglove.start_server(
             name=f"cdpr {self.get_fully_qualified_name()}", host=self.get_parameter("host").value,
-            port=self.get_parameter("port").value, capabilities=[Capability.Parameters],
-            server_listener=_Listener(self), context=self.fox)
+            port=self.get_parameter("port").value,
+            capabilities=[Capability.Parameters, Capability.Services, Capability.ClientPublish],
+            supported_encodings=["cdr"], server_listener=_Listener(self), context=self.fox)
         self.port = self.server.port
         self.selection = TopicSelection(self, "offer", DISCOVERY_PERIOD, self._offer)
+        self.create_timer(self.get_parameter("discovery_period").value, self._offer_services,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"Foxglove WebSocket server on ws://{self.get_parameter('host').value}:{self.port}")
 
     def _offer(self, topic: str, type_name: str) -> bool:
@@ -120,6 +130,64 @@ class FoxgloveBridge(Node):
     def subscribed_topics(self) -> list[str]:
         """The topics the bridge subscribes to in the graph now (the watched ones)."""
         return sorted(self._raw_subscriptions)
+
+    # -- services of the graph, for Foxglove's Service Call panel -------------------------------------
+    def _offer_services(self) -> None:
+        new = []
+        for name, types in self.get_service_names_and_types():
+            if name in self.service_clients or len(types) != 1 or types[0].startswith("rcl_interfaces/") \
+                    or any(part.startswith("_") for part in name.split("/")):
+                continue
+            try:
+                srv_class = message_class(types[0])
+                request, response = service_definitions(types[0])
+            except (LookupError, ValueError) as exc:
+                self.get_logger().warning(f"not offering service {name}: {exc}")
+                self.service_clients[name] = None
+                continue
+            self.service_clients[name] = self.create_client(srv_class, name)
+            schema = foxglove.ServiceSchema(
+                types[0],
+                request=foxglove.MessageSchema(encoding="cdr", schema=foxglove.Schema(
+                    name=f"{types[0]}_Request", encoding=ENCODING, data=request.encode())),
+                response=foxglove.MessageSchema(encoding="cdr", schema=foxglove.Schema(
+                    name=f"{types[0]}_Response", encoding=ENCODING, data=response.encode())))
+            new.append(foxglove.Service(name, schema=schema, handler=self._service_handler(name, srv_class)))
+        if new:
+            self.server.add_services(new)
+
+    def _service_handler(self, name: str, srv_class):
+        def handle(request) -> bytes:
+            """On a server thread: the CDR request to the ROS service, its response back in CDR."""
+            future = self.service_clients[name].call_async(deserialize_message(request.payload, srv_class.Request))
+            response = self._call(future)
+            if response is None:
+                raise RuntimeError(f"{name} did not answer within {SERVICE_TIMEOUT:g} s")
+            return serialize_message(response)
+        return handle
+
+    # -- messages published by clients (Foxglove's Publish panel) ------------------------------------
+    def client_advertised(self, client_id: int, channel) -> None:
+        if channel.encoding != "cdr":
+            self.get_logger().warning(f"client channel {channel.topic}: encoding {channel.encoding!r} "
+                                      f"is not supported (cdr only)")
+            return
+        try:
+            msg_class = message_class(channel.schema_name)
+        except (LookupError, ValueError) as exc:
+            self.get_logger().warning(f"client channel {channel.topic}: {exc}")
+            return
+        self.client_publishers[(client_id, channel.id)] = self.create_publisher(msg_class, channel.topic, 10)
+
+    def client_unadvertised(self, client_id: int, channel_id: int) -> None:
+        publisher = self.client_publishers.pop((client_id, channel_id), None)
+        if publisher is not None:
+            self.destroy_publisher(publisher)
+
+    def client_message(self, client_id: int, channel_id: int, data: bytes) -> None:
+        publisher = self.client_publishers.get((client_id, channel_id))
+        if publisher is not None:
+            publisher.publish(data)               # the CDR bytes as they came
 
     # -- parameters of the graph's nodes ------------------------------------------------------------
     def _client(self, node: str) -> AsyncParameterClient:
@@ -201,6 +269,15 @@ class _Listener(ServerListener):
 
     def on_unsubscribe(self, client, channel):     # also called for each channel of a client that disconnects
         self.bridge.watch(channel.topic, -1)
+
+    def on_client_advertise(self, client, channel):
+        self.bridge.client_advertised(client.id, channel)
+
+    def on_client_unadvertise(self, client, client_channel_id):
+        self.bridge.client_unadvertised(client.id, client_channel_id)
+
+    def on_message_data(self, client, client_channel_id, data):
+        self.bridge.client_message(client.id, client_channel_id, data)
 
     def on_get_parameters(self, client, param_names, request_id=None):
         return self.bridge.get_parameters(list(param_names))
