@@ -44,6 +44,10 @@ def add_parser(sub) -> None:
     r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="zstd",
                    help="compress each MCAP chunk (default zstd, in the writer process); every reader of "
                         "MCAP decompresses it")
+    r.add_argument("-b", "--max-bag-size", type=_byte_count, default=0, metavar="BYTES",
+                   help="split into files of about BYTES (rosbag2's numbered files, one metadata.yaml; 0: one file)")
+    r.add_argument("-d", "--max-bag-duration", type=_seconds, default=0.0, metavar="SEC",
+                   help="split into files of SEC seconds of log time (0: one file)")
     r.set_defaults(run=run_record)
 
     i = verbs.add_parser("info", help="print a bag's duration, topics, types and counts",
@@ -87,6 +91,17 @@ def _positive(text: str) -> float:
     return value
 
 
+def _byte_count(text: str) -> int:
+    """A whole number of bytes >= 0 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of bytes: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
 def _seconds(text: str) -> float:
     """A finite number of seconds >= 0 (argparse type)."""
     value = _number(text)
@@ -113,7 +128,9 @@ def run_record(args) -> int:
                  Parameter("exclude", value=args.exclude),
                  Parameter("include_hidden_topics", value=args.include_hidden_topics),
                  Parameter("use_sim_time", value=args.use_sim_time),
-                 Parameter("compression", value=args.compression)]
+                 Parameter("compression", value=args.compression),
+                 Parameter("max_bag_size", value=int(args.max_bag_size)),
+                 Parameter("max_bag_duration", value=float(args.max_bag_duration))]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
     context = new_context()

@@ -116,7 +116,7 @@ def test_a_disk_full_before_the_header_fails_at_open(tmp_path):
 
 
 # -- `cdpr bag record` and `cdpr launch --record` on a full disk ----------------------------------
-PAYLOAD = "x" * 1000     # 1 kB at 200 Hz: the recorder's 1 s chunks are about 200 kB
+PAYLOAD = "x" * 1000     # 1 kB at 200 Hz: the recorder's 1 s chunks are about 200 kB (uncompressed)
 
 
 @pytest.fixture
@@ -186,7 +186,7 @@ def run_cdpr():
 
 
 def record_until_full(run_cdpr, bag, **popen) -> tuple[int, str]:
-    process = run_cdpr(["bag", "record", "-a", "-o", str(bag)], **popen)
+    process = run_cdpr(["bag", "record", "-a", "-o", str(bag), "--compression", "none"], **popen)
     wait_for(lambda: "recording stopped" in process.output, timeout=90, what="the disk to fill")
     return process.stop(), process.output
 
@@ -226,7 +226,8 @@ launch:
 
 def test_launch_record_over_a_file_size_limit_exits_non_zero_with_the_count_on_disk(tmp_path, run_cdpr):
     (tmp_path / "graph.yaml").write_text(LAUNCH)
-    process = run_cdpr(["launch", str(tmp_path / "graph.yaml"), "--record", str(tmp_path / "run")],
+    process = run_cdpr(["launch", str(tmp_path / "graph.yaml"), "--record", str(tmp_path / "run"),
+                        "--record-compression", "none"],
                        preexec_fn=file_size_limit(600_000))
     wait_for(lambda: "recording stopped" in process.output, timeout=90, what="the disk to fill")
     assert process.stop() == 1, process.output

@@ -176,13 +176,19 @@ def _mcap_files(path: Path) -> list[Path]:
         if metadata and metadata.get("relative_file_paths"):
             files = [path / Path(p).name for p in metadata["relative_file_paths"]]
         else:
-            files = sorted(path.glob("*.mcap"))
+            files = sorted(path.glob("*.mcap"), key=_split_order)
         missing = [f for f in files if not f.is_file()]
         if missing:
             raise FileNotFoundError(f"bag {path}: missing {', '.join(map(str, missing))}")
         if files:
             return files
     raise FileNotFoundError(f"no bag at {path}: expected a bag directory with .mcap files or an .mcap file")
+
+
+def _split_order(file: Path) -> tuple:
+    """``bag_2.mcap`` before ``bag_10.mcap`` (a split bag's files in order, without metadata.yaml)."""
+    stem, _, number = file.stem.rpartition("_")
+    return (stem, int(number)) if number.isdigit() else (file.stem, -1)
 
 
 def _directory_metadata(path: Path) -> dict | None:

@@ -64,7 +64,7 @@ class BagWriterProcess:
     """
 
     def __init__(self, path: str | os.PathLike, *, compression: str = "zstd", chunk_size: int = 1 << 20,
-                 flush_interval: float = 1.0, batch: int = BATCH):
+                 flush_interval: float = 1.0, batch: int = BATCH, max_bag_size: int = 0, max_bag_duration: float = 0.0):
         self.batch = batch
         # the parent's sys.path: the child imports the same cdpr_tools, however the parent found it
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
@@ -83,7 +83,8 @@ class BagWriterProcess:
         self.failed: str | None = None            # why the child stopped taking messages, if it did
         self.topics: dict[str, str] = {}          # topic -> type, in the order of their indexes
         self._frame(b"O", pickle.dumps({"path": str(path), "compression": compression, "chunk_size": chunk_size,
-                                        "flush_interval": flush_interval}))
+                                        "flush_interval": flush_interval, "max_bag_size": max_bag_size,
+                                        "max_bag_duration": max_bag_duration}))
         reply = self._reply()
         if "error" in reply:
             self._proc.wait()
