@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control import kernels
 from cdpr_control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
+from cdpr_control.nodes.message_builders import builder
 from cdpr_control.safety import all_finite
 
 from .base import CdprNode, spin_node
@@ -123,7 +124,7 @@ class CableForceControllerNode(CdprNode):
         # the constructor copies into the float64 arrays that f_d.tolist() and f.tolist() would fill
         if not _valid(self.robot.m, f_d_values, f_values, theta_values):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            self.publisher.publish(ControllerState(
+            self.publisher.publish(builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, output=[0.0] * self.robot.m))
             return
@@ -141,13 +142,13 @@ class CableForceControllerNode(CdprNode):
             saturated = c.pi.saturated.tolist()
             self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
                         "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_fb.tolist(), error=(f_ref - f_fb).tolist(),
                 integrator=c.pi.integrator.tolist(), feedforward=(f_d if f_ff is None else f_ff).tolist(),
                 output=self.dq_held.tolist(), saturated=saturated)
         else:
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
         self.publisher.publish(state)
@@ -180,7 +181,7 @@ class CableForceControllerNode(CdprNode):
         if not stage.enabled or stage.controller.dq_0 is None:
             F_a = 0.0
         z = self.z_t
-        self.hand_over.publish(ControllerState(
+        self.hand_over.publish(builder(ControllerState)(
             header=header, controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
             output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))

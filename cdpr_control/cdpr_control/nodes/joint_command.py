@@ -39,6 +39,7 @@ from cdpr_control.bumpless import Blend
 from cdpr_control.force_distribution import Status
 from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.joint_command import A_BRAKE, JointCommand
+from cdpr_control.nodes.message_builders import builder
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
 
@@ -214,7 +215,8 @@ class JointCommandNode(CdprNode):
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+            self.publisher.publish(builder(JointState)(header=self.header(t_ns), name=self.names,
+                                                       position=theta_d.tolist()))
         if faults:
             level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),

@@ -17,6 +17,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
+from cdpr_control.nodes.message_builders import builder
 from cdpr_control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.safety import all_finite
 from cdpr_control.stability import check_force_control, planned_home_forces
@@ -107,9 +108,9 @@ class OSPCNode(CdprNode):
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
         feedback = x.tolist()
         # e = x_d - x element by element: the bits of numpy's subtraction
-        state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                names=self.names, reference=reference, feedback=feedback,
-                                error=[a - b for a, b in zip(reference, feedback)])
+        state = builder(ControllerState)(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
+                                         names=self.names, reference=reference, feedback=feedback,
+                                         error=[a - b for a, b in zip(reference, feedback)])
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
         if self.enabled and all_finite(feedback) and reference_finite:
