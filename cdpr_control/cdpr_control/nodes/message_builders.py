@@ -28,7 +28,6 @@ tests/test_message_builders.py checks every class of the packages the project us
 from __future__ import annotations
 
 import array
-import importlib
 import keyword
 import os
 
@@ -36,7 +35,7 @@ import numpy as np
 from rosidl_parser.definition import AbstractGenericString, AbstractNestedType, BasicType, NamespacedType
 
 _IMMUTABLE = (bool, int, float, str, bytes)
-_MISSING = object()       # a field not given (None is no message value, but a sentinel says so plainly)
+_MISSING = object()       # the value of a builder's keyword argument not given
 _builders: dict[type, object] = {}
 
 
@@ -59,8 +58,9 @@ def _field_code(name: str, slot_type, default, env: dict) -> str | None:
     shadows it (rcl_interfaces/Log has a field ``msg``, others ``id``, ``type``)."""
     d = f"_d_{name}"
     if isinstance(slot_type, NamespacedType):
-        nested = getattr(importlib.import_module(".".join(slot_type.namespaces)), slot_type.name)
-        env[f"_b_{name}"] = builder(nested)
+        if not hasattr(type(default), "SLOT_TYPES"):
+            return None
+        env[f"_b_{name}"] = builder(type(default))   # the nested class, as the generated constructor imports it
         return f"_msg._{name} = _b_{name}() if {name} is _MISSING else {name}"
     if isinstance(slot_type, (BasicType, AbstractGenericString)):
         if not isinstance(default, _IMMUTABLE):
@@ -87,8 +87,8 @@ def _compile(cls):
     if any(keyword.iskeyword(n) for n in names):
         return cls
     default = cls(check_fields=False)
-    env: dict = {"_MISSING": _MISSING, "_new": cls.__new__, "_cls": cls, "_array": array.array, "_ndarray": np.array,
-           "_list": list}
+    env: dict = {"_MISSING": _MISSING, "_new": cls.__new__, "_cls": cls, "_array": array.array,
+                 "_ndarray": np.array, "_list": list}
     body = []
     for name, slot_type in zip(names, cls.SLOT_TYPES):
         code = _field_code(name, slot_type, getattr(default, name), env)
@@ -101,5 +101,6 @@ def _compile(cls):
     exec(source, env)                              # noqa: S102 - source built from the message definition only
     build = env["build"]
     build.__name__ = build.__qualname__ = f"build_{cls.__name__}"
-    build.__doc__ = f"A {cls.__module__.split('.')[0]}/{cls.__name__} with the given fields, the .msg defaults for the others."
+    build.__doc__ = (f"A {cls.__module__.split('.')[0]}/{cls.__name__} with the given fields and the .msg defaults "
+                     "for the others (cdpr_control.nodes.message_builders).")
     return build
