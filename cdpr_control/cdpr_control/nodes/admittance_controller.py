@@ -29,6 +29,7 @@ from std_srvs.srv import SetBool
 
 from cdpr_control.control.admittance import AdmittanceController, default_parameters, settings_from
 from cdpr_control.control.ospc import AXES
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg,
@@ -133,11 +134,11 @@ class AdmittanceControllerNode(CdprNode):
         out = self.controller.step(w, x_d, xdot_d, xddot_d, periods)
         xdot, xddot = out.twist()
         header = self.header(t_ns, sp.header.frame_id or "base")
-        self.setpoint_pub.publish(OperationalSetpoint(
+        self.setpoint_pub.publish(builder(OperationalSetpoint)(
             header=header, pose=pose_to_msg(out.x), velocity=twist_to_msg(xdot), acceleration=accel_to_msg(xddot),
             force=sp.force, line=0))
         x_0 = self.controller.zones.x_0
-        self.state_pub.publish(ControllerState(
+        self.state_pub.publish(builder(ControllerState)(
             header=header, controller="admittance_controller", enabled=out.active, names=list(AXES),
             reference=x_0.tolist(), feedback=out.w_user.tolist(), error=(out.x - x_0).tolist(),
             feedforward=out.xd.tolist(), output=out.x.tolist(), saturated=out.limited.tolist()))
@@ -157,7 +158,7 @@ class AdmittanceControllerNode(CdprNode):
         out._force, out._line = sp.force, 0
         self.setpoint_pub.publish(out)
         x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
-        self.state_pub.publish(ControllerState(
+        self.state_pub.publish(builder(ControllerState)(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
             reference=x_0, feedback=_ZEROS, error=[a - b for a, b in zip(x_d, x_0)],
             feedforward=_ZEROS, output=x_d, saturated=[False] * 6))

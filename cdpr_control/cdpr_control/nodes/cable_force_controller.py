@@ -33,6 +33,8 @@ from cdpr_control.control.cable_force_control import CableForceControl, CFCParam
 from cdpr_control.control.hybrid_force_control import (CFCCoupling, HPFCParams, parse_state, task_axis,
     task_force_direction)
 from cdpr_control.control.safety import all_finite
+from cdpr_control.control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg
@@ -124,7 +126,7 @@ class CableForceControllerNode(CdprNode):
         # the constructor copies into the float64 arrays that f_d.tolist() and f.tolist() would fill
         if not _valid(self.robot.m, f_d_values, f_values, theta_values):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            self.publisher.publish(ControllerState(
+            self.publisher.publish(builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, output=[0.0] * self.robot.m))
             return
@@ -142,13 +144,13 @@ class CableForceControllerNode(CdprNode):
             saturated = c.pi.saturated.tolist()
             self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
                         "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_fb.tolist(), error=(f_ref - f_fb).tolist(),
                 integrator=c.pi.integrator.tolist(), feedforward=(f_d if f_ff is None else f_ff).tolist(),
                 output=self.dq_held.tolist(), saturated=saturated)
         else:
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
         self.publisher.publish(state)
@@ -181,7 +183,7 @@ class CableForceControllerNode(CdprNode):
         if not stage.enabled or stage.controller.dq_0 is None:
             F_a = 0.0
         z = self.z_t
-        self.hand_over.publish(ControllerState(
+        self.hand_over.publish(builder(ControllerState)(
             header=header, controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
             output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))

@@ -42,6 +42,7 @@ from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
+from cdpr_control.ros.message_builders import builder
 
 # holding faults after which a program cannot go on (its input is gone, or its path left the
 # workspace): reported with ``abort: True``, the G-code interpreter then fails the program; the
@@ -216,7 +217,8 @@ class JointCommandNode(CdprNode):
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+            self.publisher.publish(builder(JointState)(header=self.header(t_ns), name=self.names,
+                                                       position=theta_d.tolist()))
         if faults:
             level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),

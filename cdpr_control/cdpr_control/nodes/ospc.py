@@ -20,6 +20,7 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_st
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
@@ -107,9 +108,9 @@ class OSPCNode(CdprNode):
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
         feedback = x.tolist()
         # e = x_d - x element by element: the bits of numpy's subtraction
-        state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                names=self.names, reference=reference, feedback=feedback,
-                                error=[a - b for a, b in zip(reference, feedback)])
+        state = builder(ControllerState)(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
+                                         names=self.names, reference=reference, feedback=feedback,
+                                         error=[a - b for a, b in zip(reference, feedback)])
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
         if self.enabled and all_finite(feedback) and reference_finite:
