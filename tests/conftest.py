@@ -6,6 +6,10 @@ import random
 # concurrent test runs on one machine do not see each other's nodes.
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+# Generated message classes check the type of every field they are given (read when a message
+# module is imported, so before any test imports one): a wrong type fails a test with a Python
+# error instead of asserting in the C conversion and aborting the process (issue 28, exit 134).
+os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 
 import pytest  # noqa: E402
