@@ -1,8 +1,10 @@
 """Messages the node layer builds field by field (conversions.bare) equal the generated
 constructors' and serialize to the same bytes, and the DDS side reads them back unchanged."""
+import importlib
 import math
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Accel, Point, Pose, PoseStamped, Quaternion, Twist, Vector3, Wrench
 from rclpy.serialization import deserialize_message, serialize_message
@@ -44,7 +46,26 @@ def test_geometry_messages_are_the_constructed_ones():
     assert pose_to_msg(x, reused) is reused and reused == pose
 
 
-def test_fast_constructors_build_the_generated_messages():
+@pytest.fixture
+def fast_constructors(monkeypatch):
+    """message_init's constructors installed for one test: the suite runs with
+    ROS_PYTHON_CHECK_FIELDS=1 (tests/conftest.py), under which every class keeps its generated,
+    field-checking constructor; the generated ones are back afterwards, also when the test fails."""
+    from cdpr_control.nodes import message_init
+
+    generated = {cls: cls.__init__ for package in message_init.PACKAGES
+                 for cls in vars(importlib.import_module(f"{package}.msg")).values()
+                 if isinstance(cls, type) and hasattr(cls, "SLOT_TYPES")}
+    monkeypatch.setenv("ROS_PYTHON_CHECK_FIELDS", "0")
+    try:
+        message_init.install()
+        yield
+    finally:
+        for cls, init in generated.items():
+            cls.__init__ = init
+
+
+def test_fast_constructors_build_the_generated_messages(fast_constructors):
     """message_init's constructors: defaults and given values equal the generated constructor's,
     serialize alike, and numeric sequences are copied into array.array as the generated one does."""
     import array
