@@ -479,6 +479,8 @@ def robot_path(name_or_path: str | Path) -> Path:
     if candidate.suffix in (".yaml", ".yml"):
         return candidate
     shipped = ROBOTS_DIR / f"{name_or_path}.yaml"
+    if not shipped.exists() and candidate.exists():   # a file (or directory) of another name: say what it is
+        return candidate
     if not shipped.exists():
         raise RobotFileError(
             f"unknown robot {str(name_or_path)!r}; shipped robots: {', '.join(available_robots())}"

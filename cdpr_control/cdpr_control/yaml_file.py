@@ -9,7 +9,8 @@
 - ``robot.yaml: nested deeper than 64 levels (line 1, column 65)``;
 - ``robot.yaml: not UTF-8 text (byte 0xff at line 1, column 1; a UTF-16, Latin-1 or binary file?)``;
 - ``robot.yaml:3:7: not valid YAML: mapping values are not allowed here``;
-- ``robots/: is a directory, not a robot file`` and ``cannot read robot file: Permission denied``.
+- ``robots/: is a directory, not a robot file``, ``pipe: is not a regular file, not a robot file`` and
+  ``cannot read robot file: Permission denied``.
 """
 from __future__ import annotations
 
@@ -73,6 +74,8 @@ def read_text(path: str | Path, what: str = "file") -> str:
     path = Path(path)
     if path.is_dir():
         raise YamlFileError(f"{path}: is a directory, not a {what}")
+    if path.exists() and not path.is_file():     # a fifo or a device would block or never end
+        raise YamlFileError(f"{path}: is not a regular file, not a {what}")
     try:
         data = path.read_bytes()
     except FileNotFoundError:

@@ -39,6 +39,8 @@ def _text(program: str) -> tuple[str, str]:
     path = Path(program)
     if path.is_dir():
         raise IsADirectoryError(f"{program}: is a directory, not a G-code file")
+    if path.exists() and not path.is_file():     # a fifo or a device would block or never end
+        raise OSError(f"{program}: is not a regular file, not a G-code file")
     if path.exists():
         try:
             source = path.read_bytes()
