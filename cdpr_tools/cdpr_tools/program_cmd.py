@@ -86,8 +86,15 @@ def _run(args) -> int:
         return _print_diagnostics(args.program, exc)
     # on a terminal one line rewritten in place; into a file or pipe a line per tenth of the program
     shown = Progress(f"program {name!r}")
-    result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
-                         feedback=lambda line, fraction: shown.update(fraction, f"line {line}"))
-    shown.done()
+    try:
+        result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
+                             feedback=lambda line, fraction: shown.update(fraction, f"line {line}"))
+    except BaseException:
+        shown.stop()
+        raise
+    if result.success:
+        shown.done()
+    else:
+        shown.stop()
     print(f"{name}: {'done' if result.success else 'failed'} after {result.duration:.2f} s {result.message}")
     return 0 if result.success else 1
