@@ -3,7 +3,10 @@
 A robot file holds geometry (thesis tables 2.3/2.4), cable, drive, platform, sensor and friction
 parameters in SI units (keys ending in ``_deg`` are degrees and converted to rad here). Every key is
 checked for presence, shape, sign and finiteness; any problem raises :class:`RobotFileError` naming
-the file and the dotted key, e.g. ``ipanema3.yaml: geometry.r_p[3]: must be > 0, got -0.05``.
+the file and the dotted key, e.g. ``ipanema3.yaml: geometry.r_p[3]: must be > 0, got -0.05``. The
+file is read by :mod:`cdpr_control.yaml_file` (a key given twice, deep nesting and text that is not
+UTF-8 are refused in words), at most MAX_CABLES cables are taken, and the home pose must lie inside
+the frame and in the wrench-feasible workspace (2.39)-(2.40).
 
 Per-cable values may be written as one scalar, which applies to every cable.
 """

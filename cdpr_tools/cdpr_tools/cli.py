@@ -46,7 +46,7 @@ def _run(args) -> int:
         code = int(args.run(args) or 0)
         sys.stdout.flush()               # a closed pipe shows here, not in the interpreter's exit
         return code
-    except (KeyboardInterrupt, BrokenPipeError):
+    except BrokenPipeError:              # an OSError, but no tool error: main ends quietly
         raise
     except Exception as exc:  # a tool error is a message, not a traceback
         if getattr(args, "debug", False):
