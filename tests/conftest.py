@@ -10,6 +10,10 @@ SESSION_DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 # `cdpr` commands called in a test discover the graph themselves unless the test starts the graph
 # daemon (and stops it) itself: tests/tools/test_cli_daemon.py
 os.environ.setdefault("CDPR_NO_DAEMON", "1")
+# Generated message classes check the type of every field they are given (read when a message
+# module is imported, so before any test imports one): a wrong type fails a test with a Python
+# error instead of asserting in the C conversion and aborting the process (issue 28, exit 134).
+os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 
 import pytest  # noqa: E402

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 
 from cdpr_tools import progress
@@ -38,25 +39,48 @@ def main(argv: list[str] | None = None) -> int:
     # ROS 2 discovery stays on this machine unless the user says otherwise
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     argv = sys.argv[1:] if argv is None else list(argv)
-    answered = daemon_client.answer(argv)
-    if answered is not None:
-        return answered
-    args = build_parser(argv).parse_args(argv)
-    progress.enable()  # long commands show how far they are (stderr)
-    return run(args)
+    try:
+        answered = daemon_client.answer(argv)
+        if answered is not None:
+            return answered
+        args = build_parser(argv).parse_args(argv)   # --help into a closed pipe is a closed pipe too
+        progress.enable()  # long commands show how far they are (stderr)
+        return run(args)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        return _closed_pipe()
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run parsed command ``args``: its exit status; an error is a message, not a traceback."""
+    """Run parsed command ``args``: its exit status; an error is a message, not a traceback (the
+    graph daemon runs commands through this too)."""
     try:
-        return int(args.run(args) or 0)
+        code = int(args.run(args) or 0)
+        sys.stdout.flush()               # a closed pipe shows here, not in the interpreter's exit
+        return code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:              # an OSError, but no tool error: main ends quietly
+        raise
     except Exception as exc:  # a tool error is a message, not a traceback
         if getattr(args, "debug", False):
             raise
         print(f"cdpr {args.command}: error: {exc}", file=sys.stderr)
         return 1
+
+
+def _closed_pipe() -> int:
+    """The reader of stdout left (``cdpr robot | head``): end quietly with the status of a process
+    ended by SIGPIPE, as coreutils do. stdout goes to /dev/null so the exit's own flush is quiet too."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):   # not a file (a test's captured stdout): nothing to flush
+        return 128 + signal.SIGPIPE
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+    return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":

@@ -30,6 +30,7 @@ unstretched cable length.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -114,6 +115,8 @@ def _validate(v: dict) -> None:
     for name in ("wall_normal", "cylinder_axis"):
         if not np.linalg.norm(v[name]) > 0.0:
             raise ValueError(f"{name} must not be zero")
+    if not math.isfinite(v["floor_height"]):     # the one float without a range (a floor may be anywhere)
+        raise ValueError(f"floor_height must be a finite height [m], got {v['floor_height']}")
 
 
 class WinchPlatformSimNode(CdprNode):
