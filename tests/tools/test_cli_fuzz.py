@@ -192,9 +192,6 @@ def check_refused(code, out: str, err: str, named: str) -> None:
 # Found by this test in code other engineers own (issue 28's bag and analysis items): strict
 # xfails, so each turns into a failure when its fix lands and then joins the cases above.
 KNOWN = [pytest.param(argv, named, marks=pytest.mark.xfail(reason=why, strict=True), id=" ".join(argv)) for argv, named, why in [
-    (["bag", "info", "{not_a_bag}"], "{not_a_bag}", "the MCAP reader's 'invalid magic' does not name the file"),
-    (["bag", "info", "{empty_mcap}"], "{empty_mcap}", "an empty .mcap file gives an empty error message"),
-    (["bag", "reindex", "{not_a_bag}"], "{not_a_bag}", "reindex rewrites a file that is no MCAP and exits 0"),
     (["analyze", "energy", "--trajectory", "{gcode_latin1}", "--robot", "ipanema3_mini"], "{gcode_latin1}",
      "the program is read without the file's name: a bare codec message"),
     (["analyze", "energy", "--trajectory", "{gcode_directory}", "--robot", "ipanema3_mini"],
@@ -206,14 +203,17 @@ KNOWN = [pytest.param(argv, named, marks=pytest.mark.xfail(reason=why, strict=Tr
     (["analyze", "stability", "--robot", "ipanema3_mini", "--pade-order", "-1"], "pade", "'require n >= 0'"),
     (["analyze", "eigenfrequencies", "--robot", "ipanema3_mini", "--z", "nan"], "z", "accepted, exit 0"),
     (["analyze", "force-distribution", "--robot", "ipanema3_mini", "--speed", "-1"], "speed", "'division by zero'"),
-]] + [pytest.param(["identify", what, "{" + bad + "}"], "{" + bad + "}", id=f"identify {what} {bad}",
-                      marks=pytest.mark.xfail(reason="the bag reader's error (see bag info above) names no file",
-                                              strict=True))
-         for what in ("friction", "drive", "mass", "stiffness", "settlement", "eigenfrequency")
-         for bad in ("empty_mcap", "not_a_bag")]
+]]
+# fixed by the bag reader's work (issue 28): a file that is no MCAP is refused naming it
+BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", "{empty_mcap}"], "{empty_mcap}"),
+              (["bag", "reindex", "{not_a_bag}"], "{not_a_bag}")] + \
+    [(["identify", what, "{" + bad + "}"], "{" + bad + "}")
+     for what in ("friction", "drive", "mass", "stiffness", "settlement", "eigenfrequency")
+     for bad in ("empty_mcap", "not_a_bag")]
 
 
-@pytest.mark.parametrize("argv, named", ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + KNOWN,
+@pytest.mark.parametrize("argv, named",
+                         ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + BAG_READER + KNOWN,
                          ids=lambda v: " ".join(v) if isinstance(v, list) else None)
 def test_bad_input_is_refused_in_one_line_naming_it(files, capsys, argv, named):
     check_refused(*in_process(expand(argv, files), capsys), expand([named], files)[0])
