@@ -4,13 +4,15 @@ the shipped admittance sets keep the loop margins of `cdpr analyze stability`.""
 import numpy as np
 import pytest
 
-from cdpr_control.analysis.stability import (MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG, NOISE_DEAD_BAND_SIGMAS,
-                                             admittance_margins, admittance_values, wrench_noise)
 from cdpr_control.admittance import settings_from
 from cdpr_control.admittance_zones import per_axis
+from cdpr_control.analysis.stability import (MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG, NOISE_DEAD_BAND_SIGMAS,
+                                             admittance_margins, admittance_values, wrench_noise)
 from cdpr_control.controller_params import control_loop_params
+from cdpr_control.dynamics import gravity_wrench
 from cdpr_control.robot import load_robot
 from cdpr_control.workspace import feasible_poses
+from cdpr_sim.closed_loop import hold, run
 from cdpr_sim.hand_guiding import guiding_run
 from cdpr_sim.simulator import SimConfig
 
@@ -96,3 +98,14 @@ def test_guided_platform_at_rest_stands_still(name, plant, pose):
     assert moved < 1e-3, moved
     assert np.all(np.abs(w_user) < 0.05 * g.source.controller.user.w_max), np.abs(w_user).max(axis=0)
     assert r.f[on].min() >= robot.cable.f_min.min(), r.f[on].min()
+
+
+def test_the_noise_model_is_the_simulated_idle_wrench():
+    """wrench_noise (the basis of the dead band) against the measured wrench of the IPAnema 3
+    holding home on the nominal plant, unfiltered (the PT1's factor on white noise is arithmetic)."""
+    robot = ROBOTS["ipanema3"]
+    w = []
+    run(robot, hold(robot.home), 1.0, config=SimConfig(plant="nominal"),
+        before_step=lambda k, loop, sim: w.append(loop.state.w.copy()) if k > 500 else None)
+    w = np.array(w) - gravity_wrench(robot, robot.home)
+    np.testing.assert_allclose(w.std(axis=0), wrench_noise(robot, robot.home, 0.0), rtol=0.15)
