@@ -89,10 +89,7 @@ def control_loop_params(robot, **switches) -> ControlLoopParams:
     for node, values in file.items():
         if node in STAGES:
             attr, cls = STAGES[node]
-            known = {f.name for f in fields(cls)}
-            stage = {k: (np.asarray(v, dtype=float) if isinstance(v, list) else v)
-                     for k, v in values.items() if k in known}
-            loop = replace(loop, **{attr: replace(getattr(loop, attr), **stage)})
+            loop = replace(loop, **{attr: _section(cls, values)})
         for key, value in values.items():
             if (node, key) in SWITCHES:
                 loop = replace(loop, **{SWITCHES[node, key]: value})
@@ -106,7 +103,8 @@ class ShippedConfiguration:
     dt: float                                   # s, control period ("/**" control_period)
     loop: ControlLoopParams                     # the stages of Fig. 3.4 and the contact control (5.1)
     load_compensation: LoadCompensationParams   # section 4.1 (its ``enabled``: x_d,LC in the joint command)
-    payload_input: bool                         # force_distribution: the identified payload in w_dyn
+    payload_input: bool                         # force_distribution: the identified payload as the known
+                                                # part of the disturbance (3.24), docs/load_compensation.md
     admittance: dict                            # flat admittance_controller parameters (section 5.2)
     hand_guiding: bool                          # the admittance controller is the set-point source
 
