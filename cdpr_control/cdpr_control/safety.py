@@ -4,10 +4,18 @@ The monitor looks at one control period's inputs and reports faults; the joint c
 (:mod:`cdpr_control.joint_command`) holds its last safe set-point while a holding fault is present.
 Faults: cable force beyond its limits, position lag error beyond a bound, forward kinematics not
 converged, a stale input, and non-finite input values.
+
+The force watch (:class:`ForceWatch`, on by default) is the latched part: a cable force outside
+[f_min - tol, f_max + tol] for longer than ``force_limit_time``, a force rate beyond
+``max_force_rate`` force ranges per second (a growing oscillation), or a position error beyond
+``max_position_lag`` trips it once and for good (until released). The joint command then goes to
+the last command that the forces followed within their limits for ``safe_history`` seconds, and
+stays there: the controllers' outputs of that moment frozen, not the diverging ones.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from math import isfinite
 from dataclasses import dataclass
 
@@ -19,6 +27,7 @@ FK_NOT_CONVERGED = "fk_not_converged"
 STALE_INPUT = "stale_input"
 NON_FINITE = "non_finite"
 WORKSPACE = "workspace"          # the set-point left the wrench-feasible workspace (joint command)
+FORCE_WATCH = "force_watch"      # the latched force watch tripped (ForceWatch)
 
 
 def all_finite(values) -> bool:
@@ -62,11 +71,26 @@ class SafetyConfig:
     max_position_lag: float = 0.05      # m, |r_d - r|
     max_orientation_lag: float = 0.1    # rad, |phi_d - phi|
     stale_timeout: float = 0.05         # s without a new input
-    hold_on_force_limit: bool = False   # a force fault holds the command (else it is reported only)
+    hold_on_force_limit: bool = False   # a force fault holds the command while it lasts (else it is reported only)
+    # the latched force watch (ForceWatch); the times and the rate were chosen from measurement on
+    # the Mini (docs/control.md, "Safety"): the shipped programs and contacts stay below a quarter
+    # of max_force_rate, the diverging gains of issue 28 cross it within 10 ms (tests/test_force_watch.py)
+    force_watch: bool = True            # trip the latched hold to the last safe command
+    force_limit_time: float = 0.05      # s a cable force may stay beyond [f_min - tol, f_max + tol]
+    max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
+    force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
+    safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
 
     def validate(self) -> None:
-        if min(self.force_tolerance, self.max_position_lag, self.max_orientation_lag, self.stale_timeout) < 0:
-            raise ValueError("safety bounds must be >= 0")
+        bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
+                  "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
+                  "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
+                  "safe_history": self.safe_history}
+        bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
+        if not self.max_force_rate > 0:
+            bad.append(f"max_force_rate = {self.max_force_rate} (must be > 0)")
+        if bad:
+            raise ValueError(f"safety bounds must be >= 0: {', '.join(bad)}")
 
 
 @dataclass
@@ -133,3 +157,114 @@ class SafetyMonitor:
                     # (a fixed text: the report on /diagnostics changes with the message, not every period)
                     faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
         return faults
+
+
+class ForceWatch:
+    """The latched safety hold of the joint command: detects a runaway and names the command to hold.
+
+    Per period (:meth:`update`) it watches the measured cable forces f and the pose error:
+
+    * a cable outside [f_min - tol, f_max + tol] for longer than ``force_limit_time`` (consecutive);
+    * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, beyond
+      ``max_force_rate`` (f_max - f_min) per second on any cable. A rate, not an energy: it is per
+      cable, needs no model of the platform, and on the Mini crossed the limit 5-25 ms after an
+      unstable gain while the shipped programs and contacts stayed below a quarter of it;
+    * a position error |r_d - r| beyond ``max_position_lag``.
+
+    The first of these trips it: :attr:`fault` (code FORCE_WATCH, holding) stays set until
+    :meth:`release`. :attr:`safe` is what the joint command holds then: the set-point pose x_d of
+    the tripping period (on the planned path, where the platform is) with the force-control outputs
+    and the force set-point frozen at the newest period that was followed by ``safe_history``
+    seconds of clean periods (every force within the band, every rate below half the limit):
+    θ_d = IK(x_safe + Σ offsets_safe) - Δq_CFC,safe, the tension the forces followed within their
+    limits, not the diverging outputs (before a clean stretch, the first period's outputs); the
+    joint command restores f_d,safe slowly on top (:mod:`cdpr_control.joint_command`). The thesis
+    has no such layer (its safety is the drives' own limits); it is the project's.
+    """
+
+    def __init__(self, config: SafetyConfig, dt: float):
+        config.validate()
+        self.config, self.dt = config, dt
+        self.fault: Fault | None = None
+        self.safe: tuple | None = None               # (x_safe (6,), offset_safe (6,), Δq_CFC,safe (m,), f_d,safe) once tripped
+        self._outputs: tuple | None = None           # (offset, Δq_CFC, f_d) of the newest safe period
+        self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
+        self._clean = 0
+        self._outside: np.ndarray | None = None      # per cable, seconds beyond the band in a row
+        self._f_prev: np.ndarray | None = None
+        self._rate: np.ndarray | None = None         # filtered df/dt [N/s]
+
+    def release(self) -> None:
+        """End the hold (an operator's decision): the watch starts again from the next period."""
+        self.fault = None
+        self._outside = self._f_prev = self._rate = None
+        self._clean = 0
+        self._history.clear()
+        self.safe = self._outputs = None
+
+    def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
+        """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
+        limits, the set-point pose x_d (6,), the period's summed offset (6,) and Δq_CFC (m,) as the
+        joint command adds them, the force set-point f_d (m,) (None: unknown), the estimated pose x
+        (None: not watched) -> the latched fault, None while all is well."""
+        if self.fault is not None or not self.config.force_watch:
+            return self.fault
+        self._remember(np.array(offset, dtype=float), np.array(dq_cfc, dtype=float),
+                       None if f_d is None else np.array(f_d, dtype=float))
+        f = None if f is None else np.asarray(f, dtype=float)
+        if f is None or not all_finite(f):
+            self._clean = 0
+            return None
+        f_min, f_max = np.broadcast_to(f_min, f.shape), np.broadcast_to(f_max, f.shape)
+        band, oscillation = self._band(f, f_min, f_max), self._oscillation(f, f_min, f_max)   # (both kept current)
+        self.fault = band or oscillation or self._lag(x_d, x)
+        limit = self.config.max_force_rate * (f_max - f_min)
+        clean = not self._outside.any() and bool(np.all(np.abs(self._rate) < 0.5 * limit))
+        self._clean = self._clean + 1 if clean else 0
+        if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
+            self._outputs = self._history[0]
+        if self.fault is not None:
+            self.safe = (np.array(x_d, dtype=float), *self._outputs)
+        return self.fault
+
+    def _remember(self, offset: np.ndarray, dq_cfc: np.ndarray, f_d) -> None:
+        if self._outputs is None:
+            self._outputs = (offset, dq_cfc, f_d)    # the first period: the robot stood there
+        self._history.append((offset, dq_cfc, f_d))
+
+    def _band(self, f, f_min, f_max) -> Fault | None:
+        """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
+        c = self.config
+        below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
+        outside = below | above
+        self._outside = np.where(outside, (0.0 if self._outside is None else self._outside) + self.dt, 0.0)
+        i = int(np.argmax(self._outside))
+        if self._outside[i] <= c.force_limit_time:
+            return None
+        side = f"below f_min {f_min[i]:.1f} N" if below[i] else f"above f_max {f_max[i]:.1f} N"
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {c.force_tolerance:g} N) "
+                     f"for {1e3 * self._outside[i]:.0f} ms (limit {1e3 * c.force_limit_time:.0f} ms)", True)
+
+    def _oscillation(self, f, f_min, f_max) -> Fault | None:
+        """The filtered force rate beyond max_force_rate force ranges per second."""
+        c = self.config
+        rate = np.zeros_like(f) if self._f_prev is None else (f - self._f_prev) / self.dt
+        self._f_prev = f
+        alpha = self.dt / (c.force_rate_filter + self.dt)
+        self._rate = rate if self._rate is None else self._rate + alpha * (rate - self._rate)
+        limit = c.max_force_rate * (f_max - f_min)
+        excess = np.abs(self._rate) / limit
+        i = int(np.argmax(excess))
+        if excess[i] <= 1.0:
+            return None
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._rate[i]):.0f} N/s beyond "
+                     f"{limit[i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
+
+    def _lag(self, x_d, x) -> Fault | None:
+        if x_d is None or x is None:
+            return None
+        dr = math.dist(_floats(x_d)[:3], _floats(x)[:3])
+        if not dr > self.config.max_position_lag:
+            return None
+        return Fault(FORCE_WATCH, f"force watch: position error {1e3 * dr:.1f} mm beyond "
+                     f"{1e3 * self.config.max_position_lag:.1f} mm", True)
