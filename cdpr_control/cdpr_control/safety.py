@@ -76,7 +76,8 @@ class SafetyConfig:
     # the Mini (docs/control.md, "Safety"): the shipped programs and contacts stay below a quarter
     # of max_force_rate, the diverging gains of issue 28 cross it within 10 ms (tests/test_force_watch.py)
     force_watch: bool = True            # trip the latched hold to the last safe command
-    force_limit_time: float = 0.05      # s a cable force may stay beyond [f_min - tol, f_max + tol]
+    force_band: float = 0.05            # -, the watch's tolerance beyond [f_min, f_max] as a share of f_max - f_min
+    force_limit_time: float = 0.05      # s a cable force may stay beyond the band
     max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
     force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
     safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
@@ -84,7 +85,7 @@ class SafetyConfig:
     def validate(self) -> None:
         bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
                   "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
-                  "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
+                  "force_band": self.force_band, "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
                   "safe_history": self.safe_history}
         bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
         if not self.max_force_rate > 0:
@@ -164,11 +165,14 @@ class ForceWatch:
 
     Per period (:meth:`update`) it watches the measured cable forces f and the pose error:
 
-    * a cable outside [f_min - tol, f_max + tol] for longer than ``force_limit_time`` (consecutive);
-    * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, beyond
-      ``max_force_rate`` (f_max - f_min) per second on any cable. A rate, not an energy: it is per
-      cable, needs no model of the platform, and on the Mini crossed the limit 5-25 ms after an
-      unstable gain while the shipped programs and contacts stayed below a quarter of it;
+    * a cable outside [f_min - tol, f_max + tol], tol = ``force_band`` (f_max - f_min), for longer
+      than ``force_limit_time`` (consecutive periods);
+    * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, away
+      from the force set-point f_d (a force that follows a step of its set-point, a new tension
+      level, moves towards it) beyond ``max_force_rate`` (f_max - f_min) per second on any cable.
+      A rate, not an energy: it is per cable, needs no model of the platform, and on the Mini
+      crossed the limit 9 ms after an unstable gain while the shipped programs and contacts stayed
+      below a quarter of it;
     * a position error |r_d - r| beyond ``max_position_lag``.
 
     The first of these trips it: :attr:`fault` (code FORCE_WATCH, holding) stays set until
@@ -190,9 +194,17 @@ class ForceWatch:
         self._outputs: tuple | None = None           # (offset, Δq_CFC, f_d) of the newest safe period
         self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
         self._clean = 0
-        self._outside: np.ndarray | None = None      # per cable, seconds beyond the band in a row
+        self._outside: np.ndarray | None = None      # per cable, periods beyond the band in a row
+        self._limit_periods = int(round(config.force_limit_time / dt))
         self._f_prev: np.ndarray | None = None
         self._rate: np.ndarray | None = None         # filtered df/dt [N/s]
+
+    def configure(self, config: SafetyConfig) -> None:
+        """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
+        config.validate()
+        self.config = config
+        self._limit_periods = int(round(config.force_limit_time / self.dt))
+        self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
 
     def release(self) -> None:
         """End the hold (an operator's decision): the watch starts again from the next period."""
@@ -216,7 +228,8 @@ class ForceWatch:
             self._clean = 0
             return None
         f_min, f_max = np.broadcast_to(f_min, f.shape), np.broadcast_to(f_max, f.shape)
-        band, oscillation = self._band(f, f_min, f_max), self._oscillation(f, f_min, f_max)   # (both kept current)
+        band = self._band(f, f_min, f_max)
+        oscillation = self._oscillation(f, f_min, f_max, f_d)         # (both kept current)
         self.fault = band or oscillation or self._lag(x_d, x)
         limit = self.config.max_force_rate * (f_max - f_min)
         clean = not self._outside.any() and bool(np.all(np.abs(self._rate) < 0.5 * limit))
@@ -235,25 +248,28 @@ class ForceWatch:
     def _band(self, f, f_min, f_max) -> Fault | None:
         """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
         c = self.config
-        below, above = f < f_min - c.force_tolerance, f > f_max + c.force_tolerance
+        tol = c.force_band * (f_max - f_min)
+        below, above = f < f_min - tol, f > f_max + tol
         outside = below | above
-        self._outside = np.where(outside, (0.0 if self._outside is None else self._outside) + self.dt, 0.0)
+        self._outside = np.where(outside, (0 if self._outside is None else self._outside) + 1, 0)
         i = int(np.argmax(self._outside))
-        if self._outside[i] <= c.force_limit_time:
+        if self._outside[i] <= self._limit_periods:
             return None
         side = f"below f_min {f_min[i]:.1f} N" if below[i] else f"above f_max {f_max[i]:.1f} N"
-        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {c.force_tolerance:g} N) "
-                     f"for {1e3 * self._outside[i]:.0f} ms (limit {1e3 * c.force_limit_time:.0f} ms)", True)
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
+                     f"for {1e3 * self._outside[i] * self.dt:.0f} ms (limit {1e3 * c.force_limit_time:.0f} ms)", True)
 
-    def _oscillation(self, f, f_min, f_max) -> Fault | None:
-        """The filtered force rate beyond max_force_rate force ranges per second."""
+    def _oscillation(self, f, f_min, f_max, f_d) -> Fault | None:
+        """The filtered force rate away from f_d (any direction without f_d) beyond max_force_rate
+        force ranges per second."""
         c = self.config
         rate = np.zeros_like(f) if self._f_prev is None else (f - self._f_prev) / self.dt
         self._f_prev = f
         alpha = self.dt / (c.force_rate_filter + self.dt)
         self._rate = rate if self._rate is None else self._rate + alpha * (rate - self._rate)
         limit = c.max_force_rate * (f_max - f_min)
-        excess = np.abs(self._rate) / limit
+        away = np.abs(self._rate) if f_d is None else self._rate * np.sign(f - np.asarray(f_d, dtype=float))
+        excess = away / limit
         i = int(np.argmax(excess))
         if excess[i] <= 1.0:
             return None
