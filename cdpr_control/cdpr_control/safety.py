@@ -194,25 +194,42 @@ class ForceWatch:
         self._outputs: tuple | None = None           # (offset, Δq_CFC, f_d) of the newest safe period
         self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
         self._clean = 0
-        self._outside: np.ndarray | None = None      # per cable, periods beyond the band in a row
-        self._limit_periods = int(round(config.force_limit_time / dt))
-        self._f_prev: np.ndarray | None = None
-        self._rate: np.ndarray | None = None         # filtered df/dt [N/s]
+        self._outside: list | None = None            # per cable, periods beyond the band in a row
+        self._f_prev: list | None = None
+        self._rate: list | None = None               # per cable, filtered df/dt [N/s]
+        self._away: list | None = None               # per cable, that rate away from f_d [N/s]
+        self._bounds_key, self._bounds = None, None
+        self.configure(config)
 
     def configure(self, config: SafetyConfig) -> None:
         """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
         config.validate()
         self.config = config
         self._limit_periods = int(round(config.force_limit_time / self.dt))
+        self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
         self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
+        self._bounds_key = None
 
     def release(self) -> None:
         """End the hold (an operator's decision): the watch starts again from the next period."""
         self.fault = None
-        self._outside = self._f_prev = self._rate = None
+        self._outside = self._f_prev = self._rate = self._away = None
         self._clean = 0
         self._history.clear()
         self.safe = self._outputs = None
+
+    def _limits(self, f_min, f_max, m: int) -> tuple:
+        """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
+        while the limits' bytes repeat (the robot's, every period)."""
+        f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
+        key = (f_min.tobytes(), f_max.tobytes(), m)
+        if key != self._bounds_key:
+            f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
+            tol = self.config.force_band * (f_max - f_min)
+            self._bounds_key = key
+            self._bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
+                                                      self.config.max_force_rate * (f_max - f_min)))
+        return self._bounds
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
         """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
@@ -223,16 +240,13 @@ class ForceWatch:
             return self.fault
         self._remember(np.array(offset, dtype=float), np.array(dq_cfc, dtype=float),
                        None if f_d is None else np.array(f_d, dtype=float))
-        f = None if f is None else np.asarray(f, dtype=float)
-        if f is None or not all_finite(f):
+        values = None if f is None else _floats(f)
+        if values is None or not all_finite(values):
             self._clean = 0
             return None
-        f_min, f_max = np.broadcast_to(f_min, f.shape), np.broadcast_to(f_max, f.shape)
-        band = self._band(f, f_min, f_max)
-        oscillation = self._oscillation(f, f_min, f_max, f_d)         # (both kept current)
-        self.fault = band or oscillation or self._lag(x_d, x)
-        limit = self.config.max_force_rate * (f_max - f_min)
-        clean = not self._outside.any() and bool(np.all(np.abs(self._rate) < 0.5 * limit))
+        bounds = self._limits(f_min, f_max, len(values))
+        clean = self._watch_forces(values, None if f_d is None else _floats(f_d), bounds)
+        self.fault = self._band(values, bounds) or self._oscillation(values, bounds) or self._lag(x_d, x)
         self._clean = self._clean + 1 if clean else 0
         if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
             self._outputs = self._history[0]
@@ -245,34 +259,46 @@ class ForceWatch:
             self._outputs = (offset, dq_cfc, f_d)    # the first period: the robot stood there
         self._history.append((offset, dq_cfc, f_d))
 
-    def _band(self, f, f_min, f_max) -> Fault | None:
-        """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
-        c = self.config
-        tol = c.force_band * (f_max - f_min)
-        below, above = f < f_min - tol, f > f_max + tol
-        outside = below | above
-        self._outside = np.where(outside, (0 if self._outside is None else self._outside) + 1, 0)
-        i = int(np.argmax(self._outside))
-        if self._outside[i] <= self._limit_periods:
-            return None
-        side = f"below f_min {f_min[i]:.1f} N" if below[i] else f"above f_max {f_max[i]:.1f} N"
-        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
-                     f"for {1e3 * self._outside[i] * self.dt:.0f} ms (limit {1e3 * c.force_limit_time:.0f} ms)", True)
+    def _watch_forces(self, f: list, f_d: list | None, bounds: tuple) -> bool:
+        """One period of the per-cable counters and rates, on Python floats (at 1 kHz numpy's
+        per-call cost on 8 values is more than the arithmetic) -> whether the period is clean."""
+        m = len(f)
+        lower, upper, limit = bounds[3], bounds[4], bounds[5]
+        if self._rate is None or len(self._rate) != m:
+            self._outside, self._rate, self._away, self._f_prev = [0] * m, [0.0] * m, [0.0] * m, list(f)
+        outside, rate, away, prev, alpha, inv_dt = self._outside, self._rate, self._away, self._f_prev, self._alpha, 1.0 / self.dt
+        clean = True
+        for i in range(m):
+            fi = f[i]
+            out = fi < lower[i] or fi > upper[i]
+            outside[i] = outside[i] + 1 if out else 0
+            r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
+            # towards f_d is following a set-point (a new tension level); away from it is not
+            away[i] = abs(r) if f_d is None else (r if fi > f_d[i] else -r if fi < f_d[i] else 0.0)
+            clean = clean and not out and abs(r) < 0.5 * limit[i]
+        self._f_prev = f
+        return clean
 
-    def _oscillation(self, f, f_min, f_max, f_d) -> Fault | None:
+    def _band(self, f: list, bounds: tuple) -> Fault | None:
+        """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
+        longest = max(self._outside)
+        if longest <= self._limit_periods:
+            return None
+        f_min, f_max, tol, lower = bounds[:4]
+        i = self._outside.index(longest)
+        side = f"below f_min {f_min[i]:.1f} N" if f[i] < lower[i] else f"above f_max {f_max[i]:.1f} N"
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
+                     f"for {1e3 * longest * self.dt:.0f} ms (limit {1e3 * self.config.force_limit_time:.0f} ms)", True)
+
+    def _oscillation(self, f: list, bounds: tuple) -> Fault | None:
         """The filtered force rate away from f_d (any direction without f_d) beyond max_force_rate
         force ranges per second."""
-        c = self.config
-        rate = np.zeros_like(f) if self._f_prev is None else (f - self._f_prev) / self.dt
-        self._f_prev = f
-        alpha = self.dt / (c.force_rate_filter + self.dt)
-        self._rate = rate if self._rate is None else self._rate + alpha * (rate - self._rate)
-        limit = c.max_force_rate * (f_max - f_min)
-        away = np.abs(self._rate) if f_d is None else self._rate * np.sign(f - np.asarray(f_d, dtype=float))
-        excess = away / limit
-        i = int(np.argmax(excess))
-        if excess[i] <= 1.0:
+        limit = bounds[5]
+        excess = [a / lim for a, lim in zip(self._away, limit)]
+        worst = max(excess)
+        if worst <= 1.0:
             return None
+        i = excess.index(worst)
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._rate[i]):.0f} N/s beyond "
                      f"{limit[i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
 
