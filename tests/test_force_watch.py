@@ -20,7 +20,8 @@ from cdpr_control.gcode import parse_gcode
 from cdpr_control.interpolation import Interpolator
 from cdpr_control.joint_command import JointCommand
 from cdpr_control.robot import load_robot
-from cdpr_control.safety import FORCE_WATCH, ForceWatch, SafetyConfig
+from cdpr_control.safety import (FORCE_LIMIT, FORCE_WATCH, POSITION_LAG, STALE_INPUT, WORKSPACE, Fault, ForceWatch,
+                                  SafetyConfig, braking)
 from cdpr_sim.closed_loop import hold, program, run
 
 DT = 1e-3
@@ -88,6 +89,15 @@ def test_a_position_error_beyond_max_position_lag_trips():
     assert _step(watch, np.full(M, 10.0), 0, x=np.r_[0.019, 0, 0, 0, 0, 0]) is None
     fault = _step(watch, np.full(M, 10.0), 1, x=np.r_[0.0, 0.021, 0, 0, 0, 0])
     assert fault is not None and "position error 21.0 mm beyond 20.0 mm" in fault.message
+
+
+def test_the_position_error_is_left_out_while_another_fault_brakes():
+    """While the joint command brakes for another fault (workspace, stale input) the set-point may
+    go on: the lag is then by design; the position lag's own fault does not count as braking."""
+    assert braking([Fault(WORKSPACE, "set-point outside", True)])
+    assert braking([Fault(STALE_INPUT, "stale input", True)])
+    assert not braking([Fault(POSITION_LAG, "position lag 21 mm > 20 mm", True)])
+    assert not braking([Fault(FORCE_LIMIT, "cable 1: 3.0 N below f_min", False)])
 
 
 def test_the_watch_stays_tripped_until_released():

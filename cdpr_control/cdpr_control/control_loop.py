@@ -34,7 +34,7 @@ from .hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, Hy
 from .joint_command import JointCommand
 from .offset_inputs import OffsetInputs, OffsetSample
 from .ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.safety import ForceWatch
+from cdpr_control.safety import ForceWatch, braking
 from .safety import SafetyConfig, SafetyMonitor
 from .stability import check_force_control, planned_home_forces
 
@@ -235,7 +235,8 @@ class ControlLoop:
         offset, offset_faults = self.offsets.update(t, samples)               # ik_only: ramped out
         offsets.append(offset)
         faults += offset_faults
-        tripped = self.watch.update(f, robot.cable.f_min, robot.cable.f_max, x_d, sum(offsets), dq_cfc, dist.f, x)
+        tripped = self.watch.update(f, robot.cable.f_min, robot.cable.f_max, x_d, sum(offsets), dq_cfc, dist.f,
+                                    None if braking(faults) else x)     # (braking, the robot lags by design)
         if tripped is not None:
             faults.append(tripped)
         hold = any(fault.holds for fault in faults)

@@ -40,6 +40,13 @@ def all_finite(values) -> bool:
     return isfinite(sum(values)) or all(map(isfinite, values))
 
 
+def braking(faults: list) -> bool:
+    """Whether a holding fault other than the position lag is present: the joint command then
+    brakes while the set-point may go on, so the position error says nothing about the control
+    (the force watch leaves it out)."""
+    return any(fault.holds and fault.code != POSITION_LAG for fault in faults)
+
+
 def _floats(value) -> list:
     return (value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)).ravel().tolist()
 

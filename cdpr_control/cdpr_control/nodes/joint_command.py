@@ -46,7 +46,8 @@ from cdpr_control.force_distribution import Status
 from cdpr_control.control_loop import ControlLoopParams
 from cdpr_control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
-from cdpr_control.safety import FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig, SafetyMonitor
+from cdpr_control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig, SafetyMonitor,
+                                  braking)
 
 # holding faults after which a program cannot go on (its input is gone, its path left the
 # workspace, the force watch holds): reported with ``abort: True``, the G-code interpreter then
@@ -227,7 +228,9 @@ class JointCommandNode(CdprNode):
         f_msg, fd_msg, x_msg = self.latest.get("f"), self.latest.get("fd"), self.latest.get("x")
         f = None if f_msg is None else np.asarray(f_msg.f)
         f_d = None if fd_msg is None or len(fd_msg.f_d) != self.robot.m else np.asarray(fd_msg.f_d)
-        x = None if x_msg is None or x_d is None else pose_from_msg(x_msg.pose)
+        # the position error only while no other fault holds: braking for one, the robot lags the
+        # set-point by design
+        x = None if x_msg is None or x_d is None or braking(faults) else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         if x_d is None:
             tripped = self.watch.fault
