@@ -98,7 +98,7 @@ class JointCommand:
             x_safe, offset_safe, dq_safe, f_safe = safe
             self._restore_tension(x_safe, f_safe, f)
             return self._return_to(self.target(x_safe, [offset_safe], dq_safe + self.dq_hold))
-        if self.dq_hold.any():                 # (released: the next hold starts from zero)
+        if self._hold_filter.y is not None:    # (released: the next hold starts afresh)
             self.dq_hold = np.zeros(self.robot.m)
             self._hold_filter.reset()
         if not hold and kernels.ENABLED and len(offsets) == 1 and dq_cfc is not None:
