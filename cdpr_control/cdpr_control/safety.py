@@ -178,7 +178,7 @@ class ForceWatch:
       from the force set-point f_d (a force that follows a step of its set-point, a new tension
       level, moves towards it) beyond ``max_force_rate`` (f_max - f_min) per second on any cable.
       A rate, not an energy: it is per cable, needs no model of the platform, and on the Mini
-      crossed the limit 9 ms after an unstable gain while the shipped programs and contacts stayed
+      crossed the limit within 10 ms of an unstable gain while the shipped programs and contacts stayed
       below a quarter of it;
     * a position error |r_d - r| beyond ``max_position_lag``.
 
