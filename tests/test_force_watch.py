@@ -263,3 +263,21 @@ def test_after_a_350_N_push_the_hold_brings_the_cables_back_within_their_limits(
     print(f"\npush: {loop.failure}; last 0.5 s {late.min():.2f}..{late.max():.2f} N")
     assert np.all(late >= c.f_min - tol) and np.all(late <= c.f_max + tol)
     np.testing.assert_allclose(r.x[-1, :3], MINI.home[:3], atol=1e-3)
+
+
+def test_the_ipanema3_holds_too():
+    """The same watch on the 3 kN robot (its rate limit 58 kN/s): OSPC x100 while holding home."""
+    robot = load_robot("ipanema3")
+    seen = {}
+
+    def before_step(k, loop, sim):
+        if loop.failure is not None and "tripped" not in seen:
+            seen["tripped"] = k - 1
+        if k == 500:
+            loop.ospc.set_params(replace(loop.ospc.params, K_p=100 * loop.ospc.params.K_p))
+    r = run(robot, hold(robot.home), 2.0, None, before_step=before_step)
+    c, tripped = robot.cable, seen.get("tripped")
+    assert tripped is not None and 500 <= tripped <= 600                # (measured: 22 ms)
+    outside = ((r.f < 0.5 * c.f_min) | (r.f > 1.5 * c.f_max)).any(axis=1)
+    assert outside[tripped:].sum() <= 100 and not outside[:500].any()    # (measured: 8 ms)
+    assert np.all(r.f[-300:] >= c.f_min) and np.all(r.f[-300:] <= c.f_max)
