@@ -238,6 +238,34 @@ def admittance_slack(m: Margins) -> float:
     return min(m.gain_dB / MIN_GAIN_MARGIN_DB, m.phase_deg / MIN_PHASE_MARGIN_DEG) - 1.0
 
 
+def cfc_instability(robot, params: CFCParams, dt: float = 1e-3) -> str | None:
+    """Why the CFC loop (3.21) with ``params`` is unstable by the margins, or None when it is stable
+    (gain margin above 0 dB and phase margin above 0 deg). At home under the minimal tension (the
+    shipped tension level); kappa (3.23) is the least stable cable's. One transfer function, about
+    0.1 s: for a node's parameter validation, not for every period."""
+    kappa = cfc_kappa(robot, robot.home, 0.0, 0.0, params.stiffness_model)
+    mg = margins(cfc_open_loop(robot, params, kappa, dt))
+    if mg.stable:
+        return None
+    return (f"the cable force control (3.21) with K_p {params.K_p:g}, T_i {params.T_i:g} s is unstable by the stability "
+            f"analysis (thesis 3.4, at home): gain margin {mg.gain_dB:.1f} dB, phase margin {mg.phase_deg:.1f} deg "
+            f"(both must be positive)")
+
+
+def ospc_instability(robot, params: OSPCParams, dt: float = 1e-3) -> str | None:
+    """Why the OSPC loop (3.17) of some axis with ``params`` is unstable by the margins, or None
+    (see :func:`cfc_instability`): the platform model (3.15) at home under the minimal tension, six
+    transfer functions, about 0.3 s."""
+    platform = platform_model(robot, robot.home, 0.0, 0.0)
+    for j in range(6):
+        mg = margins(ospc_open_loop(robot, platform, j, params, dt))
+        if not mg.stable:
+            return (f"the operational-space position control (3.17) of axis {AXES[j]} with K_p {float(params.K_p[j]):g}, "
+                    f"T_i {float(params.T_i[j]):g} s is unstable by the stability analysis (thesis 3.4, at home): "
+                    f"gain margin {mg.gain_dB:.1f} dB, phase margin {mg.phase_deg:.1f} deg (both must be positive)")
+    return None
+
+
 def report(robot, x, cfc: CFCParams, ospc: OSPCParams, payload: float, damping_time: float, dt: float,
            pade_order: int) -> list[str]:
     lines = [f"{robot.name} at x = {np.round(x, 3).tolist()}, payload {payload:g} kg, control period {dt * 1e3:g} ms",
