@@ -18,7 +18,6 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import ClosedLoopRun, HandGuiding, run
 from cdpr_sim.hand import Hand, Segment
-from cdpr_sim.hand import Segment
 from cdpr_sim.hand_guiding import GuidingRun, guiding_run
 
 # the push sequence of the figure (and of tests/control/test_admittance_closed_loop.py)

@@ -8,7 +8,7 @@ from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError
 from cdpr_control.motion.program_check import check_program
 from cdpr_control.model.robot import load_robot
-from cdpr_control.motion.gcode import parse_gcode, program_text
+from cdpr_control.motion.gcode import program_text
 from cdpr_tools.progress import Progress
 from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 

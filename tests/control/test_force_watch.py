@@ -20,7 +20,8 @@ from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.interpolation import Interpolator
 from cdpr_control.control.joint_command import JointCommand
 from cdpr_control.model.robot import load_robot
-from cdpr_control.control.safety import (FORCE_LIMIT, FORCE_WATCH, POSITION_LAG, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig, braking)
+from cdpr_control.control.safety import (FORCE_LIMIT, FORCE_WATCH, POSITION_LAG, STALE_INPUT, WORKSPACE,
+    Fault, ForceWatch, SafetyConfig, braking)
 from cdpr_sim.closed_loop import hold, program, run
 
 DT = 1e-3

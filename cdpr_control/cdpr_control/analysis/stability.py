@@ -57,15 +57,6 @@ from cdpr_control.analysis.eigenfrequencies import stiffness_map
 from cdpr_control.analysis.energy import LEVELS
 from cdpr_control.control.admittance import settings_from
 from cdpr_control.control.admittance_zones import per_axis
-from cdpr_control.model import cable
-from cdpr_control.control.cable_force_control import CFCParams
-from cdpr_control.model.dynamics import mass_matrix
-from cdpr_control.model.kinematics import inverse_kinematics
-from cdpr_control.control.ospc import AXES, OSPCParams
-from cdpr_control.model.robot import load_robot
-from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
-from cdpr_control.analysis.eigenfrequencies import stiffness_map
-from cdpr_control.analysis.energy import LEVELS
 
 THESIS_CFC_MARGINS = {"gain_dB": 26.7, "phase_deg": 95.5}        # Fig. 3.11
 THESIS_OSPC_PHASE_MARGIN_105KG = 17.7                             # deg, z axis, Fig. 3.10

@@ -37,12 +37,8 @@ from cdpr_control import kernels
 from cdpr_control.kernels.model import joint_command_period
 from cdpr_control.kernels.robot_data import robot_data, vector
 from cdpr_control.control.safety import all_finite
-from cdpr_control.control import kernels
-from cdpr_control.control.kernels.model import joint_command_period
-from cdpr_control.control.kernels.robot_data import robot_data, vector
 from cdpr_control.model.cable import total_free_length
 from cdpr_control.control.filters import LowPass
-from cdpr_control.control.safety import all_finite
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
 T_HOLD = 0.25         # s, reset time of the force-watch hold's tension integral

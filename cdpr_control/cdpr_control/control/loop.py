@@ -36,21 +36,7 @@ from cdpr_control.control.offset_inputs import OffsetInputs, OffsetSample
 from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.safety import SafetyConfig, SafetyMonitor
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
-from cdpr_control.control import kernels
-from cdpr_control.control.bumpless import Blend
-from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
-from cdpr_control.control.calibration import DEFAULT_WINDOW
-from cdpr_control.control.filters import LowPass
-from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
-from cdpr_control.control.forward_kinematics import PoseEstimator
-from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
-from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, CFCCoupling, HPFCParams, HybridForceControl, expected_contact_wrench, select_position_feedback, task_force_direction)
-from cdpr_control.control.joint_command import JointCommand
-from cdpr_control.control.offset_inputs import OffsetInputs, OffsetSample
-from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.safety import ForceWatch, braking
-from cdpr_control.control.safety import SafetyConfig, SafetyMonitor
-from cdpr_control.control.stability import check_force_control, planned_home_forces
 
 
 @dataclass

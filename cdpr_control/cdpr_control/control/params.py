@@ -24,12 +24,6 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.friction_compensation import FrictionCompensationParams
 from cdpr_control.control.ospc import OSPCParams
 from cdpr_control.control.safety import SafetyConfig
-from cdpr_control.control.cable_force_control import CFCParams
-from cdpr_control.control.control_loop import ControlLoopParams
-from cdpr_control.control.force_setpoint import ForceSetpointParams
-from cdpr_control.control.friction_compensation import FrictionCompensationParams
-from cdpr_control.control.ospc import OSPCParams
-from cdpr_control.control.safety import SafetyConfig
 from cdpr_control.control.admittance import AdmittanceController, settings_from
 from cdpr_control.control.hybrid_force_control import HPFCParams
 from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage

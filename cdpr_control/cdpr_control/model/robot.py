@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_control.model.kinematics import inverse_kinematics
-from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.force_distribution import quadratic_program, wrench_feasible
 from cdpr_control.model.workspace import static_problem
 from cdpr_control.model.yaml_file import YamlFileError, load_yaml

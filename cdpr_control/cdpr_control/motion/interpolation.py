@@ -20,7 +20,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from ruckig import ControlInterface, DurationDiscretization, InputParameter, Result, Ruckig, RuckigError, Trajectory
+from ruckig import (ControlInterface, DurationDiscretization, InputParameter, Result, Ruckig, RuckigError,
+    Trajectory)
 
 from cdpr_control.motion.path import Chain, joins_smoothly
 from cdpr_control.motion.program import (Diagnostic, Dwell, GCodeError, Motion, ParameterCommand, Program,

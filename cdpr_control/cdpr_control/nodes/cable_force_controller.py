@@ -37,7 +37,6 @@ from cdpr_control.control.cable_force_control import CableForceControl, CFCParam
 from cdpr_control.control.hybrid_force_control import (CFCCoupling, HPFCParams, parse_state, task_axis,
     task_force_direction)
 from cdpr_control.control.safety import all_finite
-from cdpr_control.control.hybrid_force_control import CFCCoupling, HPFCParams, parse_state, task_axis, task_force_direction
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
@@ -119,7 +118,7 @@ class CableForceControllerNode(CdprNode):
 
     def _instability(self, params: CFCParams) -> str | None:
         """cfc_instability of these gains, remembered per gain set (the analysis takes ~0.1 s)."""
-        from cdpr_control.analysis.stability import cfc_instability   # python-control: imported when first needed
+        from cdpr_control.analysis.stability import (cfc_instability)   # python-control: imported when first needed
 
         key = (params.K_p, params.T_i, params.T_filter, params.stiffness_model)
         if key not in self._instabilities:

@@ -40,8 +40,6 @@ from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointPara
 from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of,
     parse_state, task_axis)
 from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
-from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of, parse_state,
-                                               task_axis)
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node

@@ -24,7 +24,6 @@ from sensor_msgs.msg import JointState
 from cdpr_control.model import forward_kinematics as fk
 from cdpr_control.control.pose_estimator import PoseEstimator
 from cdpr_control.control.safety import all_finite
-from cdpr_control.model import forward_kinematics as fk
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node

@@ -40,8 +40,6 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver,
     HPFCParams, HybridForceControl, format_state)
 from cdpr_control.control.ospc import AXES
-from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver, HPFCParams,
-                                               HybridForceControl, format_state)
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node

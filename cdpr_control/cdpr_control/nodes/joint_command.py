@@ -49,8 +49,7 @@ from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
 from cdpr_control.ros.message_builders import builder
-from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig, SafetyMonitor,
-                                  braking)
+from cdpr_control.control.safety import FORCE_WATCH, ForceWatch, braking
 
 # holding faults after which a program cannot go on (its input is gone, its path left the
 # workspace, the force watch holds): reported with ``abort: True``, the G-code interpreter then

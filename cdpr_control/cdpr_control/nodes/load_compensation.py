@@ -31,8 +31,6 @@ from cdpr_control.control.load_compensation import (ACCELERATION_SOURCES, OFFSET
     LoadCompensation, LoadCompensationParams)
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.ospc import AXES
-from cdpr_control.control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS, LoadCompensation,
-                                            LoadCompensationParams)
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node

@@ -85,7 +85,7 @@ class OSPCNode(CdprNode):
 
     def _instability(self, params: OSPCParams) -> str | None:
         """ospc_instability of these gains, remembered per gain set (the analysis takes ~0.3 s)."""
-        from cdpr_control.analysis.stability import ospc_instability   # python-control: imported when first needed
+        from cdpr_control.analysis.stability import (ospc_instability)   # python-control: imported when first needed
 
         key = (tuple(params.K_p.tolist()), tuple(params.T_i.tolist()))
         if key not in self._instabilities:
