@@ -13,7 +13,7 @@ import sys
 from cdpr_tools import progress
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
-COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "bag", "launch", "view", "plot", "identify", "analyze", "bench")
+COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "bag", "launch", "view", "plot", "identify", "analyze", "validate", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

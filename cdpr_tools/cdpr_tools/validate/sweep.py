@@ -1,0 +1,92 @@
+"""Which cases the sweep runs, and running them (in up to MAX_JOBS processes).
+
+Each pose of a robot's grid runs each family once; the plant (mismatched seeds, nominal), the
+contact force and floor stiffness, the payload fraction and the push direction are assigned round
+robin over the poses. With the default four plants (three seeds and nominal), 9 contact variants
+and 3 payload fractions, every (plant, variant) pair of a family occurs within 36 poses (4 and 9
+are coprime). The program family runs once per plant and controller through the grid's border
+poses nearest home.
+"""
+from __future__ import annotations
+
+import itertools
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+import numpy as np
+
+from cdpr_control.robot import load_robot
+
+from .cases import (CONTACT_FRACTIONS, FAMILIES, FLOOR_STIFFNESS, PAYLOAD_FRACTIONS, PUSH_DIRECTIONS, CaseResult,
+                    CaseSpec, run_case)
+from .grid import sweep_poses
+
+ROBOTS = ("ipanema3", "ipanema3_mini")
+DEFAULT_POSES = 40
+DEFAULT_SEEDS = (1, 2, 3)
+MAX_JOBS = 2
+PROGRAM_CONTROLLERS = ("force_control", "ik_only")
+PROGRAM_BORDER_POSES = 2
+
+
+def plants(kind: str = "both", seeds=DEFAULT_SEEDS) -> list[tuple[str, int]]:
+    """(plant, seed) pairs: the mismatched plant once per seed, the nominal one (seed 0)."""
+    if kind not in ("both", "mismatched", "nominal"):
+        raise ValueError(f"--plant must be both, mismatched or nominal, got {kind!r}")
+    out = [("mismatched", int(s)) for s in seeds] if kind in ("both", "mismatched") else []
+    return out + ([("nominal", 0)] if kind in ("both", "nominal") else [])
+
+
+def plan(robot_name: str, families=FAMILIES, plant_list=None, n_poses: int = DEFAULT_POSES) -> tuple[list, list]:
+    """(poses, specs) of one robot: its grid and the cases to run on it."""
+    plant_list = plant_list or plants()
+    robot = load_robot(robot_name)
+    poses = sweep_poses(robot, n_poses)
+    contact = list(itertools.product(CONTACT_FRACTIONS, FLOOR_STIFFNESS))
+    specs = []
+    for p in poses:
+        plant, seed = plant_list[p.index % len(plant_list)]
+        variants = {"contact": dict(zip(("fraction", "stiffness"), contact[p.index % len(contact)])),
+                    "guiding": {"direction": PUSH_DIRECTIONS[p.index % len(PUSH_DIRECTIONS)]},
+                    "payload": {"fraction": PAYLOAD_FRACTIONS[p.index % len(PAYLOAD_FRACTIONS)]}}
+        for family in families:
+            if family in variants:
+                specs.append(CaseSpec(family, robot_name, p.index, p.x.tolist(), p.border, plant, seed, variants[family]))
+    if "program" in families:
+        border = sorted((p for p in poses if p.border), key=lambda p: np.linalg.norm(p.x[:3] - robot.home[:3]))
+        targets = [p.x[:3].tolist() for p in border[:PROGRAM_BORDER_POSES]]
+        if targets:
+            for (plant, seed), controller in itertools.product(plant_list, PROGRAM_CONTROLLERS):
+                specs.append(CaseSpec("program", robot_name, -1, list(robot.home), True, plant, seed,
+                                      {"controller": controller, "poses": targets}))
+    return poses, specs
+
+
+def run_all(specs, jobs: int = 1, progress=None) -> list[CaseResult]:
+    """Run the cases, in ``jobs`` processes (1: in this one); ``progress(done, total, result)``
+    after each."""
+    if not 1 <= jobs <= MAX_JOBS:
+        raise ValueError(f"--jobs must be 1..{MAX_JOBS} (the machine's cores are shared), got {jobs}")
+    results = []
+    if jobs == 1:
+        for spec in specs:
+            results += _timed(spec)
+            if progress:
+                progress(len(results), len(specs), results[-1])
+        return results
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_timed, spec) for spec in specs]
+        for done, future in enumerate(as_completed(futures), 1):
+            results += future.result()
+            if progress:
+                progress(done, len(specs), results[-1])
+    return results
+
+
+def _timed(spec: CaseSpec) -> list[CaseResult]:
+    start = time.perf_counter()
+    out = run_case(spec)
+    for r in out:
+        r.wall_s = time.perf_counter() - start
+    return out
