@@ -42,8 +42,9 @@ APPROACH_TIME = 0.1                                # s at v_max,HPFC from the po
 MIN_GAP = 1e-3                                     # m: above the plant's static sag at the start
 CONTACT_TIME = 4.6                                 # s after the approach: 4 s settling + the steady window
 STEADY_WINDOW = 0.5                                # s: steady error over the last of the run
+SETTLED_HOLD = 1.0                                 # s within the 2 % band after the impact: settled, the run ends
 PAYLOAD_FRACTIONS = (0.25, 0.5, 1.0)               # of the pose's static capacity
-PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.8, 0.3, 1.7   # s: tared empty, the step (cosine), after it
+PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.7, 0.3, 1.5   # s: tared empty, the step (cosine), after it
 PAYLOAD_CONTROLLERS = ("force_control", "ik_lc")   # identify.load_steps.CONFIGS: the shipped graph; IK-only + (4.6)
 SAG_WINDOW = 0.3                                   # s: mean z error at the end of rest and dwell
 PUSH_DIRECTIONS = ((1, 0, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 1, -1), (-1, 1, 0))
@@ -57,6 +58,10 @@ EIGEN_PUSH, EIGEN_WINDOW = 0.2, 1.0                # s: push length, fitted wind
 
 class Diverged(Exception):
     """A cable force beyond DIVERGENCE_FACTOR * f_max (or not finite): the run was stopped."""
+
+
+class Done(Exception):
+    """A run has shown what it was for (a contact force settled): it ends early."""
 
 
 @dataclass
@@ -120,6 +125,8 @@ def recorded_run(robot, recorder: Recorder, *args, **kwargs) -> bool:
         run(robot, *args, before_step=recorder, **kwargs)
     except Diverged:
         return False
+    except Done:
+        pass
     return True
 
 
@@ -153,7 +160,8 @@ def judge(spec: CaseSpec, metrics: dict, diverged: bool, note: str = "") -> Case
 def contact_case(spec: CaseSpec) -> CaseResult:
     """Press F_d = fraction * the nominal contact force on a floor of the given stiffness, placed
     APPROACH_TIME at v_max,HPFC (at least MIN_GAP) below the tool's lowest point at the pose;
-    hybrid force control enabled from the start (A -> B -> D, Fig. 5.4)."""
+    hybrid force control enabled from the start (A -> B -> D, Fig. 5.4). The run ends CONTACT_TIME
+    after the approach, or earlier once the force has settled (:func:`_settled_watch`)."""
     robot = load_robot(spec.robot)
     x = np.asarray(spec.x, dtype=float)
     hpfc = shipped_hpfc(spec.robot)
@@ -166,6 +174,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     force = np.array([0.0, 0.0, -F_d])
     source = lambda t: (x, np.zeros(6), np.zeros(6), force)        # noqa: E731
     rec = Recorder(robot)
+    rec.hooks.append(_settled_watch(rec, F_d))
     params = control_loop_params(robot, hpfc=hpfc, hpfc_enabled=True)
     ok = recorded_run(robot, rec, source, gap / hpfc.v_max + CONTACT_TIME, params, x0=x,
                       config=sim_config(spec, obstacles=(floor,)))
@@ -183,6 +192,26 @@ def contact_case(spec: CaseSpec) -> CaseResult:
                        slack_s=criteria.slack_time(f[i:], robot.cable.f_min, DT))
     note = "" if len(touched) else "never touched the floor"
     return judge(spec, metrics, not ok, note or (f"diverged at {rec.diverged_at:.3f} s" if not ok else ""))
+
+
+def _settled_watch(rec: Recorder, F_d: float):
+    """A hook ending the run (:class:`Done`) once the true contact force has been within the 2 %
+    band for SETTLED_HOLD s and for STEADY_WINDOW s at least after the impact."""
+    n_hold, n_steady = int(SETTLED_HOLD / DT), int(STEADY_WINDOW / DT)
+    state = {"impact": None, "inside": 0}
+
+    def watch(k, loop, sim):
+        w = rec.rows["w_contact"]
+        if not w:
+            return
+        F = w[-1][2]
+        if state["impact"] is None and F > 0.0:
+            state["impact"] = len(w) - 1
+        if state["impact"] is not None:
+            state["inside"] = state["inside"] + 1 if abs(F - F_d) <= 0.02 * F_d else 0
+            if state["inside"] >= max(n_hold, n_steady):
+                raise Done
+    return watch
 
 
 # ---- (b) hand guiding ---------------------------------------------------------------------------

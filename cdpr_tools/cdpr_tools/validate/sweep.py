@@ -4,8 +4,8 @@ Each pose of a robot's grid runs each family once; the plant (mismatched seeds, 
 contact force and floor stiffness, the payload fraction and the push direction are assigned round
 robin over the poses. With the default four plants (three seeds and nominal), 9 contact variants
 and 3 payload fractions, every (plant, variant) pair of a family occurs within 36 poses (4 and 9
-are coprime). The program family runs once per plant and controller through the grid's border
-poses nearest home.
+are coprime). The program family runs once per plant and controller, from home to one of the
+grid's border poses nearest home and back (the plants take turns over those poses).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ DEFAULT_POSES = 40
 DEFAULT_SEEDS = (1, 2, 3)
 MAX_JOBS = 2
 PROGRAM_CONTROLLERS = ("force_control", "ik_only")
-PROGRAM_BORDER_POSES = 2
+PROGRAM_BORDER_POSES = 4     # the nearest border poses the programs take turns over
 
 
 def plants(kind: str = "both", seeds=DEFAULT_SEEDS) -> list[tuple[str, int]]:
@@ -56,10 +56,10 @@ def plan(robot_name: str, families=FAMILIES, plant_list=None, n_poses: int = DEF
     if "program" in families:
         border = sorted((p for p in poses if p.border), key=lambda p: np.linalg.norm(p.x[:3] - robot.home[:3]))
         targets = [p.x[:3].tolist() for p in border[:PROGRAM_BORDER_POSES]]
-        if targets:
-            for (plant, seed), controller in itertools.product(plant_list, PROGRAM_CONTROLLERS):
+        for j, (plant, seed) in enumerate(plant_list if targets else ()):
+            for controller in PROGRAM_CONTROLLERS:
                 specs.append(CaseSpec("program", robot_name, -1, list(robot.home), True, plant, seed,
-                                      {"controller": controller, "poses": targets}))
+                                      {"controller": controller, "poses": [targets[j % len(targets)]]}))
     return poses, specs
 
 
