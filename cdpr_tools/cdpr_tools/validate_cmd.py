@@ -7,9 +7,7 @@ per family in the output directory.
 """
 from __future__ import annotations
 
-import platform
 import sys
-import time
 
 from cdpr_tools.validate.cases import FAMILIES
 from cdpr_tools.validate.sweep import DEFAULT_POSES, DEFAULT_SEEDS, MAX_JOBS, ROBOTS
@@ -29,6 +27,8 @@ def add_parser(sub) -> None:
                    help=f"poses per robot (default {DEFAULT_POSES}; fewer: the first N of the grid, a third or more near the border)")
     p.add_argument("--jobs", type=int, default=1, help=f"processes, 1..{MAX_JOBS} (default 1)")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
+    p.add_argument("--from-cases", metavar="FILE",
+                   help="report the cases.jsonl of an earlier (or interrupted) run instead of running")
     p.set_defaults(run=run)
 
 
@@ -52,33 +52,51 @@ def _seeds(text: str) -> list[int]:
 
 def run(args) -> int:
     from cdpr_tools.progress import Progress
-    from cdpr_tools.validate import report
-    from cdpr_tools.validate.sweep import plan, plants, run_all
+    from cdpr_tools.validate.sweep import plants, validate
 
+    if args.from_cases:
+        return _report_cases(args)
     robots = _names(args.robot, ROBOTS, "robot")
     families = _names(args.family, FAMILIES, "family")
     plant_list = plants(args.plant, _seeds(args.seeds))
     if args.poses < 3:
         raise ValueError(f"--poses must be >= 3, got {args.poses}")
-    specs = []
-    for robot in robots:
-        specs += plan(robot, families, plant_list, args.poses)[1]
-    print(f"[validate] {len(specs)} cases: {', '.join(robots)}; {', '.join(families)}; {args.poses} poses per robot; "
-          f"plants {', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s)",
-          flush=True)
+    print(f"[validate] {', '.join(robots)}; {', '.join(families)}; {args.poses} poses per robot; plants "
+          f"{', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s)", flush=True)
     progress = Progress("validate")
-    start = time.perf_counter()
+    command = "cdpr " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["validate"] else "cdpr validate"
     try:
-        results = run_all(specs, args.jobs, lambda done, total, r: progress.update(done / total, f"{r.spec.family} {r.status}"))
+        results, doc, figures = validate(robots, families, plant_list, args.poses, args.jobs, args.output,
+                                         lambda done, total, r: progress.update(done / total, f"{r.spec.family} {r.status}"),
+                                         command)
     finally:
         progress.done()
-    wall = time.perf_counter() - start
-    meta = {"command": "cdpr validate " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["validate"] else "cdpr validate",
-            "robots": robots, "families": families, "plants": [list(p) for p in plant_list], "poses": args.poses,
-            "jobs": args.jobs, "wall_s": wall, "host": platform.node()}
-    doc, figures = report.write(results, meta, args.output)
+    return _summarise(results, doc, figures, args.output)
+
+
+def _summarise(results, doc, figures, outdir) -> int:
+    from cdpr_tools.validate import report
+
     for family, s in doc["summary"].items():
         print(report.summary_line(family, s))
-    print(f"[validate] {wall:.0f} s wall; {args.output}/validation.json, validation.txt, "
-          + ", ".join(f.name for f in figures))
+    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall; {outdir}/validation.json, "
+          "validation.txt, " + ", ".join(f.name for f in figures))
     return 0 if all(r.passed for r in results) else 1
+
+
+def _report_cases(args) -> int:
+    """The report of the cases recorded in a cases.jsonl; its wall time is the sum of the cases'."""
+    from pathlib import Path
+
+    from cdpr_tools.validate import report
+
+    path = Path(args.from_cases)
+    if not path.is_file():
+        raise ValueError(f"--from-cases: no file {path}")
+    results = report.read_cases(path)
+    if not results:
+        raise ValueError(f"--from-cases: {path} holds no case")
+    meta = {"command": f"cdpr validate --from-cases {path}", "from_cases": str(path),
+            "wall_s": sum(r.wall_s for r in results)}
+    doc, figures = report.write(results, meta, args.output)
+    return _summarise(results, doc, figures, args.output)

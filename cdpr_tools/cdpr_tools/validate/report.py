@@ -84,6 +84,47 @@ def case_line(r: CaseResult) -> str:
     return f"{r.spec.family:8s} {r.status:8s} {where(r)}: {metrics}{' - ' + r.note if r.note else ''}"
 
 
+def case_dict(r: CaseResult) -> dict:
+    return {**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s,
+            "metrics": r.metrics, "checks": r.checks}
+
+
+class CaseLog:
+    """cases.jsonl in the output directory: one JSON line per case as it ends, so that an
+    interrupted sweep keeps what it measured (``cdpr validate --from-cases`` reports it)."""
+
+    def __init__(self, outdir):
+        self.path = Path(outdir) / "cases.jsonl"
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.file = self.path.open("w")
+        return self
+
+    def write(self, results) -> None:
+        for r in results:
+            self.file.write(json.dumps(case_dict(r), default=_json_default) + "\n")
+        self.file.flush()
+
+    def __exit__(self, *exc):
+        self.file.close()
+
+
+def read_cases(path) -> list[CaseResult]:
+    """The cases of a cases.jsonl (lines cut off by an interrupted run are skipped)."""
+    from .cases import CaseSpec
+
+    results = []
+    for line in Path(path).read_text().splitlines():
+        try:
+            d = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
+        results.append(CaseResult(spec, d["metrics"], d["checks"], d["status"], d["note"], d["wall_s"]))
+    return results
+
+
 def to_json(results: list[CaseResult], meta: dict) -> dict:
     families = sorted({r.spec.family for r in results}, key=list(HEADLINE).index)
     return {"meta": meta,
@@ -93,8 +134,7 @@ def to_json(results: list[CaseResult], meta: dict) -> dict:
                                                       for f in families}
                                 for robot in sorted({r.spec.robot for r in results})
                                 for plant in sorted({_plant(r) for r in results})},
-            "cases": [{**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s,
-                       "metrics": r.metrics, "checks": r.checks} for r in results]}
+            "cases": [case_dict(r) for r in results]}
 
 
 def _plant(r: CaseResult) -> str:

@@ -53,32 +53,42 @@ def plan(robot_name: str, families=FAMILIES, plant_list=None, n_poses: int = DEF
         for family in families:
             if family in variants:
                 specs.append(CaseSpec(family, robot_name, p.index, p.x.tolist(), p.border, plant, seed, variants[family]))
+    programs = []
     if "program" in families:
         border = sorted((p for p in poses if p.border), key=lambda p: np.linalg.norm(p.x[:3] - robot.home[:3]))
         targets = [p.x[:3].tolist() for p in border[:PROGRAM_BORDER_POSES]]
         for j, (plant, seed) in enumerate(plant_list if targets else ()):
             for controller in PROGRAM_CONTROLLERS:
-                specs.append(CaseSpec("program", robot_name, -1, list(robot.home), True, plant, seed,
-                                      {"controller": controller, "poses": [targets[j % len(targets)]]}))
+                programs.append(CaseSpec("program", robot_name, -1, list(robot.home), True, plant, seed,
+                                         {"controller": controller, "poses": [targets[j % len(targets)]]}))
+    # the programs among the poses' cases, so that an interrupted sweep has some of every family
+    for j, spec in enumerate(programs):
+        specs.insert(min(len(specs), (3 * j + 2) * len(families)), spec)
     return poses, specs
 
 
-def run_all(specs, jobs: int = 1, progress=None) -> list[CaseResult]:
+def run_all(specs, jobs: int = 1, progress=None, log=None) -> list[CaseResult]:
     """Run the cases, in ``jobs`` processes (1: in this one); ``progress(done, total, result)``
-    after each."""
+    and ``log(results)`` (the case's results) after each."""
     if not 1 <= jobs <= MAX_JOBS:
         raise ValueError(f"--jobs must be 1..{MAX_JOBS} (the machine's cores are shared), got {jobs}")
     results = []
     if jobs == 1:
         for spec in specs:
-            results += _timed(spec)
+            out = _timed(spec)
+            results += out
+            if log:
+                log(out)
             if progress:
                 progress(len(results), len(specs), results[-1])
         return results
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = [pool.submit(_timed, spec) for spec in specs]
         for done, future in enumerate(as_completed(futures), 1):
-            results += future.result()
+            out = future.result()
+            results += out
+            if log:
+                log(out)
             if progress:
                 progress(done, len(specs), results[-1])
     return results
@@ -90,3 +100,21 @@ def _timed(spec: CaseSpec) -> list[CaseResult]:
     for r in out:
         r.wall_s = time.perf_counter() - start
     return out
+
+
+def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate"):
+    """Plan, run and report the sweep -> (results, the JSON document, figure paths)."""
+    import platform
+
+    from . import report
+
+    per_robot = [plan(robot, families, plant_list, n_poses)[1] for robot in robots]
+    specs = [spec for group in itertools.zip_longest(*per_robot) for spec in group if spec is not None]
+    start = time.perf_counter()
+    with report.CaseLog(outdir) as log:
+        results = run_all(specs, jobs, progress, log.write)
+    meta = {"command": command, "robots": list(robots), "families": list(families),
+            "plants": [list(p) for p in plant_list], "poses": n_poses, "jobs": jobs,
+            "wall_s": time.perf_counter() - start, "host": platform.node()}
+    doc, figures = report.write(results, meta, outdir)
+    return results, doc, figures
