@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_control.robot import load_robot
+
 from .cases import CaseResult
 from .criteria import band_for
 
@@ -212,10 +214,11 @@ def plot_family(results: list[CaseResult], family: str, path: Path) -> Path:
             sk = np.array(skipped)
             ax.scatter(sk[:, 0], sk[:, 1], marker="x", color="0.5", s=40, label="refused / error")
         s = family_summary(rs, family)
-        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
-               title=f"{robot}: {s['passed']}/{s['cases']} in band")
+        a = load_robot(robot).a                                   # the frame's anchors bound the view
+        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", xlim=(a[:, 0].min(), a[:, 0].max()),
+               ylim=(a[:, 1].min(), a[:, 1].max()), title=f"{robot}: {s['passed']}/{s['cases']} in band")
         ax.grid(alpha=0.3)
-        ax.legend(loc="lower right", fontsize=7)
+        ax.legend(loc="best", fontsize=7)
     fig.suptitle(f"cdpr validate, {family}: worst {metric} per pose (plants round robin: mismatched seeds and nominal)",
                  fontsize=9)
     fig.tight_layout()
