@@ -216,45 +216,55 @@ def _settled_watch(rec: Recorder, F_d: float):
 
 # ---- (b) hand guiding ---------------------------------------------------------------------------
 
-def _guiding(spec: CaseSpec, robot, overrides: dict, segments, duration: float):
-    """Hand guiding at the pose (the zones' origin there), enabled at t = 0, the simulated hand
-    pushing ``segments`` -> (recorder, source, ok, w_max)."""
-    from cdpr_control.admittance import AdmittanceController, settings_from
-    from cdpr_control.admittance_zones import per_axis
+def _settings(spec: CaseSpec, robot, overrides: dict):
+    """(params, zones, robot with the known payload) of the shipped admittance_controller section
+    with ``overrides``, the zones' origin at the pose; ValueError: refused at this pose."""
+    from cdpr_control.admittance import settings_from
+
+    values = {**file_section(spec.robot, "admittance_controller"), **overrides,
+              "zones.origin": list(np.asarray(spec.x, dtype=float) - robot.home)}
+    values.pop("hand_guiding", None)
+    return settings_from(values, robot)
+
+
+def _guiding(spec: CaseSpec, robot, settings, segments, duration: float):
+    """Hand guiding at the pose with ``settings`` (:func:`_settings`), enabled at t = 0, the
+    simulated hand pushing ``segments`` -> (recorder, source, ok)."""
+    from cdpr_control.admittance import AdmittanceController
     from cdpr_sim.hand import Hand
 
+    params, zones, loaded = settings
     x = np.asarray(spec.x, dtype=float)
-    values = {**file_section(spec.robot, "admittance_controller"), **overrides,
-              "zones.origin": list(x - robot.home)}
-    values.pop("hand_guiding", None)
-    params, zones, loaded = settings_from(values, robot)          # ValueError: refused at this pose
     controller = AdmittanceController(loaded, file_section(spec.robot, "/**").get("control_period", DT), params, zones)
     controller.enable()
     source, hand = HandGuiding(controller, x), Hand(list(segments))
     rec = Recorder(robot, [lambda k, loop, sim: hand.apply(sim)])
     ok = recorded_run(robot, rec, source, duration, control_loop_params(robot), x0=x, config=sim_config(spec))
-    return rec, source, ok, per_axis(params.user.w_max, "w_max")
+    return rec, source, ok
 
 
 def guiding_case(spec: CaseSpec) -> CaseResult:
     """At rest with nobody pushing (REST_TIME), then a push of PUSH_SHARE w_max in the variant's
     direction held until PUSH_RELEASE and released; then the eigenfrequency: the rest zone of
-    table 5.3 (row 2), a short push along x, released, the ground truth's oscillation fitted."""
+    table 5.3 (row 3), a short push along x, released, the ground truth's oscillation fitted."""
     from cdpr_control.admittance import damped_eigenfrequency
+    from cdpr_control.admittance_zones import per_axis
     from cdpr_sim.hand import Segment
 
     robot = load_robot(spec.robot)
     try:
-        rec, source, ok, w_max = _guiding(spec, robot, {}, [], REST_TIME)
+        settings = _settings(spec, robot, {})
     except ValueError as exc:
         return CaseResult(spec, {}, {}, "refused", f"hand guiding refused at this pose: {exc}")
+    w_max = per_axis(settings[0].user.w_max, "w_max")
+    rec, source, ok = _guiding(spec, robot, settings, [], REST_TIME)
     metrics = {"rest_motion_mm": criteria.rest_motion_mm(rec.array("x")) if ok else float("nan"),
                "rest_wrench_percent": criteria.wrench_share_percent([o.w_user for o in source.outputs], w_max)}
     notes = [] if ok else [f"diverged at rest at {rec.diverged_at:.3f} s"]
     direction = np.asarray(spec.variant["direction"], dtype=float)
     push = np.r_[PUSH_SHARE * w_max[0] * direction / np.linalg.norm(direction), np.zeros(3)]
-    rec2, _, ok2, _ = _guiding(spec, robot, {}, [Segment(PUSH_START, tuple(push), "step"),
-                                                 Segment(PUSH_RELEASE, release=True)], PUSH_END)
+    rec2, _, ok2 = _guiding(spec, robot, settings, [Segment(PUSH_START, tuple(push), "step"),
+                                                    Segment(PUSH_RELEASE, release=True)], PUSH_END)
     f = rec2.array("f")
     settled = rec2.array("t") >= 0.1                      # the start-up raises the cables to the planned f_min
     metrics["push_force_margin_N"] = float((f[settled] - robot.cable.f_min).min()) if ok2 and settled.any() else float("nan")
@@ -262,15 +272,15 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     if not ok2:
         notes.append(f"diverged under the push at {rec2.diverged_at:.3f} s")
     c, d, m = EIGEN_CDM
-    dead_band = np.asarray(file_section(spec.robot, "admittance_controller").get("dead_band", [0.5] * 6), dtype=float)
-    push_x = float(np.atleast_1d(dead_band)[0]) + 1.5       # 1.5 N through the dead band (the Mini test's 2 N)
     overrides = {**EIGEN_ZONE, "zones.rest.c": [c, 1000.0, 1000.0, 20.0, 20.0, 20.0],
                  "zones.rest.d": [d, 40.0, 40.0, 0.5, 0.5, 0.5], "zones.rest.m": [m, 2.0, 2.0, 0.01, 0.01, 0.01]}
     release = 0.05 + EIGEN_PUSH
     ok3 = True
     try:
-        rec3, _, ok3, _ = _guiding(spec, robot, overrides, [Segment(0.05, (push_x, 0, 0, 0, 0, 0), "rectangle", EIGEN_PUSH)],
-                                   release + 0.05 + EIGEN_WINDOW)
+        eigen = _settings(spec, robot, overrides)
+        push_x = per_axis(eigen[0].user.dead_band, "dead_band")[0] + 1.5   # 1.5 N through the dead band (the Mini test's 2 N)
+        rec3, _, ok3 = _guiding(spec, robot, eigen, [Segment(0.05, (push_x, 0, 0, 0, 0, 0), "rectangle", EIGEN_PUSH)],
+                                release + 0.05 + EIGEN_WINDOW)
         t3, x3 = rec3.array("t"), rec3.array("x")
         sel = t3 > release + 0.05
         f_exp = criteria.fitted_frequency(t3[sel], x3[sel, 0]) if ok3 and sel.sum() > 10 else float("nan")
