@@ -44,7 +44,9 @@ CONTACT_TIME = 4.6                                 # s after the approach: 4 s s
 STEADY_WINDOW = 0.5                                # s: steady error over the last of the run
 SETTLED_HOLD = 1.0                                 # s within the 2 % band after the impact: settled, the run ends
 PAYLOAD_FRACTIONS = (0.25, 0.5, 1.0)               # of the pose's static capacity
-PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.7, 0.3, 1.5   # s: tared empty, the step (cosine), after it
+# s: tared empty, the step (cosine), after it; the dwell lets the load compensation's output filter
+# (T_output 1 s) and the OSPC's integral part (T_i / K_p about 2.6 s) reach the static sag
+PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.7, 0.3, 4.0
 PAYLOAD_CONTROLLERS = ("force_control", "ik_lc")   # identify.load_steps.CONFIGS: the shipped graph; IK-only + (4.6)
 SAG_WINDOW = 0.3                                   # s: mean z error at the end of rest and dwell
 PUSH_DIRECTIONS = ((1, 0, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 1, -1), (-1, 1, 0))
