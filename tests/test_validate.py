@@ -2,6 +2,7 @@
 the divergence stop, the command's errors, and a few real cases of the IPAnema 3 Mini (short, on
 the nominal plant) whose metrics must be computed; bands are asserted only where today's
 controllers meet them (docs/validation.md lists what fails)."""
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -10,8 +11,9 @@ import pytest
 from cdpr_control.robot import load_robot
 from cdpr_control.workspace import feasible_poses
 from cdpr_tools.validate import criteria
-from cdpr_tools.validate.cases import Diverged, Recorder, CaseSpec, run_case
+from cdpr_tools.validate.cases import CaseSpec, Diverged, Recorder, judge, run_case
 from cdpr_tools.validate.grid import BORDER_BAND, planned_f_min, sweep_poses
+from cdpr_tools.validate.report import CaseLog, read_cases
 from cdpr_tools.validate.sweep import plan, plants
 
 ROBOTS = ("ipanema3", "ipanema3_mini")
@@ -141,6 +143,25 @@ def test_the_command_names_a_bad_argument_without_a_traceback(capsys):
     assert "--robot" in err and "ipanema9" in err and "Traceback" not in err
     assert main(["validate", "--jobs", "3", "--poses", "3", "--family", "program", "--robot", "ipanema3_mini"]) == 1
     assert "--jobs" in capsys.readouterr().err
+
+
+def test_an_interrupted_runs_cases_are_reported_again(tmp_path, capsys):
+    from cdpr_tools.cli import main
+
+    assert main(["validate", "--from-cases", str(tmp_path / "none.jsonl")]) == 1
+    assert "--from-cases" in capsys.readouterr().err
+    spec = CaseSpec("payload", "ipanema3_mini", 4, [0.1, 0, 0, 0, 0, 0], False, "mismatched", 2,
+                    {"fraction": 0.5, "controller": "ik_lc"})
+    results = [judge(spec, {"estimate_error_percent": e, "sag_cut_percent": 95.0}, False) for e in (1.0, 7.0, 3.0)]
+    results[1].spec = replace(spec, pose_index=7)
+    with CaseLog(tmp_path) as log:
+        log.write(results)
+    (tmp_path / "cases.jsonl").open("a").write('{"family": "payl')          # a line cut off by the interruption
+    assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
+    out = capsys.readouterr().out
+    assert "payload: 2/3 passed (67 %)" in out and "worst 7 at ipanema3_mini #7" in out
+    assert (tmp_path / "r" / "validation_payload.png").is_file()
+    assert len(read_cases(tmp_path / "cases.jsonl")) == 3
 
 
 # ---- real cases (IPAnema 3 Mini, nominal plant) -------------------------------------------------

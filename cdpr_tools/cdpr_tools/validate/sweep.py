@@ -67,11 +67,15 @@ def plan(robot_name: str, families=FAMILIES, plant_list=None, n_poses: int = DEF
     return poses, specs
 
 
+def check_jobs(jobs: int) -> None:
+    if not 1 <= jobs <= MAX_JOBS:
+        raise ValueError(f"--jobs must be 1..{MAX_JOBS} (the machine's cores are shared), got {jobs}")
+
+
 def run_all(specs, jobs: int = 1, progress=None, log=None) -> list[CaseResult]:
     """Run the cases, in ``jobs`` processes (1: in this one); ``progress(done, total, result)``
     and ``log(results)`` (the case's results) after each."""
-    if not 1 <= jobs <= MAX_JOBS:
-        raise ValueError(f"--jobs must be 1..{MAX_JOBS} (the machine's cores are shared), got {jobs}")
+    check_jobs(jobs)
     results = []
     if jobs == 1:
         for spec in specs:
@@ -108,6 +112,7 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
 
     from . import report
 
+    check_jobs(jobs)
     per_robot = [plan(robot, families, plant_list, n_poses)[1] for robot in robots]
     specs = [spec for group in itertools.zip_longest(*per_robot) for spec in group if spec is not None]
     start = time.perf_counter()
