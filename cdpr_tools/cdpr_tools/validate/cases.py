@@ -7,12 +7,14 @@
 * program (d): a G-code program through the workspace's border region under force control and IK-only.
 
 Every run watches its cable forces: beyond DIVERGENCE_FACTOR * f_max, or non-finite, it is stopped
-and the case fails as diverged. A case returns a :class:`CaseResult`; it never raises for what the
-controller did (an exception of the runner itself is reported as the case's error).
+and the case fails as diverged. :func:`run_case` returns a case's :class:`CaseResult` (one per
+controller for payloads); it never raises for what the controller did (an exception of the runner
+itself is reported as the case's error).
 
-The contact and guiding runners here are the sweep's own: the library has no in-process runner for
-contact at an arbitrary pose, and the hand-guiding one (:func:`cdpr_tools.admittance_figure.guiding_run`)
-guides only from home with part of the parameter file.
+The runners are the sweep's own: the library has no in-process runner for contact at an arbitrary
+pose, the hand-guiding one (:func:`cdpr_tools.admittance_figure.guiding_run`) guides only from home
+with part of the parameter file, and the payload one (:mod:`cdpr_tools.identify.load_steps`) takes
+no orientation and has no divergence stop.
 """
 from __future__ import annotations
 
