@@ -47,6 +47,7 @@ def main(argv=None) -> None:
                                command=" ".join(["benchmarks/bench_validation.py", *argv]))
     result = {"machine": platform.processor() or platform.machine(), "command": doc["meta"]["command"],
               "cases": len(results), "jobs": args.jobs, "sweep_wall_s": doc["meta"]["wall_s"],
+              "sweep_cpu_s": doc["meta"]["cpu_s"],
               "pass_rate": sum(r.passed for r in results) / len(results),
               "families": {f: family_figures(s, f) for f, s in doc["summary"].items()},
               "per_robot_plant": doc["per_robot_plant"], "python_calibration_us": calibration,

@@ -79,7 +79,8 @@ def _summarise(results, doc, figures, outdir) -> int:
 
     for family, s in doc["summary"].items():
         print(report.summary_line(family, s))
-    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall; {outdir}/validation.json, "
+    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall, {doc['meta']['cpu_s']:.0f} s CPU; "
+          f"{outdir}/validation.json, "
           "validation.txt, " + ", ".join(f.name for f in figures))
     return 0 if all(r.passed for r in results) else 1
 
@@ -89,6 +90,7 @@ def _report_cases(args) -> int:
     from pathlib import Path
 
     from cdpr_tools.validate import report
+    from cdpr_tools.validate.sweep import cpu_seconds
 
     path = Path(args.from_cases)
     if not path.is_file():
@@ -97,6 +99,6 @@ def _report_cases(args) -> int:
     if not results:
         raise ValueError(f"--from-cases: {path} holds no case")
     meta = {"command": f"cdpr validate --from-cases {path}", "from_cases": str(path),
-            "wall_s": sum(r.wall_s for r in results)}
+            "wall_s": sum(r.wall_s for r in results), "cpu_s": cpu_seconds(results)}
     doc, figures = report.write(results, meta, args.output)
     return _summarise(results, doc, figures, args.output)

@@ -90,6 +90,7 @@ class CaseResult:
     status: str                  # passed, failed, diverged, refused (the configuration is refused there), error
     note: str = ""
     wall_s: float = 0.0          # wall-clock time of the case's runs
+    cpu_s: float = 0.0           # CPU time of its process over them (what the sweep costs on an idle machine)
 
     @property
     def passed(self) -> bool:

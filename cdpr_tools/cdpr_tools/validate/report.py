@@ -87,7 +87,7 @@ def case_line(r: CaseResult) -> str:
 
 
 def case_dict(r: CaseResult) -> dict:
-    return {**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s,
+    return {**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s, "cpu_s": r.cpu_s,
             "metrics": r.metrics, "checks": r.checks}
 
 
@@ -123,7 +123,8 @@ def read_cases(path) -> list[CaseResult]:
         except json.JSONDecodeError:
             continue
         spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
-        results.append(CaseResult(spec, d["metrics"], d["checks"], d["status"], d["note"], d["wall_s"]))
+        results.append(CaseResult(spec, d["metrics"], d["checks"], d["status"], d["note"], d["wall_s"],
+                                  d.get("cpu_s", float("nan"))))
     return results
 
 

@@ -99,10 +99,10 @@ def run_all(specs, jobs: int = 1, progress=None, log=None) -> list[CaseResult]:
 
 
 def _timed(spec: CaseSpec) -> list[CaseResult]:
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     out = run_case(spec)
     for r in out:
-        r.wall_s = time.perf_counter() - start
+        r.wall_s, r.cpu_s = time.perf_counter() - start, time.process_time() - cpu
     return out
 
 
@@ -120,6 +120,16 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
         results = run_all(specs, jobs, progress, log.write)
     meta = {"command": command, "robots": list(robots), "families": list(families),
             "plants": [list(p) for p in plant_list], "poses": n_poses, "jobs": jobs,
-            "wall_s": time.perf_counter() - start, "host": platform.node()}
+            "wall_s": time.perf_counter() - start, "cpu_s": cpu_seconds(results), "host": platform.node()}
     doc, figures = report.write(results, meta, outdir)
     return results, doc, figures
+
+
+def cpu_seconds(results) -> float:
+    """CPU time [s] of the cases (a payload case's two results share one)."""
+    seen = {}
+    for r in results:
+        seen[(r.spec.family, r.spec.robot, r.spec.pose_index, r.spec.plant, r.spec.seed,
+              r.spec.variant.get("fraction"), r.spec.variant.get("stiffness"))
+             if r.spec.family == "payload" else id(r)] = r.cpu_s
+    return float(sum(seen.values()))
