@@ -50,7 +50,8 @@ def badness(metric: str, value: float, plant: str) -> float:
 
 
 def family_summary(results: list[CaseResult], family: str) -> dict:
-    """Counts by status, pass rate, and per metric: mean over the finite values, worst value and where."""
+    """Counts by status, pass rate, and per metric: mean over the finite values, and for a metric
+    with a band its worst value and where, for one without its range."""
     rs = [r for r in results if r.spec.family == family]
     counts = {s: sum(r.status == s for r in rs) for s in ("passed", "failed", "diverged", "refused", "error")}
     out = {"cases": len(rs), **counts, "pass_rate": counts["passed"] / len(rs) if rs else float("nan"), "metrics": {}}
@@ -58,11 +59,15 @@ def family_summary(results: list[CaseResult], family: str) -> dict:
     for name in names:
         have = [r for r in rs if name in r.metrics]
         values = np.array([r.metrics[name] for r in have], dtype=float)
-        worst = max(have, key=lambda r: badness(name, r.metrics[name], r.spec.plant))
         finite = values[np.isfinite(values)]
-        out["metrics"][name] = {"mean": float(finite.mean()) if len(finite) else float("nan"),
-                                "worst": float(worst.metrics[name]), "where": where(worst),
-                                "out_of_band": sum(1 for r in have if not r.checks.get(name, True))}
+        m = {"mean": float(finite.mean()) if len(finite) else float("nan"),
+             "out_of_band": sum(1 for r in have if not r.checks.get(name, True))}
+        if any(band_for(name, r.spec.plant) for r in have):
+            worst = max(have, key=lambda r: badness(name, r.metrics[name], r.spec.plant))
+            m.update(worst=float(worst.metrics[name]), where=where(worst))
+        elif len(finite):
+            m.update(min=float(finite.min()), max=float(finite.max()))
+        out["metrics"][name] = m
     return out
 
 
