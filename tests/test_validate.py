@@ -162,6 +162,12 @@ def test_an_interrupted_runs_cases_are_reported_again(tmp_path, capsys):
     assert "payload: 2/3 passed (67 %)" in out and "worst 7 at ipanema3_mini #7" in out
     assert (tmp_path / "r" / "validation_payload.png").is_file()
     assert len(read_cases(tmp_path / "cases.jsonl")) == 3
+    program = CaseSpec("program", "ipanema3_mini", -1, [0.0] * 6, True, "nominal", 0,
+                       {"controller": "ik_only", "poses": [[0.1, 0.0, 0.0]]})
+    with CaseLog(tmp_path / "p") as log:       # a headline metric without a band: its range
+        log.write([judge(program, {"position_error_max_mm": v, "force_below_f_min_N": -1.0}, False) for v in (2.0, 5.0)])
+    assert main(["validate", "--from-cases", str(tmp_path / "p" / "cases.jsonl"), "-o", str(tmp_path / "p")]) == 0
+    assert "position_error_max_mm mean 3.5, 2 .. 5" in capsys.readouterr().out
 
 
 # ---- real cases (IPAnema 3 Mini, nominal plant) -------------------------------------------------

@@ -78,8 +78,10 @@ def summary_line(family: str, s: dict) -> str:
     if extra:
         line += " [" + ", ".join(extra) + "]"
     m = s["metrics"].get(HEADLINE[family])
-    if m:
+    if m and "worst" in m:
         line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, worst {m['worst']:.3g} at {m['where']}"
+    elif m and "max" in m:
+        line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, {m['min']:.3g} .. {m['max']:.3g}"
     fails = [f"{name} {m['out_of_band']}" for name, m in s["metrics"].items() if m["out_of_band"] and name != "diverged"]
     if fails:
         line += "; out of band: " + ", ".join(fails)
