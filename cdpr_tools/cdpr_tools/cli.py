@@ -18,7 +18,7 @@ from cdpr_tools.daemon import client as daemon_client
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
 COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "node", "bag", "launch", "view", "plot", "identify",
-            "analyze", "bench", "daemon")
+            "analyze", "validate", "bench", "daemon")
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
