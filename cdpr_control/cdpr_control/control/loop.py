@@ -34,9 +34,8 @@ from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, CFCCoup
 from cdpr_control.control.joint_command import JointCommand
 from cdpr_control.control.offset_inputs import OffsetInputs, OffsetSample
 from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.control.safety import SafetyConfig, SafetyMonitor
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
-from cdpr_control.control.safety import ForceWatch, braking
+from cdpr_control.control.safety import ForceWatch, SafetyConfig, SafetyMonitor, braking
 
 
 @dataclass

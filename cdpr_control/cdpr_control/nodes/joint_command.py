@@ -47,15 +47,9 @@ from cdpr_control.force_distribution import Status
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
-from cdpr_control.control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
+from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
+                                          SafetyMonitor, braking)
 from cdpr_control.ros.message_builders import builder
-from cdpr_control.control.safety import FORCE_WATCH, ForceWatch, braking
-
-# holding faults after which a program cannot go on (its input is gone, its path left the
-# workspace, the force watch holds): reported with ``abort: True``, the G-code interpreter then
-# fails the program; the others (lag, FK not converged, non-finite values) hold while they last
-ABORTING = frozenset({STALE_INPUT, WORKSPACE, FORCE_WATCH})
-
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
@@ -67,6 +61,11 @@ OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/s
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
 DEFAULT_OFFSET = OffsetConfig()
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+# holding faults after which a program cannot go on (its input is gone, its path left the
+# workspace, the force watch holds): reported with ``abort: True``, the G-code interpreter then
+# fails the program; the others (lag, FK not converged, non-finite values) hold while they last
+ABORTING = frozenset({STALE_INPUT, WORKSPACE, FORCE_WATCH})
 
 
 def offset_params(name: str) -> list[ParamSpec]:
