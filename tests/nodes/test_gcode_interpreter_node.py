@@ -149,6 +149,46 @@ def test_cancel_brakes_without_velocity_jump(graph):
     assert v[-1] == 0.0 and setpoints[-1].pose.position.x < 0.02 + 0.2  # stopped short of the end
 
 
+def test_the_loop_runs_while_a_program_is_planned(graph, monkeypatch):
+    """Issue 28: planning happens off the loop's thread. The plan is held (an event, no timing) until
+    the node has published 20 more set-points; meanwhile a second program is refused. Then it runs."""
+    import threading
+    from cdpr_control.nodes import gcode_interpreter
+    node, _, _, executor, client, setpoints, _ = graph
+    release, entered = threading.Event(), threading.Event()
+    original = gcode_interpreter.check_program
+
+    def slow_check(*args, **kwargs):
+        entered.set()
+        assert release.wait(timeout=60.0), "the test never released the plan"
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(gcode_interpreter, "check_program", slow_check)
+    handle = send(graph, "G91 G1 X10 F6000", "planned slowly")
+    assert spin_until(executor, entered.is_set)
+    start = len(setpoints)
+    assert spin_until(executor, lambda: len(setpoints) >= start + 20)     # set-points go on meanwhile
+    assert node.planning == "planned slowly" and node.active is None
+    second = client.send_goal_async(RunProgram.Goal(program="G91 G1 Y1 F100", name="second"))
+    assert spin_until(executor, second.done) and not second.result().accepted
+    release.set()
+    response = result_of(graph, handle)
+    assert response.status == GoalStatus.STATUS_SUCCEEDED and node.planning is None
+
+
+def test_a_planning_error_fails_the_goal_with_its_reason(graph, monkeypatch):
+    from cdpr_control.nodes import gcode_interpreter
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("solver exploded")
+
+    monkeypatch.setattr(gcode_interpreter, "check_program", broken)
+    response = result_of(graph, send(graph, "G91 G1 X1 F100", "broken"))
+    assert response.status == GoalStatus.STATUS_ABORTED
+    assert response.result.message == "planning failed: RuntimeError: solver exploded"
+    assert graph[0].planning is None
+
+
 def call(graph, service):
     _, _, probe, executor, _, _, _ = graph
     client = probe.create_client(Trigger, f"/gcode_interpreter/{service}")

@@ -26,6 +26,11 @@ interpolator, thesis sections 2.3.2 and 5.1.2.
 
 Limit parameters apply to the next program, not to one that is running.
 
+A program is parsed, checked against the workspace and planned on a thread of its own, so the loop
+keeps running (and holding its set-point) while a long program is planned; other goals are refused
+meanwhile. (Planning is Python and shares the interpreter's lock with the loop: a program of 10^6
+lines slows the loop's periods while it is planned, it does not stop them.)
+
 Faults fail the running program with the reason (result and ``program_status`` message), at once
 (the set-point stops where it is; the joint command brakes the robot on the path): a report of the
 ``fault_source`` node on /diagnostics with ``abort: True`` (the joint command holds for a stale
@@ -37,6 +42,7 @@ command path stopped, the joint command too); in lockstep, no ``winch/state`` fo
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -201,6 +207,7 @@ class GCodeInterpreterNode(CdprNode):
         self.xdd = np.zeros(6)
         self.line = 0
         self.active: _ActiveProgram | None = None
+        self.planning: str | None = None              # name of the program being planned
         self.last_status = ProgramStatus(state=ProgramStatus.IDLE)
         self._last_status_key = None
         self._last_status_ns = 0
@@ -253,9 +260,10 @@ class GCodeInterpreterNode(CdprNode):
         if self.guided is not None and not goal.dry_run:
             self.get_logger().warn(f"program {goal.name!r} refused: {self.source} is the set-point source")
             return GoalResponse.REJECT
-        if goal.dry_run or self.active is None:
+        if goal.dry_run or (self.active is None and self.planning is None):
             return GoalResponse.ACCEPT
-        self.get_logger().warn(f"program {goal.name!r} refused: {self.active.name!r} is running")
+        busy = f"{self.active.name!r} is running" if self.active else f"{self.planning!r} is being planned"
+        self.get_logger().warn(f"program {goal.name!r} refused: {busy}")
         return GoalResponse.REJECT
 
     def _on_cancel(self, goal_handle) -> CancelResponse:
@@ -263,29 +271,57 @@ class GCodeInterpreterNode(CdprNode):
             self.active.interp.cancel()
         return CancelResponse.ACCEPT
 
-    def _plan(self, goal) -> Interpolator:
-        program = parse_gcode(goal.program, start_pose=self.q[:6], start_force=self.q[6:])
-        check_program(program, self.robot, self.limits, self.values["payload"])   # plannable, in the WFW
-        return Interpolator(program, self.limits, self.dt, wait_for_commands=True,
-                            optional_stop=self.values["optional_stop"])
+    def _plan(self, goal) -> Future:
+        """Parse, check (in the wrench-feasible workspace) and plan ``goal`` on a thread of its own;
+        the future's result is the Interpolator (or the planning error)."""
+        start, limits, payload, optional_stop = self.q.copy(), self.limits, self.values["payload"], \
+            self.values["optional_stop"]
+        planned = Future()
+
+        def plan() -> None:
+            try:
+                program = parse_gcode(goal.program, start_pose=start[:6], start_force=start[6:])
+                check_program(program, self.robot, limits, payload)
+                planned.set_result(Interpolator(program, limits, self.dt, wait_for_commands=True,
+                                                optional_stop=optional_stop))
+            except Exception as err:  # noqa: BLE001  (reported as the goal's result)
+                planned.set_exception(err)
+
+        threading.Thread(target=plan, name=f"plan {goal.name}", daemon=True).start()
+        return planned
 
     async def _execute(self, goal_handle):
         goal = goal_handle.request
         result = RunProgram.Result()
-        if not goal.dry_run and self.active is not None:  # a second goal accepted in the same cycle
-            goal_handle.abort()
-            result.message = f"{self.active.name!r} is running"
+        if not goal.dry_run and (self.active is not None or self.planning is not None):
+            goal_handle.abort()                           # a second goal accepted in the same cycle
+            busy = self.active.name if self.active is not None else self.planning
+            result.message = f"{busy!r} is running"
             return result
+        if not goal.dry_run:
+            self.planning = goal.name
+            self.get_logger().info(f"planning program {goal.name!r} ({goal.program.count(chr(10)) + 1} lines)")
         try:
-            interp = self._plan(goal)
+            interp = await self._plan(goal)
         except GCodeError as err:
             first = err.diagnostics[0]
             goal_handle.abort()
             result.message, result.error_line, result.error_column = str(err), first.line, first.column
             return result
+        except Exception as err:  # noqa: BLE001  (a bug in planning fails this goal, not the node)
+            goal_handle.abort()
+            result.message = f"planning failed: {type(err).__name__}: {err}"
+            return result
+        finally:
+            if not goal.dry_run:
+                self.planning = None
         if goal.dry_run:
             goal_handle.succeed()
             result.success, result.duration = True, interp.duration
+            return result
+        if goal_handle.is_cancel_requested:               # cancelled while it was planned
+            goal_handle.canceled()
+            result.message = "cancelled"
             return result
         self.active = active = _ActiveProgram(goal_handle, goal.name, goal.program, interp)
         self.get_logger().info(f"program {goal.name!r} started ({interp.duration:.3f} s planned)")
