@@ -34,6 +34,9 @@ def run(args) -> int:
 
     progress = Progress(f"analyze {args.analysis}")
     try:
-        return main(args.options, progress=progress.update)
-    finally:
-        progress.done()
+        code = main(args.options, progress=progress.update)
+    except BaseException:
+        progress.stop()                 # no "100 %" after an error: the error is the last line
+        raise
+    progress.done()
+    return code

@@ -88,6 +88,8 @@ def main(argv=None) -> int:
     p.add_argument("--json", metavar="FILE", help="write the summary as JSON")
     p.add_argument("--winch-map", metavar="PNG", help="winch efficiency map (4.15), Fig. 4.32")
     args = p.parse_args(argv)
+    from cdpr_control import programs
+    from cdpr_control.motion.program import GCodeError
     from cdpr_control.analysis.energy import (LEVELS, REFERENCE_TRIP, THESIS_REFERENCE_TRIP, plot,
                                               plot_winch_efficiency, program_motion, trajectory_power)
 
@@ -114,9 +116,10 @@ def main(argv=None) -> int:
             if len(args.start) not in (3, 6):
                 p.error("--start takes 3 or 6 numbers")
             start[:len(args.start)] = args.start
-        program = args.trajectory
-        if Path(program).is_file():
-            program = Path(program).read_text()
+        try:
+            _, program = programs.source(args.trajectory)
+        except GCodeError as exc:                     # bytes that are not UTF-8: where, in the file
+            raise ValueError(f"{args.trajectory}:{exc.diagnostics[0]}") from None
         motion = program_motion(program, start, args.v_max, args.a_max, args.j_max)
         for name, level in LEVELS.items():
             te = trajectory_power(robot, motion, level, args.payload)

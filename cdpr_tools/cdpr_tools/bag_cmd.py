@@ -7,7 +7,6 @@ these commands read bags from ``ros2 bag`` in turn.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import threading
 from datetime import datetime, timezone
@@ -16,6 +15,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from cdpr_control.analysis.arguments import non_negative, positive
 from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
 from cdpr_tools.bag.reader import BagReader, CorruptBagError
 from cdpr_tools.bag.recovery import RepairError, reindex
@@ -40,13 +40,13 @@ def add_parser(sub) -> None:
     r.add_argument("-x", "--exclude", default="", help="regular expression of topics not to record")
     r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
     r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
-    r.add_argument("--stop-after", type=_seconds, metavar="SEC", help="stop recording after SEC seconds")
+    r.add_argument("--stop-after", type=non_negative, metavar="SEC", help="stop recording after SEC seconds")
     r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="zstd",
                    help="compress each MCAP chunk (default zstd, in the writer process); every reader of "
                         "MCAP decompresses it")
     r.add_argument("-b", "--max-bag-size", type=_byte_count, default=0, metavar="BYTES",
                    help="split into files of about BYTES (rosbag2's numbered files, one metadata.yaml; 0: one file)")
-    r.add_argument("-d", "--max-bag-duration", type=_seconds, default=0.0, metavar="SEC",
+    r.add_argument("-d", "--max-bag-duration", type=non_negative, default=0.0, metavar="SEC",
                    help="split into files of SEC seconds of log time (0: one file)")
     r.set_defaults(run=run_record)
 
@@ -59,15 +59,15 @@ def add_parser(sub) -> None:
                          description="Publish the messages of a bag with their recorded types, QoS and "
                                      "relative timing.")
     y.add_argument("bag", help="bag directory or .mcap file")
-    y.add_argument("-r", "--rate", type=_positive, default=1.0, help="playback speed factor (default 1.0)")
-    y.add_argument("--clock", type=_positive, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
+    y.add_argument("-r", "--rate", type=positive, default=1.0, help="playback speed factor (default 1.0)")
+    y.add_argument("--clock", type=positive, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
                    help=f"publish /clock from the bag time at HZ (default {DEFAULT_CLOCK_HZ:g} Hz when given)")
     y.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
-    y.add_argument("--start-offset", type=_seconds, default=0.0, metavar="SEC",
+    y.add_argument("--start-offset", type=non_negative, default=0.0, metavar="SEC",
                    help="start SEC seconds into the bag")
     y.add_argument("-l", "--loop", action="store_true", help="play the bag again and again until Ctrl-C")
-    y.add_argument("-d", "--delay", type=_seconds, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
-    y.add_argument("--wait-for-subscribers", type=_seconds, default=0.0, metavar="SEC",
+    y.add_argument("-d", "--delay", type=non_negative, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
+    y.add_argument("--wait-for-subscribers", type=non_negative, default=0.0, metavar="SEC",
                    help="wait up to SEC seconds until every topic has a subscriber")
     y.add_argument("--remap", nargs="+", type=_remap, default=[], metavar="FROM:=TO",
                    help="publish bag topic FROM on topic TO (as ros2 bag play --remap)")
@@ -83,14 +83,6 @@ def add_parser(sub) -> None:
     x.set_defaults(run=run_reindex)
 
 
-def _positive(text: str) -> float:
-    """A finite number > 0 (argparse type): nan, inf, 0 and negative values are refused."""
-    value = _number(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return value
-
-
 def _byte_count(text: str) -> int:
     """A whole number of bytes >= 0 (argparse type)."""
     try:
@@ -99,24 +91,6 @@ def _byte_count(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not a whole number of bytes: {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    """A finite number of seconds >= 0 (argparse type)."""
-    value = _number(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text!r}")
-    return value
-
-
-def _number(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
     return value
 
 

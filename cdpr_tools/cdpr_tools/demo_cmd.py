@@ -43,11 +43,7 @@ def add_parser(sub) -> None:
 
 
 def program_text(robot_name: str, program: str | None) -> tuple[str, str]:
-    name = program or DEFAULT_PROGRAM.get(robot_name, "rectangle")
-    path = Path(name)
-    if path.suffix == ".gcode" or path.exists():
-        return path.stem, path.read_text()
-    return name, programs.read(name)
+    return programs.source(program or DEFAULT_PROGRAM.get(robot_name, "rectangle"))
 
 
 def surface_parameters(robot, surface: str, stiffness: float) -> dict:

@@ -1,14 +1,12 @@
 """``cdpr program``: list the shipped G-code programs, check one, or run one on a running graph."""
 from __future__ import annotations
 
-from pathlib import Path
 
 from cdpr_control import programs
 from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError
 from cdpr_control.motion.program_check import check_program
 from cdpr_control.model.robot import load_robot
-from cdpr_control.motion.gcode import program_text
 from cdpr_tools.progress import Progress
 from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 
@@ -35,24 +33,6 @@ def add_parser(sub) -> None:
     run.set_defaults(run=_run)
 
 
-def _text(program: str) -> tuple[str, str]:
-    """(name, text) of a G-code file or a shipped program; GCodeError (line:col) for bytes that are not UTF-8."""
-    path = Path(program)
-    if path.is_dir():
-        raise IsADirectoryError(f"{program}: is a directory, not a G-code file")
-    if path.exists() and not path.is_file():     # a fifo or a device would block or never end
-        raise OSError(f"{program}: is not a regular file, not a G-code file")
-    if path.exists():
-        try:
-            source = path.read_bytes()
-        except OSError as exc:
-            raise OSError(f"{program}: cannot read: {exc.strerror}") from None
-        return path.stem, program_text(source)      # the parser's line:col of the first non-UTF-8 byte
-    if program in programs.names() or f"{program}.gcode" in programs.names():
-        return program.removesuffix(".gcode"), programs.read(program)
-    raise FileNotFoundError(f"no file {program!r} and no shipped program of that name; shipped: {', '.join(programs.names())}")
-
-
 def _print_diagnostics(program: str, exc: GCodeError) -> int:
     for d in exc.diagnostics:
         print(f"{program}:{d}")
@@ -68,7 +48,7 @@ def _list(args) -> int:
 def _check(args) -> int:
     robot = load_robot(args.robot)
     try:
-        name, text = _text(args.program)
+        name, text = programs.source(args.program)
         program = parse_gcode(text, start_pose=robot.home)
         duration = check_program(program, robot, payload=args.payload)
     except GCodeError as exc:
@@ -82,7 +62,7 @@ def _run(args) -> int:
     from cdpr_tools.program_client import run_program
 
     try:
-        name, text = _text(args.program)
+        name, text = programs.source(args.program)
     except GCodeError as exc:
         return _print_diagnostics(args.program, exc)
     # on a terminal one line rewritten in place; into a file or pipe a line per tenth of the program

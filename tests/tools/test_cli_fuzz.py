@@ -165,6 +165,15 @@ ANALYZE = [
     (["analyze", "eigenfrequencies", "--robot", "ipanema3_mini", "--payloads", "nan"], "payload"),
     (["analyze", "stability", "--robot", "{latin1}"], "{latin1}"),
     (["analyze", "stability", "--robot", "ipanema3_mini", "--payload", "nan"], "payload"),
+    (["analyze", "energy", "--trajectory", "{gcode_latin1}", "--robot", "ipanema3_mini"], "{gcode_latin1}"),
+    (["analyze", "energy", "--trajectory", "{gcode_directory}", "--robot", "ipanema3_mini"],
+     "{gcode_directory}: is a directory"),
+    (["analyze", "stability", "--robot", "ipanema3_mini", "--params", "{utf16}"], "{utf16}"),
+    (["analyze", "stability", "--robot", "ipanema3_mini", "--params", "{yaml_list}"], "{yaml_list}"),
+    (["analyze", "stability", "--robot", "ipanema3_mini", "--damping-time", "nan"], "damping"),
+    (["analyze", "stability", "--robot", "ipanema3_mini", "--pade-order", "-1"], "pade"),
+    (["analyze", "eigenfrequencies", "--robot", "ipanema3_mini", "--z", "nan"], "z"),
+    (["analyze", "force-distribution", "--robot", "ipanema3_mini", "--speed", "-1"], "speed"),
 ]
 
 
@@ -189,21 +198,6 @@ def check_refused(code, out: str, err: str, named: str) -> None:
         assert [line for line in lines if line.startswith("cdpr ")] == [message], err
 
 
-# Found by this test in code other engineers own (issue 28's bag and analysis items): strict
-# xfails, so each turns into a failure when its fix lands and then joins the cases above.
-KNOWN = [pytest.param(argv, named, marks=pytest.mark.xfail(reason=why, strict=True), id=" ".join(argv)) for argv, named, why in [
-    (["analyze", "energy", "--trajectory", "{gcode_latin1}", "--robot", "ipanema3_mini"], "{gcode_latin1}",
-     "the program is read without the file's name: a bare codec message"),
-    (["analyze", "energy", "--trajectory", "{gcode_directory}", "--robot", "ipanema3_mini"],
-     "{gcode_directory}: is a directory", "a directory answers with an errno message"),
-    (["analyze", "stability", "--robot", "ipanema3_mini", "--params", "{utf16}"], "{utf16}",
-     "the parameter file is read without the file's name: a bare codec message"),
-    (["analyze", "stability", "--robot", "ipanema3_mini", "--damping-time", "nan"], "damping",
-     "'Array must not contain infs or NaNs'"),
-    (["analyze", "stability", "--robot", "ipanema3_mini", "--pade-order", "-1"], "pade", "'require n >= 0'"),
-    (["analyze", "eigenfrequencies", "--robot", "ipanema3_mini", "--z", "nan"], "z", "accepted, exit 0"),
-    (["analyze", "force-distribution", "--robot", "ipanema3_mini", "--speed", "-1"], "speed", "'division by zero'"),
-]]
 # fixed by the bag reader's work (issue 28): a file that is no MCAP is refused naming it
 BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", "{empty_mcap}"], "{empty_mcap}"),
               (["bag", "reindex", "{not_a_bag}"], "{not_a_bag}")] + \
@@ -213,7 +207,7 @@ BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", 
 
 
 @pytest.mark.parametrize("argv, named",
-                         ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + BAG_READER + KNOWN,
+                         ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + BAG_READER,
                          ids=lambda v: " ".join(v) if isinstance(v, list) else None)
 def test_bad_input_is_refused_in_one_line_naming_it(files, capsys, argv, named):
     check_refused(*in_process(expand(argv, files), capsys), expand([named], files)[0])

@@ -33,6 +33,7 @@ from cdpr_control.model.stiffness import (cable_stiffness, eigenfrequencies, geo
     modal_frequencies)
 from cdpr_control.model.workspace import workspace_grid
 from cdpr_control.analysis.energy import LEVELS
+from cdpr_control.analysis.arguments import finite, non_negative, positive
 
 AXES = ("x", "y", "z", "a", "b", "c")
 # Table 4.5: positions [m] of the eigenfrequency experiments on the IPAnema 3
@@ -219,11 +220,11 @@ def main(argv=None) -> int:
                                 description="Eigenfrequencies (4.8), coupled modes and stiffness eigenvalues over "
                                             "the workspace at minimal, medium and maximal tension (section 4.3).")
     p.add_argument("--robot", default="ipanema3", help="robot name or YAML path")
-    p.add_argument("--step", type=float, default=0.25, help="grid spacing over the robot's workspace box [m]")
-    p.add_argument("--payloads", type=float, nargs="+", default=[0.0, 80.0], help="payloads [kg]")
-    p.add_argument("--points", type=float, nargs="+", metavar="XYZ",
+    p.add_argument("--step", type=positive, default=0.25, help="grid spacing over the robot's workspace box [m]")
+    p.add_argument("--payloads", type=non_negative, nargs="+", default=[0.0, 80.0], help="payloads [kg]")
+    p.add_argument("--points", type=finite, nargs="+", metavar="XYZ",
                    help="poses x y z ... for the table (default: Table 4.5 for the IPAnema 3, else home)")
-    p.add_argument("--z", type=float, help="height of the map slice [m] (default: home)")
+    p.add_argument("--z", type=finite, help="height of the map slice [m] (default: home)")
     p.add_argument("--plot-dir", help="write eigenfrequency_maps_<payload>kg.png and stiffness_points.png here")
     p.add_argument("--json", help="write the shift statistics as JSON")
     args = p.parse_args(argv)

@@ -34,6 +34,7 @@ from cdpr_control.force_distribution import distribute
 from cdpr_control.model.robot import load_robot
 from cdpr_control.model.workspace import (WorkspaceGrid, plot_workspace, serpentine_order, static_problem,
     with_platform_mass, workspace_grid, workspace_hull)
+from cdpr_control.analysis.arguments import positive
 
 # Table 3.2 of the thesis: (method, set) -> (mean force [N], xi_M [N/ms], xi_RMS [N/ms]).
 THESIS_TABLE_3_2 = {
@@ -233,13 +234,13 @@ def format_report(c: Comparison) -> str:
 
 def main(argv=None, progress=None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m cdpr_control.analysis.force_distribution_comparison",
+        prog="cdpr analyze force-distribution",
         description="Tables 3.2 and 3.3 of the thesis: cable force algorithms over the workspace grid.")
     parser.add_argument("--robot", default="ipanema3", help="robot name or YAML path")
-    parser.add_argument("--mass", type=float, default=30.0, help="platform mass m_p for Table 3.2 [kg]")
-    parser.add_argument("--step", type=float, default=0.25, help="grid spacing [m]")
-    parser.add_argument("--speed", type=float, default=1.0, help="speed along the trajectory [m/s]")
-    parser.add_argument("--masses", type=float, nargs="*", default=[30.0, 50.0, 100.0, 150.0],
+    parser.add_argument("--mass", type=positive, default=30.0, help="platform mass m_p for Table 3.2 [kg]")
+    parser.add_argument("--step", type=positive, default=0.25, help="grid spacing [m]")
+    parser.add_argument("--speed", type=positive, default=1.0, help="speed along the trajectory [m/s]")
+    parser.add_argument("--masses", type=positive, nargs="*", default=[30.0, 50.0, 100.0, 150.0],
                         help="platform masses m_p for Table 3.3 [kg]")
     parser.add_argument("--no-pulleys", action="store_true", help="kinematics without swivelling pulleys")
     parser.add_argument("--json", help="also write the numbers to this JSON file")

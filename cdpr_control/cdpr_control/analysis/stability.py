@@ -57,6 +57,8 @@ from cdpr_control.analysis.eigenfrequencies import stiffness_map
 from cdpr_control.analysis.energy import LEVELS
 from cdpr_control.control.admittance import settings_from
 from cdpr_control.control.admittance_zones import per_axis
+from cdpr_control.analysis.arguments import finite, non_negative, positive, whole
+from cdpr_control.model.yaml_file import load_yaml
 
 THESIS_CFC_MARGINS = {"gain_dB": 26.7, "phase_deg": 95.5}        # Fig. 3.11
 THESIS_OSPC_PHASE_MARGIN_105KG = 17.7                             # deg, z axis, Fig. 3.10
@@ -326,9 +328,11 @@ def _parameter_file(robot, path=None) -> dict:
 
     if path is None:
         text = resources.files("cdpr_control").joinpath("params", f"{Path(str(robot.file)).stem}.yaml").read_text()
-    else:
-        text = Path(path).read_text()
-    return yaml.safe_load(text) or {}
+        return yaml.safe_load(text) or {}
+    data = load_yaml(path, "parameter file") or {}        # errors name the file
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: a parameter file is a mapping of node names, not a {type(data).__name__}")
+    return data
 
 
 def admittance_values(robot, path=None) -> dict:
@@ -359,13 +363,13 @@ def main(argv=None) -> int:
                                             "and hand guiding (5.4)-(5.9) (section 5.2).")
     p.add_argument("--robot", default="ipanema3", help="robot name or YAML path")
     p.add_argument("--params", help="controller parameter file (default: the robot's shipped params/<robot>.yaml)")
-    p.add_argument("--pose", type=float, nargs="+", help="x y z [a b c] (default: home)")
-    p.add_argument("--payload", type=float, default=0.0, help="payload [kg]")
-    p.add_argument("--damping-time", type=float, default=0.002,
+    p.add_argument("--pose", type=finite, nargs="+", help="x y z [a b c] (default: home)")
+    p.add_argument("--payload", type=non_negative, default=0.0, help="payload [kg]")
+    p.add_argument("--damping-time", type=positive, default=0.002,
                    help="cable Kelvin-Voigt time constant tau_c [s] (the simulator's default)")
-    p.add_argument("--pade-order", type=int, default=2, help="order of the Pade approximation (3.18)")
+    p.add_argument("--pade-order", type=whole(0), default=2, help="order of the Pade approximation (3.18)")
     p.add_argument("--plot-dir", help="write stability_<robot>.png (Bode and Nyquist) here")
-    p.add_argument("--plot-payloads", type=float, nargs="+", default=[0.0, 80.0],
+    p.add_argument("--plot-payloads", type=non_negative, nargs="+", default=[0.0, 80.0],
                    help="payloads [kg] of the OSPC z loops in the plot (default 0 80: m_p 25 and 105 kg, Fig. 3.10)")
     args = p.parse_args(argv)
     robot = load_robot(args.robot)
