@@ -6,7 +6,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-stress bench clean
+.PHONY: setup demo test test-stress bench fault-table clean
 
 setup:
 	@bash scripts/setup.sh
@@ -20,6 +20,10 @@ test: setup
 # the tests while two busy loops load both cores (no test may depend on an idle machine)
 test-stress: setup
 	@bash scripts/test-stress.sh
+
+# docs/faults.md: the faults the suite injects, tries, held and lost
+fault-table: setup
+	@$(PY) scripts/fault_table.py
 
 bench: setup
 	@$(VENV)/bin/cdpr bench
