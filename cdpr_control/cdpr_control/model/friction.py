@@ -26,7 +26,7 @@ its exact inverse. Everything is vectorised over the m cables; pure numpy.
 
 The two per-sample steps, :func:`platform_force_step` and :func:`sensor_force_step`, are written in
 the array subset that numba compiles and take the Dahl state as an explicit array, so a caller that
-needs speed passes ``jit=numba.njit`` to :class:`PulleyFriction` and runs this same code compiled;
+needs speed passes ``jit=cdpr_control.kernels.jit.njit`` to :class:`PulleyFriction` and runs this same code compiled;
 this module itself imports nothing beyond numpy. The simulator runs :meth:`PulleyFriction.sensor_force`
 as :func:`cdpr_control.kernels.friction_sensor_force` (the same operations as a loop over the
 cables) while the kernels are enabled.
@@ -245,7 +245,7 @@ class PulleyFriction:
     mu, sigma [N/m], F_pv [N s/m] (m,): friction parameters (table 3.4); n_pulleys (m,);
     beta_inner, beta_1 [rad]: wrap angles of the inner pulleys and of the sensor pulley;
     theta (m,): cable lengths to start from; v_eps [m/s]: standstill band of the Dahl model;
-    jit: compiler for the per-sample steps (e.g. numba.njit); None runs them as numpy.
+    jit: compiler for the per-sample steps (e.g. cdpr_control.kernels.jit.njit); None runs them as numpy.
     """
 
     def __init__(self, mu, sigma, F_pv, n_pulleys, beta_inner: float, beta_1: float, theta,
