@@ -43,7 +43,7 @@ from cdpr_control.kernels.model import (_AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q
     elastic_frozen, ik_packed)
 from cdpr_control.kernels.model import secant_stiffness
 from cdpr_control.kernels.model import inverse_kinematics as _inverse_kinematics
-from cdpr_control.kernels.model import joint_command_step
+from cdpr_control.kernels.model import joint_command_period, joint_command_step
 from cdpr_control.kernels.model import measured_wrench as _measured_wrench
 from cdpr_control.kernels.model import platform_wrench as _platform_wrench
 from cdpr_control.kernels.robot_data import RobotData, robot_data, vector
@@ -52,7 +52,7 @@ from cdpr_control.kernels.setpoint import smith_step
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["CFCConstants", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
-           "compiled_cfc_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
+           "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
            "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
            "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
            "vector", "warm_up"]
@@ -185,6 +185,21 @@ def compiled_cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_
     return out[0], saturated, out[1], out[2], out[3]
 
 
+def compiled_joint_command_period(robot, x_d, offset, dq_cfc, theta_d, step: float, dt: float):
+    """The twin of control.joint_command.joint_command_period: (θ_d, θ̇_d) of the next period, None
+    where the target is not finite or the shapes are not one pose and m cables."""
+    d = robot_data(robot)
+    m = d.a.shape[0]
+    x_d, offset, dq_cfc, theta_d = vector(x_d), vector(offset), vector(dq_cfc), vector(theta_d)
+    if x_d.shape != (6,) or offset.shape != (6,) or dq_cfc.shape != (m,) or theta_d.shape != (m,):
+        return None
+    theta_next, velocity = np.empty(m), np.empty(m)
+    if not joint_command_period(x_d, offset, d.a, d.b, d.R_A, d.r_p, d.pulleys, dq_cfc, theta_d, float(step),
+                                float(dt), theta_next, velocity):
+        return None
+    return theta_next, velocity
+
+
 _warm = {"robot_free": False, "robot": False}
 
 
@@ -215,6 +230,7 @@ def warm_up(robot=None) -> None:
     ik = _inverse_kinematics(robot, x)
     _cable_lengths(robot, x)
     joint_command_step(robot, x, f, f, 1e-3)
+    compiled_joint_command_period(robot, x, zero, f, f, 1e-3, 1e-3)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,

@@ -272,10 +272,13 @@ class PulleyFriction:
         the commanded theta_d, thetadot_d, section 3.7.3); beta_last (m,): wrap angle of the
         swivelling pulley from the inverse kinematics (2.6).
         """
+        return self.platform_force_of_winch(winch_force_from_sensor(F_s, self.beta_1), theta, thetadot, beta_last)
+
+    def platform_force_of_winch(self, f_w, theta, thetadot, beta_last) -> np.ndarray:
+        """:meth:`platform_force` from the winch forces f_w (3.40) (the sensor forces converted)."""
         alpha, gamma = self.series.tables(beta_last)
         d = self.dahl
-        return self._platform_step(winch_force_from_sensor(F_s, self.beta_1), _floats(theta), _floats(thetadot),
-                                   alpha, gamma, d.sigma, d.v_eps, d.state)
+        return self._platform_step(f_w, _floats(theta), _floats(thetadot), alpha, gamma, d.sigma, d.v_eps, d.state)
 
     def sensor_force(self, f, theta, thetadot, beta_last, tol: float = 1e-12,
                      max_iterations: int = 50) -> np.ndarray:
