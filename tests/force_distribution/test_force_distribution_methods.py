@@ -11,7 +11,7 @@ from cdpr_control import force_distribution as fd
 from cdpr_control.force_distribution import Status
 from cdpr_control.model.robot import load_robot
 from cdpr_control.model.workspace import static_problem, with_platform_mass
-from cdpr_test_nodes.force_problems import point_anchor_AT, random_problems
+from cdpr_test_nodes.force_problems import random_problems
 
 F_MIN, F_MAX = 100.0, 3000.0
 CLOSED_FORM = ("cf", "cfe", "pm", "acf", "ipm")
