@@ -3,16 +3,15 @@ commands, period by period, bit for bit.
 
 The graph (graphs/closed_loop.yaml, composed, lockstep) runs the shipped floor_contact_ipanema3
 program on the IPAnema 3 against a simulated floor (nominal plant, as test_hybrid_force_graph.py),
-with hybrid force control in contact (approach, brake, force control, release; the controller
-enabled from the start, see FLOOR) and load compensation on (its ``enabled``: the identification,
-its offset x_d,LC and the payload wrench in the force distribution all act). The bag holds every
-period's inputs of the controller (the set-point with its force F_d,0 and the winch state θ, θ̇,
-F_s) and its outputs. ControlLoop, built from the same parameter file (:func:`control_loop_params`
-with the hybrid force controller's and the load compensation's sections), replays those inputs
-period by period, so neither timing nor the program's start enter: every stage's output of every
-period must equal the graph's topic of that period exactly (TOLERANCE: the two exceptions and
-why). The graph has no blends of its own (the loop's CFC/OSPC blends): they stay at weight 1.0,
-where they multiply exactly.
+with hybrid force control in contact (approach, brake, force control, release) and load
+compensation on (its ``enabled``: the identification, its offset x_d,LC and the payload wrench in
+the force distribution all act). The bag holds every period's inputs of the controller (the
+set-point with its force F_d,0 and the winch state θ, θ̇, F_s) and its outputs. ControlLoop, built
+from the same parameter file (:func:`control_loop_params` with the hybrid force controller's and
+the load compensation's sections), replays those inputs period by period, so neither timing nor
+the program's start enter: every stage's output of every period must equal the graph's topic of
+that period exactly. The graph has no blends of its own (the loop's CFC/OSPC/HPFC blends): they
+stay at weight 1.0, where they multiply exactly.
 
 The replay also compares the intermediate topics (cable forces, pose, wrench, force distribution,
 CFC, OSPC, hybrid force controller and load compensation states) so that a drift names the stage
