@@ -44,13 +44,8 @@ from cdpr_tools.launch_file import load_launch_file  # noqa: E402
 from cdpr_tools.program_client import run_program  # noqa: E402
 
 # the case: robot, program name and text, a floor to press on, load compensation on
-# The hybrid force controller is enabled from the start and stays so (the program's M104 left out):
-# the graph's joint command ramps its output in over transfer_time when it becomes active and out
-# when it goes idle, ControlLoop applies it always (ControlLoop.step); active from the first period,
-# the ramp is exact (its output is zero during the ramp's first 0.5 s, weight 1.0 after).
-FLOOR = SimpleNamespace(robot="ipanema3", name="floor_contact_ipanema3", floor=True, load_compensation=True,
-                        program="".join(line for line in programs.read("floor_contact_ipanema3").splitlines(True)
-                                        if "M104" not in line))
+FLOOR = SimpleNamespace(robot="ipanema3", name="floor_contact_ipanema3", program=programs.read("floor_contact_ipanema3"),
+                        floor=True, load_compensation=True)
 INPUTS = ["/setpoint", "/winch/state"]
 OUTPUTS = ["/winch/command", "/cable_forces", "/platform/pose", "/platform/wrench", "/force_distribution",
            "/cable_force_controller/state", "/ospc/state", "/hybrid_force_controller/state",
@@ -74,9 +69,11 @@ def record_graph(case, bag) -> SimpleNamespace:
             if case.floor:
                 spec.parameters.append(surface_parameters(robot, "floor", 1e6))
         elif spec.module.endswith("load_compensation") and case.load_compensation:
-            spec.parameters.append(_enabled_file(bag, "load_compensation"))
-        elif spec.module.endswith("hybrid_force_controller"):
-            spec.parameters.append(_enabled_file(bag, "hybrid_force_controller"))
+            # a file with the node's own section: an inline mapping is a "/**" one, which the
+            # parameter file's load_compensation section (enabled: false) would override
+            lc_on = Path(bag).parent / "load_compensation_on.yaml"
+            lc_on.write_text(yaml.safe_dump({"load_compensation": {"ros__parameters": {"enabled": True}}}))
+            spec.parameters.append(str(lc_on))
     with Launcher(description, mode="composed") as launch:
         sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").sim
         result = run_program(case.program, case.name, timeout=600.0, server_timeout=120.0)   # a loaded machine
@@ -84,14 +81,6 @@ def record_graph(case, bag) -> SimpleNamespace:
         wait_for(lambda: sim.t >= t_end + 0.05, timeout=60.0, what="the loop to run on after the program")
         errors = list(launch.errors)
     return SimpleNamespace(result=result, errors=errors)
-
-
-def _enabled_file(bag, node: str) -> str:
-    """A parameter file setting the node's ``enabled``: its own section, as an inline mapping (a "/**"
-    one) would lose against the parameter file's section of the node."""
-    path = Path(bag).parent / f"{node}_enabled.yaml"
-    path.write_text(yaml.safe_dump({node: {"ros__parameters": {"enabled": True}}}))
-    return str(path)
 
 
 def read_periods(bag) -> tuple[list[int], dict[str, dict[int, object]]]:
@@ -109,15 +98,15 @@ def read_periods(bag) -> tuple[list[int], dict[str, dict[int, object]]]:
 
 def loop_from_params(robot, dt: float, load_compensation: bool) -> ControlLoop:
     """ControlLoop of the robot's parameter file, with the hybrid force controller of its
-    ``hybrid_force_controller`` section (enabled, as the graph's) and the load compensation of its
-    ``load_compensation`` section (``enabled`` as the graph's) as the offset stage named like the node."""
+    ``hybrid_force_controller`` section and the load compensation of its ``load_compensation``
+    section (``enabled`` as the graph's) as the offset stage named like the node."""
     file = load_params_file(robot.file.stem)
     hpfc = file["hybrid_force_controller"]
     loop_params = replace(control_loop_params(robot),
                           hpfc=HPFCParams(**{k: v for k, v in hpfc.items() if k in HPFCParams.__dataclass_fields__
                                              and k != "T_MA"},
                                           T_MA=file["cable_force_controller"]["T_MA"]),
-                          hpfc_enabled=True)
+                          hpfc_enabled=False)
     lc = LoadCompensationParams(**{**{k: v for k, v in file["load_compensation"].items()
                                       if k in LoadCompensationParams.__dataclass_fields__},
                                    "enabled": load_compensation})
@@ -126,14 +115,32 @@ def loop_from_params(robot, dt: float, load_compensation: bool) -> ControlLoop:
     return ControlLoop(robot, dt, loop_params, {"load_compensation": stage})
 
 
+def _hpfc_enabled(series, stamps) -> list[bool]:
+    """The hybrid force controller's ``enabled`` per period (M103 ... M104 of the program), from its
+    state messages: idle (I) it reports ``enabled`` as it is; A-D are entered and kept only while
+    enabled (else it releases, R), so there it is on; in R it may be either, and stays as it was."""
+    out, enabled = [], False
+    for t in stamps:
+        msg = series["/hybrid_force_controller/state"][t]
+        state = parse_state(msg.controller)
+        if state == "I":
+            enabled = bool(msg.enabled)
+        elif state != "R":
+            enabled = True
+        out.append(enabled)
+    return out
+
+
 def replay(stamps, series, robot, load_compensation: bool) -> list[dict]:
     """ControlLoop.step on every recorded period's inputs -> per period, the differences
     (max |loop - graph|) of each compared quantity."""
     dt = 1e-3
     loop = loop_from_params(robot, dt, load_compensation)
+    enabled = _hpfc_enabled(series, stamps)
     rows = []
     for k, t_ns in enumerate(stamps):
         sp, ws = series["/setpoint"][t_ns], series["/winch/state"][t_ns]
+        loop.set_parameter("hybrid_force_controller", "enabled", enabled[k])
         s = loop.step(t_ns * 1e-9, pose_from_msg(sp.pose), twist_from_msg(sp.velocity),
                       accel_from_msg(sp.acceleration), np.asarray(ws.position), np.asarray(ws.velocity),
                       np.asarray(ws.effort), from_vector3(sp.force))

@@ -206,11 +206,7 @@ class ControlLoop:
         if force_control:                                                   # ik_only: ramped out
             samples["ospc"] = OffsetSample(t, True, x_ospc)
             if hpfc is not None:
-                # applied always: zero while idle, without steps by itself (x_t starts at zero and
-                # moves at limited rates). The node graph's joint command instead ramps it in over
-                # transfer_time when the controller becomes active and out after the release
-                # (docs/hybrid_force_control.md: on the cylinder program 30 N of force error, here 10 N)
-                samples["hybrid_force_controller"] = OffsetSample(t, True, x_hpfc)
+                samples["hybrid_force_controller"] = OffsetSample(t, hpfc.active, x_hpfc)
             samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
         offset, offset_faults = self.offsets.update(t, samples)
         faults += offset_faults
