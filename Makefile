@@ -6,7 +6,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test test-stress bench clean
 
 setup:
 	@bash scripts/setup.sh
@@ -16,6 +16,10 @@ demo: setup
 
 test: setup
 	@$(PY) -m pytest -q tests
+
+# the tests while two busy loops load both cores (no test may depend on an idle machine)
+test-stress: setup
+	@bash scripts/test-stress.sh
 
 bench: setup
 	@$(VENV)/bin/cdpr bench

@@ -6,9 +6,34 @@ import random
 # concurrent test runs on one machine do not see each other's nodes.
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+SESSION_DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
+# `cdpr` commands called in a test discover the graph themselves unless the test starts the graph
+# daemon (and stops it) itself: tests/tools/test_cli_daemon.py
+os.environ.setdefault("CDPR_NO_DAEMON", "1")
+# Generated message classes check the type of every field they are given (read when a message
+# module is imported, so before any test imports one): a wrong type fails a test with a Python
+# error instead of asserting in the C conversion and aborting the process (issue 28, exit 134).
+os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 
 import pytest  # noqa: E402
+
+
+_MODULES_RUN = [0]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def ros_domain_of_the_module():
+    """Each test module on a ROS domain of its own: whatever an earlier module left publishing (a
+    node of a failed test, a player) cannot reach this module's subscribers or recordings. The
+    domains cycle from the session's random one through 1..100 (FastDDS's port range on localhost);
+    contexts, launched graphs and subprocesses made in the module read ROS_DOMAIN_ID when they start.
+    Autouse at module scope: set before the module's other fixtures start anything."""
+    domain = 1 + (SESSION_DOMAIN - 1 + _MODULES_RUN[0]) % 100
+    _MODULES_RUN[0] += 1
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    yield domain
+    os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN)
 
 
 @pytest.fixture(scope="session")

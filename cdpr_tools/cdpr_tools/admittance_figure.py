@@ -2,19 +2,15 @@
 
     python -m cdpr_tools.admittance_figure docs/img/admittance_guiding.png
 
-The IPAnema 3 Mini with its shipped parameter file, the in-process closed loop
-(:func:`cdpr_sim.closed_loop.run`) with hand guiding as the set-point source, and the simulated
-hand pushing: light pulses in zone 1, a push out of it, a constant push into the wall, release,
-and back to the origin. Plant: the simulator's defaults for the robot file.
+The IPAnema 3 Mini with its shipped parameter file, the in-process hand-guiding runner
+(:func:`cdpr_sim.hand_guiding.guiding_run`), and the simulated hand pushing: light pulses in
+zone 1, a push out of it, a constant push into the wall, release, and back to the origin. Plant: the simulator's defaults for the robot file.
 """
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
-from importlib import resources
 
 import numpy as np
-import yaml
 
 from cdpr_control.control.admittance import AdmittanceController, settings_from
 from cdpr_control.control.loop import ControlLoopParams
@@ -22,48 +18,12 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import ClosedLoopRun, HandGuiding, run
 from cdpr_sim.hand import Hand, Segment
+from cdpr_sim.hand_guiding import GuidingRun, guiding_run
 
 # the push sequence of the figure (and of tests/control/test_admittance_closed_loop.py)
 PUSHES = (Segment(0.2, (2.6, 0, 0, 0, 0, 0), "rectangle", 0.5), Segment(1.2, (-2.0, 0, 0, 0, 0, 0), "rectangle", 0.3),
           Segment(2.0, (13.0, 0, 0, 0, 0, 0), "half_sine", 0.5), Segment(3.0, (4.0, 0, 0, 0, 0, 0), "step"),
           Segment(5.0, release=True), Segment(6.0, (-4.5, 0, 0, 0, 0, 0), "rectangle", 1.0))
-
-
-@dataclass
-class GuidingRun:
-    run: ClosedLoopRun
-    source: HandGuiding
-    hand: Hand
-
-
-def parameter_file(robot: str) -> dict:
-    return yaml.safe_load(resources.files("cdpr_control").joinpath("params", f"{robot}.yaml").read_text())
-
-
-def file_loop_params(robot_name: str = "ipanema3_mini") -> ControlLoopParams:
-    """The in-process loop with the parameter file's force distribution (f_min margin, tension)."""
-    fd = parameter_file(robot_name)["force_distribution"]["ros__parameters"]
-    return ControlLoopParams(force=ForceSetpointParams(f_min=np.asarray(fd["f_min"]), tension_level=fd["tension_level"]))
-
-
-def guiding_run(segments=PUSHES, duration: float = 8.5, overrides: dict | None = None, robot_name="ipanema3_mini",
-                loop_params: ControlLoopParams | None = None, before_step=None) -> GuidingRun:
-    """Hand guiding from home (enabled at t = 0) with the robot's parameter file, pushed by ``segments``."""
-    robot = load_robot(robot_name)
-    file = parameter_file(robot_name)
-    values = {**file.get("admittance_controller", {}).get("ros__parameters", {}), **(overrides or {})}
-    params, zones, loaded = settings_from(values, robot)
-    controller = AdmittanceController(loaded, file["/**"]["ros__parameters"]["control_period"], params, zones)
-    controller.enable()
-    source, hand = HandGuiding(controller), Hand(list(segments))
-    loop_params = loop_params or file_loop_params(robot_name)
-
-    def step(k, loop, sim):
-        hand.apply(sim)
-        if before_step is not None:
-            before_step(k, loop, sim)
-
-    return GuidingRun(run(robot, source, duration, loop_params, before_step=step), source, hand)
 
 
 def plot(g: GuidingRun, path) -> None:
@@ -103,7 +63,7 @@ def plot(g: GuidingRun, path) -> None:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     path = argv[0] if argv else "admittance_guiding.png"
-    plot(guiding_run(), path)
+    plot(guiding_run(PUSHES, 8.5), path)
     print(path)
     return 0
 

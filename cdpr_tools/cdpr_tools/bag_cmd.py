@@ -7,6 +7,7 @@ these commands read bags from ``ros2 bag`` in turn.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 from datetime import datetime, timezone
@@ -17,10 +18,11 @@ from rclpy.parameter import Parameter
 
 from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
 from cdpr_tools.bag.reader import BagReader, CorruptBagError
-from cdpr_tools.bag.recovery import reindex
+from cdpr_tools.bag.recovery import RepairError, reindex
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
 from cdpr_control.ros.runner import spin, stop_on_signals
-from cdpr_tools.ros_graph import new_context
+from cdpr_tools.progress import Progress
+from cdpr_tools.ros_graph import fully_qualified, new_context
 
 
 def add_parser(sub) -> None:
@@ -38,9 +40,14 @@ def add_parser(sub) -> None:
     r.add_argument("-x", "--exclude", default="", help="regular expression of topics not to record")
     r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
     r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
-    r.add_argument("--stop-after", type=float, metavar="SEC", help="stop recording after SEC seconds")
-    r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
-                   help="compress each MCAP chunk (default none); every reader of MCAP decompresses it")
+    r.add_argument("--stop-after", type=_seconds, metavar="SEC", help="stop recording after SEC seconds")
+    r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="zstd",
+                   help="compress each MCAP chunk (default zstd, in the writer process); every reader of "
+                        "MCAP decompresses it")
+    r.add_argument("-b", "--max-bag-size", type=_byte_count, default=0, metavar="BYTES",
+                   help="split into files of about BYTES (rosbag2's numbered files, one metadata.yaml; 0: one file)")
+    r.add_argument("-d", "--max-bag-duration", type=_seconds, default=0.0, metavar="SEC",
+                   help="split into files of SEC seconds of log time (0: one file)")
     r.set_defaults(run=run_record)
 
     i = verbs.add_parser("info", help="print a bag's duration, topics, types and counts",
@@ -52,34 +59,78 @@ def add_parser(sub) -> None:
                          description="Publish the messages of a bag with their recorded types, QoS and "
                                      "relative timing.")
     y.add_argument("bag", help="bag directory or .mcap file")
-    y.add_argument("-r", "--rate", type=float, default=1.0, help="playback speed factor (default 1.0)")
-    y.add_argument("--clock", type=float, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
+    y.add_argument("-r", "--rate", type=_positive, default=1.0, help="playback speed factor (default 1.0)")
+    y.add_argument("--clock", type=_positive, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
                    help=f"publish /clock from the bag time at HZ (default {DEFAULT_CLOCK_HZ:g} Hz when given)")
     y.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
-    y.add_argument("--start-offset", type=float, default=0.0, metavar="SEC", help="start SEC seconds into the bag")
+    y.add_argument("--start-offset", type=_seconds, default=0.0, metavar="SEC",
+                   help="start SEC seconds into the bag")
     y.add_argument("-l", "--loop", action="store_true", help="play the bag again and again until Ctrl-C")
-    y.add_argument("-d", "--delay", type=float, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
-    y.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SEC",
+    y.add_argument("-d", "--delay", type=_seconds, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
+    y.add_argument("--wait-for-subscribers", type=_seconds, default=0.0, metavar="SEC",
                    help="wait up to SEC seconds until every topic has a subscriber")
+    y.add_argument("--remap", nargs="+", type=_remap, default=[], metavar="FROM:=TO",
+                   help="publish bag topic FROM on topic TO (as ros2 bag play --remap)")
     y.set_defaults(run=run_play)
 
     x = verbs.add_parser("reindex", help="rebuild the index and metadata.yaml of a bag cut off by a crash",
-                         description="Make a bag whose recording was killed whole again, as `ros2 bag "
-                                     "reindex` does: every complete chunk is kept, the file gets its summary "
-                                     "and index back (the original stays beside it as <file>.orig) and the "
-                                     "bag directory a new metadata.yaml.")
+                         description="Make a bag whose recording was killed, or whose file is damaged, "
+                                     "whole again, as `ros2 bag reindex` does: every intact chunk is kept "
+                                     "(damaged ones are reported), the file gets its summary and index back "
+                                     "(the original stays beside it as <file>.orig) and the bag directory a "
+                                     "new metadata.yaml. Exits 1 when nothing could be read.")
     x.add_argument("bag", help="bag directory or .mcap file")
     x.set_defaults(run=run_reindex)
+
+
+def _positive(text: str) -> float:
+    """A finite number > 0 (argparse type): nan, inf, 0 and negative values are refused."""
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def _byte_count(text: str) -> int:
+    """A whole number of bytes >= 0 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of bytes: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    """A finite number of seconds >= 0 (argparse type)."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text!r}")
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
 
 
 def run_record(args) -> int:
     if args.all and args.topics:
         raise ValueError("give either -a/--all or topics, not both")
-    overrides = [Parameter("output", value=args.output or default_bag_name()),
+    output = args.output or default_bag_name()
+    overrides = [Parameter("output", value=output),
                  Parameter("exclude", value=args.exclude),
                  Parameter("include_hidden_topics", value=args.include_hidden_topics),
                  Parameter("use_sim_time", value=args.use_sim_time),
-                 Parameter("compression", value=args.compression)]
+                 Parameter("compression", value=args.compression),
+                 Parameter("max_bag_size", value=int(args.max_bag_size)),
+                 Parameter("max_bag_duration", value=float(args.max_bag_duration))]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
     context = new_context()
@@ -87,7 +138,12 @@ def run_record(args) -> int:
     stop = threading.Event()
     try:
         with stop_on_signals(stop):
-            recorder = BagRecorder(context=context, parameter_overrides=overrides)
+            try:
+                recorder = BagRecorder(context=context, parameter_overrides=overrides)
+            except OSError as exc:              # the bag cannot be created there: a usage error
+                print(f"cdpr bag record: error: cannot create the bag {output}: {exc.strerror or exc}",
+                      file=sys.stderr)
+                return 2
             executor = EventsExecutor(context=context)
             executor.add_node(recorder)
             if args.stop_after is not None:
@@ -99,10 +155,13 @@ def run_record(args) -> int:
     finally:
         stop.set()
         if recorder is not None:
-            recorder.destroy_node()
+            recorder.destroy_node()          # closes the bag: the count is then what the file holds
             print(f"bag {recorder.writer.path}: {recorder.writer.message_count} messages on "
                   f"{len(recorder.writer.topics)} topics")
         context.try_shutdown()
+    if recorder.writer.failed:
+        print(f"cdpr bag record: error: {recorder.writer.failed}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -114,7 +173,12 @@ def run_info(args) -> int:
 
 
 def run_reindex(args) -> int:
-    for line in reindex(args.bag):
+    try:
+        report = reindex(args.bag)
+    except RepairError as exc:
+        print(f"cdpr bag reindex: error: {exc}", file=sys.stderr)
+        return 1
+    for line in report:
         print(line)
     return 0
 
@@ -158,6 +222,23 @@ def _stamp(ns: int | None) -> str:
     return f"{wall:%b %d %Y %H:%M:%S}.{nsec:09d} ({sec}.{nsec:09d})"
 
 
+def _play_progress():
+    """bag play's progress on stderr (about once a second): bag time played of the bag's span."""
+    shown = Progress("bag play")
+
+    def update(done_s: float, total_s: float) -> None:
+        shown.update(done_s / total_s if total_s > 0 else 1.0, f"{done_s:.1f} of {total_s:.1f} s of the bag")
+    return update
+
+
+def _remap(text: str) -> tuple[str, str]:
+    """FROM:=TO (topic names, made fully qualified) for --remap."""
+    source, sep, target = text.partition(":=")
+    if not sep or not source.strip() or not target.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not FROM:=TO (e.g. /winch/state:=/replay/winch/state)")
+    return fully_qualified(source.strip()), fully_qualified(target.strip())
+
+
 def run_play(args) -> int:
     bag = BagReader(args.bag)
     context = new_context()
@@ -166,7 +247,8 @@ def run_play(args) -> int:
         with stop_on_signals(stop):
             node = Node("bag_player", context=context, start_parameter_services=False)
             player = BagPlayer(node, bag, rate=args.rate, topics=args.topics, start_offset=args.start_offset,
-                               clock_hz=args.clock, loop=args.loop)
+                               clock_hz=args.clock, loop=args.loop, remap=dict(args.remap),
+                               progress=_play_progress())
             if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(args.wait_for_subscribers, stop):
                 print("not every topic has a subscriber; playing anyway", flush=True)
             if args.delay > 0:
@@ -180,8 +262,12 @@ def run_play(args) -> int:
                 print(f"published {player.published} of {bag.message_count} messages, then: {exc}", file=sys.stderr)
                 return 1
         print(f"published {count} messages" + (" (stopped)" if stop.is_set() else ""))
-        if bag.corrupt_chunks:
-            print(f"error: {bag.corrupt_chunks} corrupt chunk(s) of {bag.path} were not played", file=sys.stderr)
+        if bag.damage:                         # (each was warned about before playing; again at the end)
+            counted, unknown = bag.lost_messages
+            print(f"error: {len(bag.damage)} damaged part(s) of {bag.path} were skipped: {counted} messages lost"
+                  + (f", and an unknown number in {unknown} part(s)" if unknown else ""), file=sys.stderr)
+            for damage in bag.damage:
+                print(f"  {damage}", file=sys.stderr)
             return 1
     finally:
         context.try_shutdown()

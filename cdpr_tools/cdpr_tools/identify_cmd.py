@@ -127,6 +127,10 @@ def run_friction(args) -> int:
     return 0
 
 
+# units of the drive models' parameters, (3.10) and (5.11); zeta is a ratio
+DRIVE_UNITS = {"T_1": " s", "T_d": " s", "T_w": " s", "zeta": ""}
+
+
 def run_drive(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import drive
@@ -136,7 +140,7 @@ def run_drive(args) -> int:
     model = args.model or load_robot(args.robot).drive.model
     data, fit = drive.identify(BagReader(args.bag), model)
     print(f"{fit.model} from cables {[c + 1 for c in data.cables]}: "
-          + ", ".join(f"{k} = {v:.6g}" for k, v in fit.params.items()) + f"  (rms {fit.rms:.3g} m)")
+          + ", ".join(f"{k} = {v:.6g}{DRIVE_UNITS[k]}" for k, v in fit.params.items()) + f"  (rms {fit.rms:.3g} m)")
     if args.plot:
         drive.plot(data, fit, args.plot)
         print(f"wrote {args.plot}")

@@ -94,6 +94,7 @@ class RecordSpec:
     topics: list = field(default_factory=list)  # empty: every topic
     exclude: str = ""
     include_hidden_topics: bool = False
+    compression: str = "zstd"     # MCAP chunk compression: zstd, lz4 or none
 
 
 @dataclass
@@ -260,6 +261,7 @@ class Launcher:
         overrides = [Parameter("output", value=record.output or default_bag_name()),
                      Parameter("exclude", value=record.exclude),
                      Parameter("include_hidden_topics", value=bool(record.include_hidden_topics)),
+                     Parameter("compression", value=record.compression),
                      Parameter("use_sim_time", value=bool(self.description.parameters.get("use_sim_time", False)))]
         if record.topics:
             overrides.append(Parameter("topics", value=[str(t) for t in record.topics]))

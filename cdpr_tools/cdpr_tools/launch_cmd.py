@@ -29,6 +29,8 @@ def add_parser(sub) -> None:
     p.add_argument("--mode", choices=MODES, help="composed (default): one process; processes: one per node")
     p.add_argument("--record", nargs="?", const="", metavar="BAG",
                    help="record every topic (to BAG, default bags/rosbag2_<date>-<time>)")
+    p.add_argument("--record-compression", choices=("zstd", "lz4", "none"), default="zstd",
+                   help="with --record: MCAP chunk compression (default zstd, in the writer process)")
     p.add_argument("--only", nargs="+", metavar="NODE", help="start only these nodes (name or module, regex); "
                    "the rest of the graph may run in another process or on another host")
     p.add_argument("--exclude", nargs="+", metavar="NODE", help="start every node but these")
@@ -57,6 +59,7 @@ def run(args) -> int:
     if args.record is not None:
         record = description.record or RecordSpec()
         record.output = args.record or record.output
+        record.compression = args.record_compression
         description.record = record
     mode = args.mode or description.mode
     if args.show:
@@ -74,6 +77,8 @@ def run(args) -> int:
             launcher.stop()
     if launcher.recorder is not None:
         print(f"[launch] bag {launcher.recorder.writer.path}: {launcher.recorder.writer.message_count} messages")
+        if launcher.recorder.writer.failed:      # (disk full: the count above is what the bag holds)
+            launcher.errors.append(f"recording: {launcher.recorder.writer.failed}")
     if launcher.errors:
         print("[launch] stopped with errors: " + "; ".join(launcher.errors))
         return 1

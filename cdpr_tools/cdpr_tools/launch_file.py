@@ -35,6 +35,7 @@ from pathlib import Path
 
 import yaml
 
+from cdpr_control.model.yaml_file import YamlFileError, load_yaml
 from cdpr_tools.launch import LaunchDescription, NodeSpec
 from cdpr_tools.share import package_share
 
@@ -52,10 +53,12 @@ class LaunchFileError(ValueError):
 def load_launch_file(path: str | os.PathLike, arguments: dict | None = None) -> LaunchDescription:
     """Read a ROS 2 YAML launch file; ``arguments`` (NAME -> value) set its ``arg`` declarations."""
     path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"launch file {path} not found")
     try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"launch file {path} not found") from None
+        data = load_yaml(path, "launch file")   # YAML, encoding and nesting errors name the file
+    except YamlFileError as exc:
+        raise LaunchFileError(str(exc)) from None
     if not isinstance(data, dict) or set(data) != {"launch"} or not isinstance(data["launch"], list):
         raise LaunchFileError(f"{path}: a ROS 2 YAML launch file is a mapping with one key, 'launch:', "
                               "holding a list of actions")

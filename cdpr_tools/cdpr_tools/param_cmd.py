@@ -3,7 +3,9 @@
 The commands call ``<node>/list_parameters``, ``get_parameters``, ``set_parameters`` and
 ``describe_parameters`` (rcl_interfaces), as ``ros2 param`` does, so they work on any ROS 2 node
 and ``ros2 param`` works on ours. ``dump`` prints (``load`` reads) the standard parameter file
-layout ``/node: {ros__parameters: {...}}``.
+layout ``/node: {ros__parameters: {...}}``. ``list``, ``get``, ``set``, ``describe`` and ``dump``
+(to the terminal) run in the graph daemon, which keeps the graph and each node's parameter
+clients (``cdpr daemon``); ``--no-daemon`` or CDPR_NO_DAEMON=1 runs them here.
 """
 from __future__ import annotations
 
@@ -16,13 +18,15 @@ import yaml
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.parameter import Parameter, get_parameter_value, parameter_value_to_python
-from rclpy.parameter_client import AsyncParameterClient
 
+from cdpr_tools.daemon.client import add_no_daemon
+from cdpr_control.model.yaml_file import load_yaml
 from cdpr_tools.ros_graph import (
     DISCOVERY_TIMEOUT,
     find_node,
     graph_node,
     node_names,
+    parameter_client,
     settle,
     spin_future,
     spin_until,
@@ -104,6 +108,7 @@ def add_parser(sub) -> None:
 def _common(p) -> None:
     p.add_argument("--timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
                    help=f"wait up to SEC seconds for the node and its answers (default {DISCOVERY_TIMEOUT:g})")
+    add_no_daemon(p)
 
 
 class _Remote:
@@ -112,7 +117,7 @@ class _Remote:
     def __init__(self, node, name: str, timeout: float):
         self.name = find_node(node, name, timeout)
         self.node, self.timeout = node, timeout
-        self.client = AsyncParameterClient(node, self.name)
+        self.client = parameter_client(node, self.name)
         if not spin_until(node, self.client.services_are_ready, timeout):
             raise TimeoutError(f"node {self.name} offers no parameter services (started without them?)")
 
@@ -254,9 +259,10 @@ def _nest(tree: dict, path: list[str], value) -> None:
 
 
 def run_load(args) -> int:
+    entries = read_parameter_file(args.file)       # a broken file is named before the graph is asked
     with graph_node("param") as node:
         remote = _Remote(node, args.node, args.timeout)
-        params = parameters_for_node(args.file, remote.name, not args.no_use_wildcard)
+        params = node_parameters(entries, args.file, remote.name, not args.no_use_wildcard)
         # read-only parameters holding the file's value already are left alone (a dump loads back)
         names = list(params)
         current = dict(zip(names, remote.get(names)))
@@ -279,29 +285,52 @@ def _same(a: ParameterValue, b: ParameterValue) -> bool:
 
 def parameters_for_node(path: str, node_name: str, use_wildcard: bool = True) -> dict[str, ParameterValue]:
     """Parameters a standard parameter file gives ``node_name`` (``/**`` first, then its own entry)."""
-    data = yaml.safe_load(Path(path).read_text()) or {}
-    keys = (["/**"] if use_wildcard else []) + [node_name, node_name.lstrip("/")]
-    params: dict[str, ParameterValue] = {}
-    found = False
-    for key in keys:
-        entry = data.get(key)
-        if entry is None:
-            continue
+    return node_parameters(read_parameter_file(path), path, node_name, use_wildcard)
+
+
+def read_parameter_file(path: str) -> dict[str, dict[str, ParameterValue]]:
+    """Each entry of a standard parameter file (node name or ``/**``) with its parameters, flattened
+    to dotted names; ValueError naming the file for YAML, encoding and nesting errors, for anything
+    but a mapping of ``{ros__parameters: {...}}`` entries and for values no parameter can hold."""
+    data = load_yaml(path, "parameter file")
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: a parameter file maps node names to {{ros__parameters: ...}}, "
+                         f"got a {type(data).__name__} at the top level")
+    entries = {}
+    for key, entry in data.items():
         if not isinstance(entry, dict) or "ros__parameters" not in entry:
             raise ValueError(f"{path}: entry {key!r} has no ros__parameters")
-        found = True
-        _flatten(entry["ros__parameters"] or {}, "", params)
+        tree = entry["ros__parameters"] or {}
+        if not isinstance(tree, dict):
+            raise ValueError(f"{path}: {key}.ros__parameters maps names to values, got a {type(tree).__name__}")
+        entries[str(key)] = params = {}
+        try:
+            _flatten(tree, "", params)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {key}: {exc}") from None
+    return entries
+
+
+def node_parameters(entries: dict, path: str, node_name: str, use_wildcard: bool = True) -> dict[str, ParameterValue]:
+    """The parameters the entries of parameter file ``path`` give ``node_name`` (``/**`` first, then its own)."""
+    keys = (["/**"] if use_wildcard else []) + [node_name, node_name.lstrip("/")]
+    found = [entries[key] for key in keys if key in entries]
     if not found:
-        raise ValueError(f"{path} has no parameters for {node_name}; entries: {', '.join(map(str, data)) or '(none)'}")
-    return params
+        raise ValueError(f"{path} has no parameters for {node_name}; entries: {', '.join(entries) or '(none)'}")
+    return {name: value for params in found for name, value in params.items()}
 
 
 def _flatten(tree: dict, prefix: str, out: dict) -> None:
     for key, value in tree.items():
+        name = f"{prefix}{key}"
         if isinstance(value, dict):
-            _flatten(value, f"{prefix}{key}.", out)
+            _flatten(value, f"{name}.", out)
         else:
+            if any(isinstance(v, int) and not -2**63 <= v < 2**63 for v in (value if isinstance(value, list) else [value])):
+                raise ValueError(f"parameter {name}: {value!r} is beyond the 64-bit integers of ROS 2 parameters")
             try:
-                out[prefix + key] = Parameter(prefix + key, value=value).get_parameter_value()
+                out[name] = Parameter(name, value=value).get_parameter_value()
             except TypeError:
-                raise ValueError(f"parameter {prefix + key}: unsupported value {value!r}") from None
+                raise ValueError(f"parameter {name}: unsupported value {value!r}") from None

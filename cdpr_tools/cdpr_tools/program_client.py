@@ -31,7 +31,8 @@ def run_program(text: str, name: str, action: str = "/run_program", timeout: flo
             executor.spin_once(timeout_sec=0.1)
         on_feedback = None if feedback is None else (lambda m: feedback(m.feedback.line, m.feedback.progress))
         sent = client.send_goal_async(RunProgram.Goal(program=text, name=name), feedback_callback=on_feedback)
-        _spin_until(executor, sent.done, time.monotonic() + server_timeout)
+        if not _spin_until(executor, sent.done, time.monotonic() + server_timeout):
+            raise TimeoutError(f"{action} did not answer the goal of program {name!r} within {server_timeout:g} s")
         handle = sent.result()
         if not handle.accepted:
             raise RuntimeError(f"program {name!r} was rejected by {action}")

@@ -8,6 +8,8 @@ from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError
 from cdpr_control.motion.program_check import check_program
 from cdpr_control.model.robot import load_robot
+from cdpr_control.motion.gcode import program_text
+from cdpr_tools.progress import Progress
 from cdpr_tools.ros_graph import DISCOVERY_TIMEOUT
 
 
@@ -34,12 +36,27 @@ def add_parser(sub) -> None:
 
 
 def _text(program: str) -> tuple[str, str]:
+    """(name, text) of a G-code file or a shipped program; GCodeError (line:col) for bytes that are not UTF-8."""
     path = Path(program)
+    if path.is_dir():
+        raise IsADirectoryError(f"{program}: is a directory, not a G-code file")
+    if path.exists() and not path.is_file():     # a fifo or a device would block or never end
+        raise OSError(f"{program}: is not a regular file, not a G-code file")
     if path.exists():
-        return path.stem, path.read_bytes()         # the parser names line:col of non-UTF-8 bytes
+        try:
+            source = path.read_bytes()
+        except OSError as exc:
+            raise OSError(f"{program}: cannot read: {exc.strerror}") from None
+        return path.stem, program_text(source)      # the parser's line:col of the first non-UTF-8 byte
     if program in programs.names() or f"{program}.gcode" in programs.names():
         return program.removesuffix(".gcode"), programs.read(program)
     raise FileNotFoundError(f"no file {program!r} and no shipped program of that name; shipped: {', '.join(programs.names())}")
+
+
+def _print_diagnostics(program: str, exc: GCodeError) -> int:
+    for d in exc.diagnostics:
+        print(f"{program}:{d}")
+    return 1
 
 
 def _list(args) -> int:
@@ -49,15 +66,13 @@ def _list(args) -> int:
 
 
 def _check(args) -> int:
-    name, text = _text(args.program)
     robot = load_robot(args.robot)
     try:
+        name, text = _text(args.program)
         program = parse_gcode(text, start_pose=robot.home)
         duration = check_program(program, robot, payload=args.payload)
     except GCodeError as exc:
-        for d in exc.diagnostics:
-            print(f"{args.program}:{d}")
-        return 1
+        return _print_diagnostics(args.program, exc)
     print(f"{name}: ok for {robot.name}, {len(program.blocks)} blocks, {duration:.2f} s "
           "(at the interpreter's default limits)")
     return 0
@@ -66,9 +81,21 @@ def _check(args) -> int:
 def _run(args) -> int:
     from cdpr_tools.program_client import run_program
 
-    name, text = _text(args.program)
-    result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
-                         feedback=lambda line, progress: print(f"\r line {line:5d}  {100 * progress:5.1f} %", end="", flush=True))
-    print()
+    try:
+        name, text = _text(args.program)
+    except GCodeError as exc:
+        return _print_diagnostics(args.program, exc)
+    # on a terminal one line rewritten in place; into a file or pipe a line per tenth of the program
+    shown = Progress(f"program {name!r}")
+    try:
+        result = run_program(text, name, action=args.action, timeout=args.timeout, server_timeout=args.server_timeout,
+                             feedback=lambda line, fraction: shown.update(fraction, f"line {line}"))
+    except BaseException:
+        shown.stop()
+        raise
+    if result.success:
+        shown.done()
+    else:
+        shown.stop()
     print(f"{name}: {'done' if result.success else 'failed'} after {result.duration:.2f} s {result.message}")
     return 0 if result.success else 1

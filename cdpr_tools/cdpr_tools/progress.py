@@ -66,6 +66,14 @@ class Progress:
         elif self._decile < 10:
             self.update(1.0, detail)
 
+    def stop(self) -> None:
+        """End the progress without claiming it complete (the work failed): a terminal's line is
+        closed, so that the error that follows starts a line of its own."""
+        if self.active and self.tty and self._shown:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._shown = False
+
 
 def track(items: Iterable[T], total: int, label: str) -> Iterator[T]:
     """Yield ``items`` while showing how many of ``total`` have passed."""

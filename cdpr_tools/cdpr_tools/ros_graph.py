@@ -1,7 +1,9 @@
 """The ROS graph as the tools see it: a private node, discovery waits, names, QoS to subscribe with.
 
-Without ros2cli's daemon every command discovers the graph itself, so lookups wait (up to a
-timeout) for the node or topic asked for, and fail with the names that do exist.
+A command discovers the graph itself, or runs inside the graph daemon (``cdpr_tools.daemon``),
+whose node knows the graph already: there ``graph_node`` hands out the daemon's shared node, spun
+by the daemon's executor, and waits poll instead of spinning. Lookups wait (up to a timeout) for
+the node or topic asked for, and fail with the names that do exist.
 """
 from __future__ import annotations
 
@@ -20,10 +22,12 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 DISCOVERY_TIMEOUT = 5.0  # s to wait for a named node or topic to appear
 SPIN_PERIOD = 0.05  # s, executor wake-up while waiting
+POLL_PERIOD = 0.005  # s between looks at a shared node, which another thread spins
 
 
 def keep_discovery_local() -> None:
@@ -39,9 +43,40 @@ def new_context() -> Context:
     return context
 
 
+class SharedNode:
+    """The graph daemon's node, which every command run inside the daemon uses instead of its own.
+
+    Another thread spins it; ``settled`` is set once its first discovery has settled, and
+    ``parameter_clients`` keeps one parameter client per remote node, whose services stay
+    discovered between commands.
+    """
+
+    def __init__(self, node: Node):
+        self.node = node
+        self.settled = threading.Event()
+        self.parameter_clients: dict[str, AsyncParameterClient] = {}
+        self.lock = threading.Lock()
+
+
+_shared: SharedNode | None = None
+
+
+def share_node(shared: SharedNode | None) -> None:
+    """Make ``shared`` the node of every later ``graph_node`` in this process (the daemon), or stop."""
+    global _shared
+    _shared = shared
+
+
+def _is_shared(node: Node) -> bool:
+    return _shared is not None and node is _shared.node
+
+
 @contextlib.contextmanager
 def graph_node(purpose: str) -> Iterator[Node]:
-    """A hidden node in a context of its own, for one command's lifetime."""
+    """A hidden node in a context of its own, for one command's lifetime (in the daemon: its node)."""
+    if _shared is not None:
+        yield _shared.node
+        return
     context = new_context()
     node = executor = None
     try:
@@ -59,11 +94,17 @@ def graph_node(purpose: str) -> Iterator[Node]:
 
 
 def spin_until(node: Node, done: Callable[[], bool], timeout: float | None) -> bool:
-    """Spin ``node``'s executor until ``done()`` or ``timeout`` seconds; returns ``done()``."""
+    """Spin ``node``'s executor until ``done()`` or ``timeout`` seconds; returns ``done()``.
+
+    A shared node (the daemon's) is spun by another thread: then this only looks at ``done()``.
+    """
     deadline = None if timeout is None else time.monotonic() + timeout
     while not done():
         if deadline is not None and time.monotonic() >= deadline:
             return done()
+        if _is_shared(node):
+            time.sleep(POLL_PERIOD)
+            continue
         try:
             node.executor.spin_once(timeout_sec=SPIN_PERIOD)
         except ExternalShutdownException:
@@ -97,8 +138,23 @@ def settle(node: Node, quiet: float, timeout: float = DISCOVERY_TIMEOUT) -> None
     """Spin until other nodes are seen and the graph stayed unchanged for ``quiet`` seconds.
 
     Discovery on one machine takes from a few ms to about 2 s here; without a daemon that knows the
-    graph already, a fixed wait either wastes time or misses nodes.
+    graph already, a fixed wait either wastes time or misses nodes. The daemon's node settles once,
+    when the daemon starts (``settle_shared``), and answers from then on at once.
     """
+    if _is_shared(node):
+        _shared.settled.wait(timeout)
+        return
+    spin_until(node, _graph_quiet(node, quiet), timeout)
+
+
+def settle_shared(quiet: float, timeout: float = DISCOVERY_TIMEOUT) -> None:
+    """Let the shared node's first discovery settle (the daemon calls it once, in a thread of its own)."""
+    spin_until(_shared.node, _graph_quiet(_shared.node, quiet), timeout)
+    _shared.settled.set()
+
+
+def _graph_quiet(node: Node, quiet: float) -> Callable[[], bool]:
+    """A check that is true once other nodes are seen and the graph stayed unchanged for ``quiet`` s."""
     state = {"snapshot": None, "since": time.monotonic()}
 
     def quiet_enough() -> bool:
@@ -108,7 +164,7 @@ def settle(node: Node, quiet: float, timeout: float = DISCOVERY_TIMEOUT) -> None
             state["snapshot"], state["since"] = snapshot, now
         return bool(snapshot[0]) and now - state["since"] >= quiet
 
-    spin_until(node, quiet_enough, timeout)
+    return quiet_enough
 
 
 def find_node(node: Node, name: str, timeout: float = DISCOVERY_TIMEOUT) -> str:
@@ -117,6 +173,16 @@ def find_node(node: Node, name: str, timeout: float = DISCOVERY_TIMEOUT) -> str:
     if spin_until(node, lambda: wanted in node_names(node, include_hidden=True), timeout):
         return wanted
     raise LookupError(f"node {wanted} not found; running nodes: {', '.join(node_names(node)) or '(none)'}")
+
+
+def parameter_client(node: Node, name: str) -> AsyncParameterClient:
+    """A client of node ``name``'s parameter services: new, or the daemon's kept one for that node."""
+    if not _is_shared(node):
+        return AsyncParameterClient(node, name)
+    with _shared.lock:
+        if name not in _shared.parameter_clients:
+            _shared.parameter_clients[name] = AsyncParameterClient(node, name)
+        return _shared.parameter_clients[name]
 
 
 def topic_types(node: Node, include_hidden: bool = False) -> dict[str, list[str]]:
@@ -138,7 +204,7 @@ def find_topic(node: Node, topic: str, timeout: float = DISCOVERY_TIMEOUT, publi
 
     if not spin_until(node, known, timeout):
         if topic in topic_types(node, True):
-            raise LookupError(f"topic {topic} has no publisher")
+            raise LookupError(f"topic {topic} has no publisher (waited {timeout:g} s)")
         raise LookupError(f"topic {topic} not found; topics: {', '.join(sorted(topic_types(node))) or '(none)'}")
     types = topic_types(node, True)[topic]
     if len(types) > 1:

@@ -1,18 +1,23 @@
 """``cdpr topic list|info|echo|hz|pub``: the topics of the running graph, as ``ros2 topic`` shows them.
 
-Every command discovers the graph itself (there is no daemon): ``list`` prints once the graph has
-not changed for ``--spin-time`` seconds, the others wait up to ``--timeout`` seconds for the topic
-they are given.
+``list``, ``info`` and ``echo --once`` run in the graph daemon (``cdpr daemon``), which knows the
+graph already; ``--no-daemon`` or CDPR_NO_DAEMON=1 runs them here, where the command discovers the
+graph itself: ``list`` prints once the graph has not changed for ``--spin-time`` seconds, the
+others wait up to ``--timeout`` seconds for the topic they are given.
 """
 from __future__ import annotations
 
 import argparse
 import math
 import time
+from typing import Callable
 
 import yaml
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
 
+from cdpr_tools.daemon.client import add_no_daemon
 from cdpr_tools.message_convert import dict_to_message, field_value, message_class, message_to_yaml
 from cdpr_tools.ros_graph import (
     DISCOVERY_TIMEOUT,
@@ -39,7 +44,8 @@ def add_parser(sub) -> None:
     ls.add_argument("-v", "--verbose", action="store_true", help="publishers and subscribers per topic")
     ls.add_argument("--include-hidden-topics", action="store_true", help="also list hidden topics (/_...)")
     ls.add_argument("--spin-time", type=float, default=0.5, metavar="SEC",
-                    help="list once the graph has not changed for SEC seconds (default 0.5)")
+                    help="without the daemon: list once the graph has not changed for SEC seconds (default 0.5)")
+    add_no_daemon(ls)
     ls.set_defaults(run=run_list)
 
     info = verbs.add_parser("info", help="type and endpoints of a topic",
@@ -47,22 +53,39 @@ def add_parser(sub) -> None:
     info.add_argument("topic")
     info.add_argument("-v", "--verbose", action="store_true", help="every endpoint with node, GID and QoS")
     _timeout(info)
+    add_no_daemon(info)
     info.set_defaults(run=run_info)
 
-    echo = verbs.add_parser("echo", help="print messages as YAML", description="Print the messages of a topic.")
+    echo = verbs.add_parser("echo", help="print messages as YAML",
+                            description="Print the messages of a topic. It waits up to --timeout seconds for a "
+                                        "publisher and subscribes with its QoS (a latched, transient-local "
+                                        "topic gives its last message); with --once or --count it fails when "
+                                        "no message comes for --timeout seconds.")
     echo.add_argument("topic")
     echo.add_argument("type", nargs="?", help="message type (default: from the graph)")
     echo.add_argument("--once", action="store_true", help="print one message and exit")
     echo.add_argument("-n", "--count", type=int, metavar="N", help="print N messages and exit")
     echo.add_argument("--field", help="print only this field (dotted path, e.g. header.stamp)")
-    _timeout(echo)
+    echo.add_argument("--timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
+                      help="wait up to SEC seconds for a publisher and, with --once or --count, for each "
+                           f"message (default {DISCOVERY_TIMEOUT:g})")
+    add_no_daemon(echo)
     echo.set_defaults(run=run_echo)
 
     hz = verbs.add_parser("hz", help="publishing rate of a topic",
-                          description="Print the rate of a topic from receive timestamps, once a second.")
+                          description="Print the rate of a topic once a second (wall clock), and which clock "
+                                      "it measured. When /clock has a publisher (a simulated graph), or with "
+                                      "--use-sim-time, the rate is in simulated time: from the messages' "
+                                      "header stamps, or for messages without a header from the /clock "
+                                      "time at which they arrive.")
     hz.add_argument("topic")
     hz.add_argument("-w", "--window", type=int, default=10000, help="messages in the window (default 10000)")
-    hz.add_argument("--duration", type=float, metavar="SEC", help="measure SEC seconds, print once and exit")
+    hz.add_argument("--duration", type=float, metavar="SEC", help="measure SEC wall-clock seconds, print once and exit")
+    clock = hz.add_mutually_exclusive_group()
+    clock.add_argument("--use-sim-time", action="store_true",
+                       help="measure in simulated time (default when /clock has a publisher)")
+    clock.add_argument("--wall-time", action="store_true",
+                       help="measure in wall-clock time even when /clock is published")
     _timeout(hz)
     hz.set_defaults(run=run_hz)
 
@@ -137,56 +160,95 @@ def run_echo(args) -> int:
     limit = 1 if args.once else args.count
     with graph_node("echo") as node:
         topic = fully_qualified(args.topic)
-        type_name = args.type or find_topic(node, topic, args.timeout)
-        printed = [0]
-
-        def on_message(msg) -> None:
-            value = field_value(msg, args.field) if args.field else msg
-            if hasattr(value, "get_fields_and_field_types"):
-                text = message_to_yaml(value)
-            else:
-                text = yaml.safe_dump(value.tolist() if hasattr(value, "tolist") else value,
-                                      default_flow_style=False)
-            print(text.rstrip("\n").removesuffix("\n..."), "---", sep="\n", flush=True)
-            printed[0] += 1
-
-        node.create_subscription(message_class(type_name), topic, on_message, adapted_qos(node, topic))
-        spin_until(node, lambda: limit is not None and printed[0] >= limit, None)
+        # the publishers' QoS decides how to subscribe (a latched message reaches only a
+        # transient-local subscription): wait for a publisher, not only for the topic's name
+        found = find_topic(node, topic, args.timeout, publishers=True)
+        received: list = []  # appended by the executor (the daemon's thread), taken here
+        subscription = node.create_subscription(message_class(args.type or found), topic, received.append,
+                                                adapted_qos(node, topic))
+        try:
+            printed = 0
+            while limit is None or printed < limit:
+                if not spin_until(node, lambda: bool(received), None if limit is None else args.timeout):
+                    raise TimeoutError(f"no message on {topic} within {args.timeout:g} s; "
+                                       f"it has {node.count_publishers(topic)} publisher(s)")
+                _print_message(received.pop(0), args.field)
+                printed += 1
+        finally:
+            node.destroy_subscription(subscription)
     return 0
+
+
+def _print_message(msg, field: str | None) -> None:
+    value = field_value(msg, field) if field else msg
+    if hasattr(value, "get_fields_and_field_types"):
+        text = message_to_yaml(value)
+    else:
+        text = yaml.safe_dump(value.tolist() if hasattr(value, "tolist") else value, default_flow_style=False)
+    print(text.rstrip("\n").removesuffix("\n..."), "---", sep="\n", flush=True)
 
 
 def run_hz(args) -> int:
     with graph_node("hz") as node:
         topic = fully_qualified(args.topic)
-        type_name = find_topic(node, topic, args.timeout, publishers=True)
+        msg_class = message_class(find_topic(node, topic, args.timeout, publishers=True))
+        clock, stamp_of = _hz_clock(node, args, msg_class)
         stamps: list[int] = []
 
-        def on_message(_data, info) -> None:
-            stamps.append(info["received_timestamp"])
+        def on_message(data, info) -> None:
+            stamp = stamp_of(data, info)
+            if stamp is None:  # no /clock yet
+                return
+            stamps.append(stamp)
             if len(stamps) > args.window + 1:
                 del stamps[0]
 
-        node.create_subscription(message_class(type_name), topic, on_message, adapted_qos(node, topic, 1000), raw=True)
+        node.create_subscription(msg_class, topic, on_message, adapted_qos(node, topic, 1000), raw=True)
         if args.duration is not None:
             spin_until(node, lambda: False, args.duration)
-            print(format_rate(stamps))
+            print(format_rate(stamps, clock))
             return 0
         while True:
             spin_until(node, lambda: False, HZ_REPORT_PERIOD)
-            print(format_rate(stamps), flush=True)
+            print(format_rate(stamps, clock), flush=True)
 
 
-def format_rate(stamps_ns: list[int]) -> str:
-    """``ros2 topic hz``'s report of receive timestamps."""
+def _hz_clock(node, args, msg_class) -> tuple[str, Callable[[bytes, dict], int | None]]:
+    """The clock `topic hz` measures with: its name, and the time of a (raw) message in ns.
+
+    Wall time: the receive timestamps. Simulated time (asked for, or /clock published now): the
+    message's header stamp, which its publisher took from /clock; without a header, the latest
+    /clock time when the message arrives (so periods are whole /clock periods).
+    """
+    if not (args.use_sim_time or (not args.wall_time and node.count_publishers("/clock") > 0)):
+        return "wall time", lambda _data, info: info["received_timestamp"]
+    if msg_class.get_fields_and_field_types().get("header") == "std_msgs/Header":
+        def header_stamp(data: bytes, _info) -> int:
+            stamp = deserialize_message(data, msg_class).header.stamp
+            return stamp.sec * 1_000_000_000 + stamp.nanosec
+        return "sim time, header stamps", header_stamp
+    find_topic(node, "/clock", args.timeout, publishers=True)
+    latest: list[int | None] = [None]
+
+    def on_clock(msg: Clock) -> None:
+        latest[0] = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+
+    node.create_subscription(Clock, "/clock", on_clock, adapted_qos(node, "/clock", 1))
+    if not spin_until(node, lambda: latest[0] is not None, args.timeout):  # a paused clock counts nothing
+        raise TimeoutError(f"/clock has a publisher but sent no time within {args.timeout:g} s; "
+                           "--wall-time measures without it")
+    return "sim time, /clock on arrival", lambda _data, _info: latest[0]
+
+
+def format_rate(stamps_ns: list[int], clock: str) -> str:
+    """``ros2 topic hz``'s report of message timestamps, naming the ``clock`` they are on."""
     if len(stamps_ns) < 2:
         return "no new messages"
     periods = [(b - a) * 1e-9 for a, b in zip(stamps_ns, stamps_ns[1:])]
     mean = sum(periods) / len(periods)
     std = math.sqrt(sum((p - mean) ** 2 for p in periods) / len(periods))
-    return (f"average rate: {1.0 / mean if mean > 0 else math.inf:.3f}\n"
+    return (f"average rate: {1.0 / mean if mean > 0 else math.inf:.3f} ({clock})\n"
             f"\tmin: {min(periods):.3f}s max: {max(periods):.3f}s std dev: {std:.5f}s window: {len(periods)}")
-
-
 def run_pub(args) -> int:
     times = 1 if args.once else args.times
     wait = args.wait_matching_subscriptions

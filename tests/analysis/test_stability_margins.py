@@ -12,12 +12,17 @@ from cdpr_control.control.cable_force_control import CFCParams
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.ospc import OSPCParams
+from cdpr_control.control.safety import SafetyConfig
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import run
 from cdpr_tools.cli import main as cdpr
 
 ROBOTS = {name: load_robot(name) for name in ("ipanema3", "ipanema3_mini")}
 
+
+# these tests drive the loops past their critical gains on purpose: the force watch, which would
+# hold them (tests/control/test_force_watch.py), is off
+UNWATCHED = SafetyConfig(force_watch=False)
 
 def test_cfc_margins_of_fig_3_11():
     """Table 3.1 gains, PT1 + 6.3 ms dead time, Pade (3.18) of order 2, continuous controller."""
@@ -75,7 +80,8 @@ def test_cfc_gain_margin_predicts_the_simulated_loop(name):
     amplitude = {}
     for factor in (0.7, 1.6):
         params = ControlLoopParams(cfc=CFCParams(**{**cfc.__dict__, "K_p": factor * critical}), ospc=ospc,
-                                   force=ForceSetpointParams(tension_level=0.1, tension_rate=0.0))
+                                   force=ForceSetpointParams(tension_level=0.1, tension_rate=0.0),
+                                   safety=UNWATCHED)
         r = run(robot, lambda t: (robot.home, np.zeros(6), np.zeros(6)), 1.2, params, tension_level=0.0)
         assert np.mean(r.f_d[0] - r.f[0]) > 0.02 * np.max(robot.cable.f_max - robot.cable.f_min)
         amplitude[factor] = _envelope(r.f, slice(100, 400), slice(900, 1200))
@@ -103,7 +109,8 @@ def test_ospc_gain_margin_predicts_the_simulated_step(name, axis):
     for factor in (0.5, 2.5):
         K_p = np.array(ospc.K_p, dtype=float)
         K_p[axis] = factor * critical
-        params = ControlLoopParams(cfc_enabled=False, cfc=cfc, ospc=OSPCParams(K_p, ospc.T_i, ospc.x_sat))
+        params = ControlLoopParams(cfc_enabled=False, cfc=cfc, ospc=OSPCParams(K_p, ospc.T_i, ospc.x_sat),
+                                   safety=UNWATCHED)
         r = run(robot, lambda t: (step if t >= 0.05 else robot.home, np.zeros(6), np.zeros(6)), n * dt, params)
         y = sosfiltfilt(band, r.x[:, axis])[100:-100, None]
         w = len(y) // 5

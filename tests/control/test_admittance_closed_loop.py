@@ -10,8 +10,10 @@ from scipy.optimize import curve_fit
 from cdpr_control.control.admittance import damped_eigenfrequency
 from cdpr_control.control.friction_compensation import FrictionCompensationParams
 from cdpr_control.model.robot import load_robot
+from cdpr_control.control.params import control_loop_params
 from cdpr_sim.hand import Segment
-from cdpr_tools.admittance_figure import PUSHES, file_loop_params, guiding_run
+from cdpr_sim.hand_guiding import guiding_run
+from cdpr_tools.admittance_figure import PUSHES
 
 DT = 1e-3
 MINI = load_robot("ipanema3_mini")
@@ -120,7 +122,7 @@ def test_pulley_friction_compensation_keeps_the_guided_platform_still():
     3 N push the uncompensated pulley friction (Dahl hysteresis) reads as a user force and moves the
     released platform on; with the friction compensation of 3.7 it stays within noise."""
     def ptp_after_push(compensated: bool) -> float:
-        lp = dataclasses.replace(file_loop_params(),
+        lp = dataclasses.replace(control_loop_params(MINI),
                                  friction=FrictionCompensationParams(enabled=compensated))
         r, _ = _guide({"dead_band": [0.0] * 6}, [Segment(0.1, (3.0, 0, 0, 0, 0, 0), "rectangle", 0.2)], 2.0,
                       loop_params=lp)

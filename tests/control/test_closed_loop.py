@@ -98,9 +98,12 @@ def test_tension_level_changed_live_moves_internal_forces_not_the_pose():
     def schedule(k, loop, sim):
         if k in (1000, 3000):
             p = loop.force.params
-            loop.force.set_params(ForceSetpointParams(**{**p.__dict__, "tension_level": 1.0 if k == 1000 else 0.0}))
+            # 0.9 with the shipped parameters: at 1.0 the true forces stay 2-3 N above the Mini's
+            # 40 N for seconds, and with the dataclass defaults they fall to 2.2 N on the way back;
+            # the force watch (docs/control.md, "Safety") rightly holds both
+            loop.force.set_params(ForceSetpointParams(**{**p.__dict__, "tension_level": 0.9 if k == 1000 else 0.0}))
 
-    r = run(robot, hold(robot.home), 5.0, ControlLoopParams(), before_step=schedule)
+    r = run(robot, hold(robot.home), 5.0, None, before_step=schedule)
     low, high, back = r.f[990], r.f[2990], r.f[-1]
     assert high.mean() > 2.0 * low.mean()               # internal forces follow f_ref from f_min to f_max
     np.testing.assert_allclose(back, low, atol=0.3)

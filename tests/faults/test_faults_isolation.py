@@ -155,3 +155,22 @@ def test_an_aborted_program_fails_with_its_reason():
     at_once = Interpolator(program, dt=0.001)
     at_once.step()
     assert at_once.abort("no winch/state", brake=False) and at_once.state is ProgramState.FAILED
+
+
+def test_stamps_ahead_of_the_clock_are_refused_every_time():
+    """Issue 28: a stream of the same far-future stamp passed for a restarted publisher (its second
+    message "continued" from the first) and stopped the loop for good. Against a clock of its own
+    (simulated time) nothing ahead of the clock by more than the limit is ever accepted; without a
+    clock (None: /clock not running yet) the restart rule still applies."""
+    period = 1_000_000
+    jumps = StampJumps(50, 50 * period)
+    clock = lambda: 12 * period                                     # noqa: E731
+    assert jumps.check("s", 10 * period, clock=clock) is None
+    for _ in range(5):                                              # 20 Hz of stamp.sec 5000
+        assert "ahead of the clock" in jumps.check("s", 5000 * 1_000_000_000, clock=clock)
+        assert jumps.check("s", jumps.newest["s"] + period, clock=clock) is None   # the real stream goes on
+    assert jumps.newest["s"] == 15 * period
+    assert jumps.check("s", 100 * period, clock=lambda: 80 * period) is None   # ahead of its stream, not of the clock
+    assert "ahead" in jumps.check("s", 5000 * period, clock=lambda: None)
+    assert jumps.check("s", 5001 * period, clock=lambda: None) is None   # no clock yet: a restarted publisher
+    assert jumps.newest["s"] == 5001 * period

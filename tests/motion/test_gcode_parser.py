@@ -108,11 +108,11 @@ def test_dwell_stops_and_end_of_program():
 
 
 def test_parameter_mcodes_and_assignments():
-    p = parse_gcode('M100 P120.5\nM101\nN5 #<cable_force_controller.f_ref> = 80.0\n'
+    p = parse_gcode('M100 P0.5\nM101\nN5 #<cable_force_controller.f_ref> = 80.0\n'
                     '#/cdpr/ospc.gains.kp = 3 (int)\n#<x.flag> = TRUE\n#<x.label> = "a b"')
     node, name, _ = PARAMETER_MCODES[100]
     assert p.blocks == (
-        ParameterCommand(node, name, 120.5, 1),
+        ParameterCommand(node, name, 0.5, 1),
         ParameterCommand(*PARAMETER_MCODES[101], 2),
         ParameterCommand("cable_force_controller", "f_ref", 80.0, 3),
         ParameterCommand("/cdpr/ospc", "gains.kp", 3, 4),

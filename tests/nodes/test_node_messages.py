@@ -42,32 +42,3 @@ def test_geometry_messages_are_the_constructed_ones():
     same(wrench_to_msg(w), Wrench(force=halves[0], torque=halves[1]))
     reused = pose_to_msg(np.zeros(6))            # filling a given message still works
     assert pose_to_msg(x, reused) is reused and reused == pose
-
-
-def test_fast_constructors_build_the_generated_messages():
-    """message_init's constructors: defaults and given values equal the generated constructor's,
-    serialize alike, and numeric sequences are copied into array.array as the generated one does."""
-    import array
-
-    from cdpr_msgs.msg import CableForces, ControllerState, OperationalSetpoint
-    from sensor_msgs.msg import JointState
-
-    from cdpr_control.ros import message_init
-    installed = message_init.install()  # already installed on import: nothing left to change
-    assert installed == []
-    for cls in (ControllerState, OperationalSetpoint, CableForces, JointState, PoseStamped, Header, Pose):
-        assert "message_init" in cls.__init__.__doc__
-        same(cls(), cls(check_fields=True))
-    values = np.array([1.0, -2.5, 3.25])
-    fast = ControllerState(header=CdprNode.header(7, "base"), controller="c", enabled=True, names=["a", "b", "c"],
-                           reference=values, feedback=[0.5, 0.25, 0.0], saturated=[True, False, True])
-    generated = ControllerState(check_fields=True, header=CdprNode.header(7, "base"), controller="c", enabled=True,
-                                names=["a", "b", "c"], reference=values.tolist(), feedback=[0.5, 0.25, 0.0],
-                                saturated=[True, False, True])
-    same(fast, generated)
-    assert isinstance(fast.reference, array.array) and fast.reference.typecode == "d"
-    values[0] = 99.0                          # a copy, not a view of the caller's array
-    assert fast.reference[0] == 1.0
-    js = JointState(header=CdprNode.header(3), name=["q1"], position=[0.1], velocity=[0.2], effort=[0.3])
-    same(js, JointState(check_fields=True, header=CdprNode.header(3), name=["q1"], position=[0.1],
-                        velocity=[0.2], effort=[0.3]))

@@ -1,5 +1,6 @@
-"""Bags cut off by a crash stay readable up to their last complete chunk; corrupt chunks are never
-skipped silently; ``cdpr bag reindex`` makes a cut bag whole for every reader (issue: faults)."""
+"""Bags cut off by a crash stay readable up to their last complete chunk; a corrupt chunk is skipped
+with a report, never silently, and the chunks after it are read; ``cdpr bag reindex`` makes a cut bag
+whole for every reader (issue: faults). The corruption cases in detail: test_bag_corruption.py."""
 import signal
 import subprocess
 import sys
@@ -9,15 +10,13 @@ import time
 import pytest
 import yaml
 from mcap.reader import make_reader
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from cdpr_tools.bag import BagReader, BagWriter
-from cdpr_tools.bag.reader import CorruptBagError
-from cdpr_tools.bag.recovery import reindex, scan
+from cdpr_tools.bag.recovery import layout, reindex
 from cdpr_tools.cli import main as cdpr
 
 CHUNK = 4096   # bytes: small chunks, so a short recording has many
@@ -121,29 +120,24 @@ def _corrupt_second_chunk(file):
     return chunk
 
 
-def test_corrupt_chunk_is_an_error_not_a_silent_gap(tmp_path):
+def test_corrupt_chunk_is_skipped_with_a_report_not_a_silent_gap(tmp_path):
     path = _bag_with_chunks(tmp_path / "run")
-    _corrupt_second_chunk(path / "run_0.mcap")
+    chunk = _corrupt_second_chunk(path / "run_0.mcap")
     bag = BagReader(path)
-    with pytest.raises(CorruptBagError, match="reindex"):
-        list(bag.messages())
-    # the scan keeps every other chunk and names the one it skipped
-    found = scan(path / "run_0.mcap")
-    assert found.corrupt_chunks == 1 and "corrupt chunk" in found.problems[0]
-    kept = [int(_position(m)) for m in found.messages]
-    assert 0 < len(kept) < 600
+    assert len(bag.damage) == 1 and bag.damage[0].start == chunk.chunk_start_offset
+    assert "damaged chunk" in bag.problems[0]
+    kept = [int(m.msg.position[0]) for m in bag.messages()]
+    assert bag.damage[0].lost == 600 - len(kept) == 600 - bag.message_count > 0
     assert kept[0] == 0 and kept[-1] == 599                     # chunks after the bad one survive
     gap = [k for k in range(600) if k not in set(kept)]
     assert gap == list(range(gap[0], gap[0] + len(gap)))        # one contiguous chunk is missing
-
-
-def _position(message):
-    return deserialize_message(message.data, JointState).position[0]
+    assert layout(path / "run_0.mcap").message_count == len(kept)
 
 
 def test_play_of_a_corrupt_bag_exits_non_zero(tmp_path, capsys):
     path = _bag_with_chunks(tmp_path / "run", n=300)
     _corrupt_second_chunk(path / "run_0.mcap")
     assert cdpr(["bag", "play", str(path), "-r", "100"]) == 1
-    err = capsys.readouterr().err
-    assert "corrupt chunk" in err and "published" in err
+    captured = capsys.readouterr()
+    assert "damaged chunk" in captured.err and "messages lost" in captured.err
+    assert f"published {BagReader(path).message_count} messages" in captured.out

@@ -9,7 +9,7 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from rosidl_parser.definition import (AbstractSequence, AbstractString, Array, BasicType, NamespacedType)
 
-import cdpr_control.ros.message_init  # noqa: F401  (the graph's message constructors)
+from cdpr_control.ros.message_builders import builder
 from cdpr_tools.bag.cdr import trimmed
 from cdpr_tools.bag.encode import HEADER, encoder, serialize
 from cdpr_tools.message_convert import message_class, type_name_of
@@ -73,8 +73,9 @@ def value(slot_type, rng: random.Random):
 
 
 def fill(cls, rng: random.Random):
-    """A message with random values in every field, set through the generated (checking) setters."""
-    msg = cls()
+    """A message as the graph builds it (message_builders), random values in every field set through
+    the generated setters."""
+    msg = builder(cls)()
     for name, slot_type in zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES):
         setattr(msg, name, value(slot_type, rng))
     return msg
@@ -102,6 +103,7 @@ def test_encoding_is_rclpys_for_random_messages(type_name):
         return
     rng = random.Random(type_name)
     check_same_encoding(cls(), encode(cls()))
+    check_same_encoding(builder(cls)(), encode(builder(cls)()))
     for _ in range(40):
         msg = fill(cls, rng)
         check_same_encoding(msg, encode(msg))

@@ -202,3 +202,24 @@ def test_composed_recorder_takes_message_objects(tmp_path):
     times = [m.log_time_ns for m in bag.messages()]
     assert times == sorted(times)
     check_readers(tmp_path / "run", 300)
+
+
+def test_bags_are_zstd_compressed_by_default_and_every_reader_reads_them(tmp_path):
+    """The writer process compresses each chunk with zstd unless told otherwise (issue 27: 982 MiB
+    for 174 s of the loop uncompressed); mcap, mcap_ros2, rosbags and the project's reader read it."""
+    sizes = {}
+    for compression in ("zstd", "none"):
+        path = tmp_path / compression
+        bag = BagWriterProcess(path) if compression == "zstd" else BagWriterProcess(path, compression="none")
+        state = bag.add_topic("/winch/state", "sensor_msgs/msg/JointState")
+        for k in range(5000):
+            bag.put((state, 1_000_000 * (k + 1), serialize(joints(k)), True))
+        bag.close()
+        (mcap_file,) = path.glob("*.mcap")
+        sizes[compression] = mcap_file.stat().st_size
+        with open(mcap_file, "rb") as f:
+            chunks = make_reader(f).get_summary().chunk_indexes
+        assert {c.compression for c in chunks} == ({"zstd"} if compression == "zstd" else {""})
+        check_readers(path, 5000)
+        assert BagReader(path).message_count == 5000
+    assert sizes["zstd"] < sizes["none"] / 3, sizes

@@ -54,9 +54,9 @@ def test_hz_measures_the_rate(graph, capfd):
 
 
 def test_rate_report_format():
-    text = format_rate([0, 10_000_000, 20_000_000, 30_000_000])
-    assert text == "average rate: 100.000\n\tmin: 0.010s max: 0.010s std dev: 0.00000s window: 3"
-    assert format_rate([5]) == "no new messages"
+    text = format_rate([0, 10_000_000, 20_000_000, 30_000_000], "wall time")
+    assert text == "average rate: 100.000 (wall time)\n\tmin: 0.010s max: 0.010s std dev: 0.00000s window: 3"
+    assert format_rate([5], "wall time") == "no new messages"
 
 
 def test_pub_delivers_messages_with_now_stamps(graph, capfd):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 from mcap_ros2._dynamic import generate_dynamic
+from rclpy import node as rclpy_node
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 from websockets.sync.client import connect
@@ -180,3 +181,124 @@ def test_the_shipped_layout_shows_topics_the_graph_publishes(live):
     def leaves(node):
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
     assert sorted(leaves(layout["layout"])) == sorted(panels)
+
+
+def test_the_bridge_subscribes_only_while_a_client_watches():
+    """Unwatched the bridge costs the graph nothing: topics are advertised, but the ROS subscription
+    exists only while a client subscribes to the channel, and is dropped when the last one
+    unsubscribes or disconnects (the publisher's matched-subscription count, over DDS, says so)."""
+    from cdpr_test_nodes.graph import Spinner, wait_for
+
+    graph, view = Spinner(), Spinner()
+    try:
+        talker = graph.add(_Talker)
+        bridge = view.add(FoxgloveBridge, parameter_overrides=[Parameter("port", value=0),
+                                                               Parameter("discovery_period", value=0.1),
+                                                               Parameter("topics", value=["/lazy_a", "/lazy_b"])])
+        pub_a, pub_b = talker.pubs
+        with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=SUBPROTOCOLS, open_timeout=10) as ws:
+            client = Client(ws)
+            client.receive(lambda: {"/lazy_a", "/lazy_b"} <= set(client.channels))
+            assert bridge.subscribed_topics() == []
+            assert pub_a.get_subscription_count() == 0 and pub_b.get_subscription_count() == 0
+
+            client.subscribe(1, "/lazy_a")
+            client.receive(lambda: len(client.messages.get(1, [])) >= 3)
+            assert all(isinstance(m.data, str) and m.data.startswith("a") for _, m in client.messages[1])
+            assert bridge.subscribed_topics() == ["/lazy_a"]
+            wait_for(lambda: pub_a.get_subscription_count() == 1, what="the bridge's subscription to /lazy_a")
+            assert pub_b.get_subscription_count() == 0
+
+            ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [1]}))
+            wait_for(lambda: bridge.subscribed_topics() == [], what="the subscription dropped")
+            wait_for(lambda: pub_a.get_subscription_count() == 0, what="/lazy_a unmatched")
+
+            client.subscribe(2, "/lazy_b")
+            wait_for(lambda: bridge.subscribed_topics() == ["/lazy_b"], what="the subscription to /lazy_b")
+        # the client disconnected: its channels are unsubscribed
+        wait_for(lambda: bridge.subscribed_topics() == [], what="the subscription dropped on disconnect")
+        wait_for(lambda: pub_b.get_subscription_count() == 0, what="/lazy_b unmatched")
+    finally:
+        for spinner in (view, graph):
+            spinner.close()
+
+
+class _Talker(rclpy_node.Node):
+    """Publishes /lazy_a and /lazy_b (std_msgs/String) every 20 ms."""
+
+    def __init__(self, **kwargs):
+        from std_msgs.msg import String
+
+        super().__init__("lazy_talker", **kwargs)
+        self.pubs = (self.create_publisher(String, "/lazy_a", 10), self.create_publisher(String, "/lazy_b", 10))
+        self.k = 0
+
+        def tick():
+            self.k += 1
+            self.pubs[0].publish(String(data=f"a{self.k}"))
+            self.pubs[1].publish(String(data=f"b{self.k}"))
+        self.create_timer(0.02, tick)
+
+
+SERVICE_CALL_REQUEST, SERVICE_CALL_RESPONSE, CLIENT_MESSAGE_DATA = 0x02, 0x03, 0x01
+
+
+def test_services_and_client_publishing_reach_the_graph():
+    """Foxglove's Service Call panel calls a ROS service of the graph through the bridge (CDR both
+    ways, ros2msg schemas from the .srv file), and its Publish panel publishes on a ROS topic
+    (clientPublish): a std_srvs/SetBool server flips, a std_msgs/String arrives."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    from cdpr_test_nodes.graph import Collector, Spinner, wait_for
+
+    graph, view = Spinner(), Spinner()
+    try:
+        served = []
+        server = graph.add(Collector, topics={"/from_foxglove": String})
+
+        def set_bool(request, response):
+            served.append(request.data)
+            response.success, response.message = True, f"now {request.data}"
+            return response
+        server.create_service(SetBool, "/test_switch", set_bool)
+        bridge = view.add(FoxgloveBridge, parameter_overrides=[Parameter("port", value=0),
+                                                               Parameter("discovery_period", value=0.1)])
+        with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=SUBPROTOCOLS, open_timeout=10) as ws:
+            services, responses = {}, []
+            deadline = time.monotonic() + 30
+            while "/test_switch" not in services:
+                assert time.monotonic() < deadline, f"no /test_switch among {sorted(services)}"
+                try:
+                    data = ws.recv(timeout=1.0)
+                except TimeoutError:
+                    continue
+                if isinstance(data, str) and json.loads(data)["op"] == "advertiseServices":
+                    services.update({s["name"]: s for s in json.loads(data)["services"]})
+            service = services["/test_switch"]
+            assert service["type"] == "std_srvs/srv/SetBool"
+            assert service["request"]["schemaEncoding"] == "ros2msg" and "bool data" in service["request"]["schema"]
+            assert "string message" in service["response"]["schema"]
+            payload = serialize_message(SetBool.Request(data=True))
+            ws.send(struct.pack("<BIII", SERVICE_CALL_REQUEST, service["id"], 7, 3) + b"cdr" + payload)
+            while not responses:
+                data = ws.recv(timeout=10.0)
+                if isinstance(data, bytes) and data[0] == SERVICE_CALL_RESPONSE:
+                    responses.append(data)
+            service_id, call_id, length = struct.unpack_from("<III", responses[0], 1)
+            assert (service_id, call_id, responses[0][13:13 + length]) == (service["id"], 7, b"cdr")
+            reply = deserialize_message(responses[0][13 + length:], SetBool.Response)
+            assert (reply.success, reply.message, served) == (True, "now True", [True])
+
+            ws.send(json.dumps({"op": "advertise", "channels": [
+                {"id": 5, "topic": "/from_foxglove", "encoding": "cdr", "schemaName": "std_msgs/msg/String"}]}))
+            wait_for(lambda: bridge.client_publishers, what="the bridge's publisher for the client channel")
+            wait_for(lambda: server.count("/from_foxglove") > 0 or
+                     ws.send(struct.pack("<BI", CLIENT_MESSAGE_DATA, 5) + serialize_message(String(data="hi"))),
+                     what="the client's message on /from_foxglove")
+            assert {m.data for m in server.messages("/from_foxglove")} == {"hi"}
+        wait_for(lambda: not bridge.client_publishers, what="the client's publisher removed on disconnect")
+    finally:
+        for spinner in (view, graph):
+            spinner.close()

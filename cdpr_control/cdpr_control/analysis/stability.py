@@ -15,6 +15,22 @@ Open loops (the thesis' SISO models):
   platform follows x_d through (d_j s + c_j) / (m_j s^2 + d_j s + c_j) (the thesis' (3.15) has no
   zero: it damps the absolute velocity with an identified d_j = 83.3 N s/m).
 
+* Hand guiding (section 5.2) per axis j: the admittance (5.4)-(5.8) V = 1 / (m s^2 + d s + c) of a
+  zone is driven by the user wrench (5.9) w_Adm = PT1(w - w_init - m_p xddot_d) of the period
+  before. The measured wrench holds the hand h and the inertia of the *real* platform, which
+  follows x_d through T = G_a G_s,p (the OSPC's platform model above): w - w_init = h - m_p xddot,
+  so w_Adm = PT1(h + m_p s^2 (1 - T) x_d), a feedback of the platform's own dynamics. Its
+  open loop L = -PT1 e^{-s dt} V m_p s^2 (1 - T) (without the inertia term: +PT1 e^{-s dt} V m_p s^2 T)
+  is a mass ratio m_p / m times the platform's resonance 1 - T, which peaks at 1 / (2 zeta) for
+  the lightly damped cable modes: the virtual mass and damping must be large enough (and the
+  filter must not add too much lag) for the margins. The thesis ran hand guiding on the Mini only,
+  whose 1 kg platform is light against its virtual masses; the 25 kg IPAnema 3 needs virtual
+  masses of several hundred kg (docs/admittance.md).
+* The dead band of (5.9) against the sensor noise: the noise sigma_s of every force sensor reaches
+  the wrench as sigma_w,j = sigma_s |row j of A^T| and the PT1 passes sqrt(alpha / (2 - alpha)) of
+  it (alpha = 1 - e^{-dt / T_1}); a dead band of :data:`NOISE_DEAD_BAND_SIGMAS` filtered sigmas
+  keeps the noise from reaching the virtual system.
+
 The dead time T_d becomes a Pade approximation (3.18) (order 2 as in the thesis, or higher); the
 sampled controller adds half a period of zero-order hold, dt / 2, to it. The gain margin is the
 factor by which K_p may grow before the loop is unstable: the critical gain is K_p times it.
@@ -39,10 +55,14 @@ from cdpr_control.model.robot import load_robot
 from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
 from cdpr_control.analysis.eigenfrequencies import stiffness_map
 from cdpr_control.analysis.energy import LEVELS
+from cdpr_control.control.admittance import settings_from
+from cdpr_control.control.admittance_zones import per_axis
 
 THESIS_CFC_MARGINS = {"gain_dB": 26.7, "phase_deg": 95.5}        # Fig. 3.11
 THESIS_OSPC_PHASE_MARGIN_105KG = 17.7                             # deg, z axis, Fig. 3.10
 S = control.tf("s")
+MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG = 6.0, 45.0               # what a shipped parameter set must keep
+NOISE_DEAD_BAND_SIGMAS = 6.0        # dead band of (5.9) in filtered noise sigmas: the peaks of a long idle time and its slow wander
 
 
 def pade_delay(T: float, order: int = 2) -> control.TransferFunction:
@@ -149,6 +169,94 @@ def cfc_kappa(robot, x, level: float, payload: float, stiffness_model: str) -> f
     return float(np.max(stiffness_ratio(robot, f, l_t, stiffness_model)))
 
 
+def admittance_open_loop(robot, platform: Platform, axis: int, c: float, d: float, m: float, T_filter: float,
+                         dt: float = 1e-3, pade_order: int = 2, inertia_compensation: bool = True) -> control.TransferFunction:
+    """L of the hand-guiding loop of one axis and one zone (c, d, m of (5.4)), negative feedback
+    form (closed loop V / (1 + L)): -PT1 e^{-s dt} V m_p s^2 (1 - T) with the inertia term of (5.9),
+    +PT1 e^{-s dt} V m_p s^2 T without; T = G_a (3.10)/(5.11) G_s,p (3.15) the platform following x_d."""
+    m_p, c_p, d_p = platform.m[axis], platform.c[axis], platform.d[axis]
+    T = drive_transfer_function(robot, dt, pade_order) * (d_p * S + c_p) / (m_p * S**2 + d_p * S + c_p)
+    # V s^2 written out, so that the free zone's integrator (c = 0) cancels exactly
+    V_s2 = control.tf([1.0, 0.0], [m, d]) if c == 0.0 else control.tf([1.0, 0.0, 0.0], [m, d, c])
+    loop = (1 / (1 + T_filter * S)) * pade_delay(dt, pade_order) * V_s2 * m_p
+    return -loop * (1 - T) if inertia_compensation else loop * T
+
+
+def admittance_margins(robot, x, zones, T_filter: float, payload: float = 0.0, damping_time: float = 0.002,
+                       dt: float = 1e-3, pade_order: int = 2, inertia_compensation: bool = True) -> list[list[Margins]]:
+    """Margins of :func:`admittance_open_loop` at pose x, per zone of ``zones`` (a ZoneSet; the
+    wall zone with its spring) and axis: [zone][axis]. ``robot`` without the payload."""
+    plat = platform_model(robot, x, 0.0, payload, damping_time)
+    return [[margins(admittance_open_loop(robot, plat, j, float(zone.c[j]), float(zone.d[j]), float(zone.m[j]),
+                                          T_filter, dt, pade_order, inertia_compensation)) for j in range(6)]
+            for zone in zones.zones]
+
+
+def wrench_noise(robot, x, T_filter: float, dt: float = 1e-3, noise_std: float | None = None) -> np.ndarray:
+    """Standard deviation (6,) [N, N m] of the sensor noise in the PT1-filtered wrench (5.9) at
+    pose x: sigma_s |row of A^T| sqrt(alpha / (2 - alpha)); noise_std default: the robot file's."""
+    sigma = robot.sensor.noise_std if noise_std is None else noise_std
+    AT = inverse_kinematics(robot, x).AT
+    alpha = 1.0 if T_filter == 0.0 else 1.0 - np.exp(-dt / T_filter)
+    return sigma * np.linalg.norm(AT, axis=1) * np.sqrt(alpha / (2.0 - alpha))
+
+
+def admittance_report(robot, x, values: dict, payload: float, damping_time: float, dt: float,
+                      pade_order: int) -> list[str]:
+    """Lines of the hand-guiding loop's margins per axis (worst zone) and the dead band against
+    the filtered sensor noise, for the flat ``admittance_controller`` parameters ``values``."""
+    params, zones, _ = settings_from(values, robot, check_workspace=False)
+    T_f = params.user.T_filter
+    per_zone = admittance_margins(robot, x, zones, T_f, payload, damping_time, dt, pade_order,
+                                  params.user.inertia_compensation)
+    noise = wrench_noise(robot, x, T_f, dt)
+    band = per_axis(params.user.dead_band, "dead_band")
+    lines = [f"hand guiding (5.4)-(5.9): T_filter {T_f * 1e3:g} ms, zones {', '.join(z.name for z in zones.zones)}; "
+             f"need >= {MIN_GAIN_MARGIN_DB:g} dB, {MIN_PHASE_MARGIN_DEG:g} deg",
+             "  axis  m       d         worst zone  GM [dB]  PM [deg]  noise sigma  dead band / sigma"
+             "  (PM 999: |L| < 1 everywhere)"]
+    for j in range(6):
+        k = min(range(len(zones.zones)), key=lambda i: admittance_slack(per_zone[i][j]))
+        mg, zone = per_zone[k][j], zones.zones[k]
+        verdict = "ok" if admittance_slack(mg) >= 0.0 and band[j] >= NOISE_DEAD_BAND_SIGMAS * noise[j] else "FAILS"
+        lines.append(f"  {AXES[j]:4s}  {zone.m[j]:6.4g}  {zone.d[j]:8.4g}  {zone.name:10s}  {mg.gain_dB:7.2f}"
+                     f"  {min(mg.phase_deg, 999.0):8.1f}  {noise[j]:11.3g}  {band[j] / noise[j]:6.1f}  {verdict}")
+    return lines
+
+
+def admittance_slack(m: Margins) -> float:
+    """How far margins exceed what a shipped set needs, relative (< 0: they fall short)."""
+    return min(m.gain_dB / MIN_GAIN_MARGIN_DB, m.phase_deg / MIN_PHASE_MARGIN_DEG) - 1.0
+
+
+def cfc_instability(robot, params: CFCParams, dt: float = 1e-3) -> str | None:
+    """Why the CFC loop (3.21) with ``params`` is unstable by the margins, or None when it is stable
+    (gain margin above 0 dB and phase margin above 0 deg). At home under the minimal tension (the
+    shipped tension level); kappa (3.23) is the least stable cable's. One transfer function, about
+    0.1 s: for a node's parameter validation, not for every period."""
+    kappa = cfc_kappa(robot, robot.home, 0.0, 0.0, params.stiffness_model)
+    mg = margins(cfc_open_loop(robot, params, kappa, dt))
+    if mg.stable:
+        return None
+    return (f"the cable force control (3.21) with K_p {params.K_p:g}, T_i {params.T_i:g} s is unstable by the stability "
+            f"analysis (thesis 3.4, at home): gain margin {mg.gain_dB:.1f} dB, phase margin {mg.phase_deg:.1f} deg "
+            f"(both must be positive)")
+
+
+def ospc_instability(robot, params: OSPCParams, dt: float = 1e-3) -> str | None:
+    """Why the OSPC loop (3.17) of some axis with ``params`` is unstable by the margins, or None
+    (see :func:`cfc_instability`): the platform model (3.15) at home under the minimal tension, six
+    transfer functions, about 0.3 s."""
+    platform = platform_model(robot, robot.home, 0.0, 0.0)
+    for j in range(6):
+        mg = margins(ospc_open_loop(robot, platform, j, params, dt))
+        if not mg.stable:
+            return (f"the operational-space position control (3.17) of axis {AXES[j]} with K_p {float(params.K_p[j]):g}, "
+                    f"T_i {float(params.T_i[j]):g} s is unstable by the stability analysis (thesis 3.4, at home): "
+                    f"gain margin {mg.gain_dB:.1f} dB, phase margin {mg.phase_deg:.1f} deg (both must be positive)")
+    return None
+
+
 def report(robot, x, cfc: CFCParams, ospc: OSPCParams, payload: float, damping_time: float, dt: float,
            pade_order: int) -> list[str]:
     lines = [f"{robot.name} at x = {np.round(x, 3).tolist()}, payload {payload:g} kg, control period {dt * 1e3:g} ms",
@@ -211,18 +319,29 @@ def plot(robot, loops: dict, path) -> None:
     plt.close(fig)
 
 
-def controller_params(robot, path=None) -> tuple[CFCParams, OSPCParams, float]:
-    """(CFC, OSPC parameters, control period) from a ROS parameter file; default: the robot's
-    shipped params/<robot file stem>.yaml. Keys the dataclasses do not know are left out."""
+def _parameter_file(robot, path=None) -> dict:
+    """The ROS parameter file ``path``, default the robot's shipped params/<robot file stem>.yaml."""
     import yaml
-    from dataclasses import fields
     from importlib import resources
 
     if path is None:
         text = resources.files("cdpr_control").joinpath("params", f"{Path(str(robot.file)).stem}.yaml").read_text()
     else:
         text = Path(path).read_text()
-    data = yaml.safe_load(text)
+    return yaml.safe_load(text) or {}
+
+
+def admittance_values(robot, path=None) -> dict:
+    """The flat ``admittance_controller`` parameters of a parameter file (see :func:`controller_params`)."""
+    return dict(((_parameter_file(robot, path).get("admittance_controller") or {}).get("ros__parameters")) or {})
+
+
+def controller_params(robot, path=None) -> tuple[CFCParams, OSPCParams, float]:
+    """(CFC, OSPC parameters, control period) from a ROS parameter file; default: the robot's
+    shipped params/<robot file stem>.yaml. Keys the dataclasses do not know are left out."""
+    from dataclasses import fields
+
+    data = _parameter_file(robot, path)
 
     def section(node: str, cls):
         values = (data.get(node) or {}).get("ros__parameters") or {}
@@ -236,7 +355,8 @@ def controller_params(robot, path=None) -> tuple[CFCParams, OSPCParams, float]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="cdpr analyze stability",
-                                description="Gain and phase margins of CFC (3.21) and OSPC (3.17) (sections 3.1.3, 3.4).")
+                                description="Gain and phase margins of CFC (3.21), OSPC (3.17) (sections 3.1.3, 3.4) "
+                                            "and hand guiding (5.4)-(5.9) (section 5.2).")
     p.add_argument("--robot", default="ipanema3", help="robot name or YAML path")
     p.add_argument("--params", help="controller parameter file (default: the robot's shipped params/<robot>.yaml)")
     p.add_argument("--pose", type=float, nargs="+", help="x y z [a b c] (default: home)")
@@ -254,6 +374,8 @@ def main(argv=None) -> int:
         x[:len(args.pose)] = args.pose
     cfc, ospc, dt = controller_params(robot, args.params)
     print("\n".join(report(robot, x, cfc, ospc, args.payload, args.damping_time, dt, args.pade_order)))
+    print("\n".join(admittance_report(robot, x, admittance_values(robot, args.params), args.payload,
+                                       args.damping_time, dt, args.pade_order)))
     if args.plot_dir:
         out = Path(args.plot_dir)
         out.mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,8 @@ thesis' w_init / g estimate:
 
 w the measured wrench (2.11), w_g, w_dyn the weight and inverse dynamics (2.33) of the platform
 with its known payload, w_tare the remainder at switch-on (the thesis' w_init: sensor offsets and
-model errors), PT1 the filter of T_1 = 3 ms, DB a dead band per axis, then a saturation at w_max.
+model errors; averaged over ``tare_time``, during which the platform holds), PT1 the filter of
+T_1 = 3 ms, DB a dead band per axis, then a saturation at w_max.
 """
 from __future__ import annotations
 
@@ -61,11 +62,14 @@ class UserWrenchParams:
     dead_band: object = field(default_factory=lambda: [0.5, 0.02])   # N, N m (ASSUMPTION: above the idle wrench)
     w_max: object = field(default_factory=lambda: [20.0, 0.5])       # N, N m, saturation (ASSUMPTION)
     tare_on_enable: bool = True                                # the thesis' w_init at start-up
+    tare_time: float = 0.0                                     # s, w_init is the mean over this after switch-on (0: one sample)
     inertia_compensation: bool = True                          # the m_p xddot_d term of (5.9)
 
     def validate(self) -> None:
         if not self.T_filter >= 0.0:
             raise ValueError(f"T_filter must be >= 0 s, got {self.T_filter}")
+        if not self.tare_time >= 0.0:
+            raise ValueError(f"tare_time must be >= 0 s, got {self.tare_time}")
         per_axis(self.dead_band, "dead_band")
         w_max = per_axis(self.w_max, "w_max")
         if np.any(w_max <= per_axis(self.dead_band, "dead_band")):
@@ -80,6 +84,7 @@ class UserWrench:
         self.dt = dt
         self.filter = LowPass(0.0, dt)
         self.tare = np.zeros(6)
+        self._tare_sum, self._tare_count, self._tare_left = np.zeros(6), 0, 0
         self.set_params(params or UserWrenchParams())
 
     def set_params(self, params: UserWrenchParams) -> None:
@@ -100,13 +105,27 @@ class UserWrench:
         return r
 
     def reset(self, raw) -> None:
-        """Switch-on: tare the remainder (if configured) and start the filter there."""
+        """Switch-on: tare the remainder (if configured) and start the filter there.
+
+        The tare is the mean of the raw wrench over ``tare_time`` from here on (0: this sample, the
+        thesis' w_init): one sample carries the full sensor noise (on the IPAnema 3 sigma 3 N m
+        about z), which the dead band would then see as a lasting user wrench; the mean over
+        0.1 s has a tenth of it."""
         raw = np.asarray(raw, dtype=float)
         self.tare = raw.copy() if self.params.tare_on_enable else np.zeros(6)
+        self._tare_sum, self._tare_count = self.tare.copy(), 1
+        self._tare_left = int(round(self.params.tare_time / self.dt)) - 1 if self.params.tare_on_enable else 0
         self.filter.reset(raw - self.tare)
 
     def update(self, raw) -> np.ndarray:
-        """One period: filtered, dead band (continuous: |w| - band), saturated."""
+        """One period: filtered, dead band (continuous: |w| - band), saturated; zero while taring."""
+        if self._tare_left > 0:
+            self._tare_sum += np.asarray(raw, dtype=float)
+            self._tare_count += 1
+            self._tare_left -= 1
+            self.tare = self._tare_sum / self._tare_count
+            self.filter.reset(np.zeros(6))
+            return np.zeros(6)
         y = self.filter.update(np.asarray(raw, dtype=float) - self.tare)
         y = np.sign(y) * np.maximum(np.abs(y) - self.dead_band, 0.0)
         return np.clip(y, -self.w_max, self.w_max)
@@ -306,7 +325,8 @@ def default_parameters() -> dict:
     return {
         "v_max": six(p.v_max), "a_max": six(p.a_max),
         "T_filter": p.user.T_filter, "dead_band": six(p.user.dead_band), "w_max": six(p.user.w_max),
-        "tare_on_enable": p.user.tare_on_enable, "inertia_compensation": p.user.inertia_compensation,
+        "tare_on_enable": p.user.tare_on_enable, "tare_time": p.user.tare_time,
+        "inertia_compensation": p.user.inertia_compensation,
         "payload_mass": 0.0, "payload_center_of_gravity": [0.0, 0.0, 0.0],
         "zones.origin": [0.0] * 6, "zones.rest.radius": float(rest.size),
         "zones.rest.c": six(rest.c), "zones.rest.d": six(rest.d), "zones.rest.m": six(rest.m),
@@ -316,17 +336,18 @@ def default_parameters() -> dict:
     }
 
 
-def settings_from(values: dict, robot) -> tuple[AdmittanceParams, ZoneSet, object]:
+def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[AdmittanceParams, ZoneSet, object]:
     """(params, zones, robot with the known payload) from flat parameters (missing: defaults).
 
     The zone origin is the robot's home plus ``zones.origin``. Raises ValueError with the reason
-    for an invalid combination, including a virtual workspace that leaves the WFW."""
+    for an invalid combination, including a virtual workspace that leaves the WFW (unless
+    ``check_workspace`` is false: an analysis of the dynamics only)."""
     from cdpr_control.control.admittance_zones import Zone, check_in_workspace
 
     v = {**default_parameters(), **values}
     params = AdmittanceParams(v_max=v["v_max"], a_max=v["a_max"], user=UserWrenchParams(
         T_filter=v["T_filter"], dead_band=v["dead_band"], w_max=v["w_max"],
-        tare_on_enable=v["tare_on_enable"], inertia_compensation=v["inertia_compensation"]))
+        tare_on_enable=v["tare_on_enable"], tare_time=v["tare_time"], inertia_compensation=v["inertia_compensation"]))
     params.validate()
     if not v["payload_mass"] >= 0.0:
         raise ValueError(f"payload_mass must be >= 0 kg, got {v['payload_mass']}")
@@ -341,5 +362,6 @@ def settings_from(values: dict, robot) -> tuple[AdmittanceParams, ZoneSet, objec
         Zone("wall", "outside", None, v["zones.wall.c"], v["zones.wall.d"], v["zones.wall.m"], spring="border")), x_0)
     if v["zones.rest.radius"] >= float(np.min(zones.box[:3])):
         raise ValueError("the rest sphere must lie inside the free box")
-    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    if check_workspace:
+        check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
     return params, zones, loaded

@@ -14,6 +14,20 @@ switching controllers or a jump in an input never commands a step. A hold brakes
 CNC does: the cable velocities of the last period are scaled down together (their ratio, the
 direction of the path in joint space, is kept) at ``a_brake`` [m/s^2] until θ_d stands, so a hold
 while moving is no velocity step either; the cables keep the tension of the last command.
+
+A tripped force watch (:class:`cdpr_control.control.safety.ForceWatch`) holds differently: the last command
+is what drove the forces away, so θ_d goes, at most v_max per second per cable, to the watch's safe
+command θ_d = IK(x_safe + offset_safe) - Δq_CFC,safe - Δq_hold (the set-point where it tripped, the
+controller outputs of the last moment the forces followed within their limits) and stays there.
+Δq_hold restores that moment's internal tension when the plant has changed since (cables that
+settled under an overload, a push): a pure integral on the force error f_d,safe - f, low-pass
+filtered over ``T_HOLD_FILTER`` so that a ringing platform does not feed it and projected onto the
+null space of A^T (the internal forces, which move no pose: its wrench part, sensor errors and the
+model's, would only move the platform), with reset time ``T_HOLD`` through the linear stiffness
+k_spec / l_t (2.15), bounded to the elongation of the force range, and paused while a filtered force
+is above f_max (an overload is a push or the oscillation itself, not a tension to restore).
+Its crossover, 1 / T_HOLD = 4 rad/s, is far below the drives' bandwidth, so it is stable whatever
+made the controllers diverge.
 """
 from __future__ import annotations
 
@@ -23,8 +37,12 @@ from cdpr_control import kernels
 from cdpr_control.kernels.model import joint_command_period
 from cdpr_control.kernels.robot_data import robot_data, vector
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.cable import total_free_length
+from cdpr_control.control.filters import LowPass
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
+T_HOLD = 0.25         # s, reset time of the force-watch hold's tension integral
+T_HOLD_FILTER = 0.05  # s, PT1 of the forces it integrates
 
 
 class JointCommand:
@@ -37,6 +55,8 @@ class JointCommand:
         self.velocity = np.zeros(robot.m)      # θ̇_d of the last period [m/s]
         self.no_dq = np.zeros(robot.m)         # Δq_CFC when none is given (q - 0 = q)
         self.held = False
+        self.dq_hold = np.zeros(robot.m)       # the force-watch hold's tension correction [m]
+        self._hold_filter = LowPass(T_HOLD_FILTER, dt)
         kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
         if kernels.ENABLED:                  # and the compiled period (kernels.model.joint_command_period)
             x, f = np.zeros(6), np.zeros(robot.m)
@@ -67,10 +87,20 @@ class JointCommand:
             x += offset
         return x
 
-    def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False) -> np.ndarray:
-        """One period: the rate-limited θ_d, or braking to a stand when holding or the target is invalid."""
+    def update(self, x_d, offsets=(), dq_cfc=None, hold: bool = False, safe=None, f=None) -> np.ndarray:
+        """One period: the rate-limited θ_d, or braking to a stand when holding or the target is
+        invalid; with ``safe`` = (x_safe, offset_safe, Δq_CFC,safe, f_d,safe) (a tripped force watch,
+        :attr:`cdpr_control.control.safety.ForceWatch.safe`) θ_d rate-limited to their target instead, the
+        measured forces f (m,) [N] restoring f_d,safe."""
         if self.theta_d is None:
             raise RuntimeError("JointCommand.update before reset(theta)")
+        if safe is not None:
+            x_safe, offset_safe, dq_safe, f_safe = safe
+            self._restore_tension(x_safe, f_safe, f)
+            return self._return_to(self.target(x_safe, [offset_safe], dq_safe + self.dq_hold))
+        if self._hold_filter.y is not None:    # (released: the next hold starts afresh)
+            self.dq_hold = np.zeros(self.robot.m)
+            self._hold_filter.reset()
         if not hold and kernels.ENABLED and len(offsets) == 1 and dq_cfc is not None:
             theta_d = self._period(x_d, offsets[0], dq_cfc)
             if theta_d is not None:
@@ -79,6 +109,33 @@ class JointCommand:
         self.held = delta is None
         if self.held:
             delta = self.brake() * self.dt
+        self.velocity = delta / self.dt
+        self.theta_d = self.theta_d + delta
+        return self.theta_d.copy()
+
+    def _restore_tension(self, x_safe, f_safe, f) -> None:
+        """One period of Δq_hold: dt / T_HOLD of the filtered internal force error as elongation (2.15)."""
+        if f_safe is None or f is None or not all_finite(np.asarray(f, dtype=float).tolist()):
+            return
+        c = self.robot.cable
+        f_lp = self._hold_filter.update(np.asarray(f, dtype=float))
+        if np.any(f_lp > c.f_max):
+            return
+        error = f_safe - f_lp
+        AT = kernels.inverse_kinematics(self.robot, x_safe).AT
+        internal = error - AT.T @ np.linalg.solve(AT @ AT.T, AT @ error)       # the null space of A^T
+        k = c.k_spec_nominal / total_free_length(self.robot, self.theta_d)      # (2.15)
+        bound = (c.f_max - c.f_min) / k
+        self.dq_hold = np.clip(self.dq_hold + self.dt / T_HOLD * internal / k, -bound, bound)
+
+    def _return_to(self, theta_safe: np.ndarray) -> np.ndarray:
+        """θ_d towards theta_safe at most v_max dt per cable (a held period); braking as :meth:`brake`
+        if theta_safe is not finite."""
+        if not all_finite(theta_safe.tolist()):
+            return self.update(None, hold=True)
+        step = self.v_max * self.dt
+        delta = np.minimum(np.maximum(theta_safe - self.theta_d, -step), step)
+        self.held = True
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()

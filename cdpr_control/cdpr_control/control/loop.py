@@ -39,8 +39,8 @@ from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, Contact
 from cdpr_control.control.joint_command import JointCommand
 from cdpr_control.control.offset_inputs import OffsetInputs, OffsetSample
 from cdpr_control.control.ospc import OperationalSpacePositionController, OSPCParams
-from cdpr_control.control.safety import SafetyConfig, SafetyMonitor
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
+from cdpr_control.control.safety import ForceWatch, SafetyConfig, SafetyMonitor, braking
 
 
 @dataclass
@@ -114,6 +114,7 @@ class ControlLoop:
         self.cfc = CableForceControl(robot, dt, p.cfc, enabled=True, calibration_window=p.calibration_window)
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
+        self.watch = ForceWatch(p.safety, dt)     # the latched hold (tripped: the loop has failed)
         self.command = JointCommand(robot, dt)
         force_control = p.mode == "force_control"
         if force_control:
@@ -145,6 +146,11 @@ class ControlLoop:
         self.estimator.dq_0 = None
         self.cfc.calibration.set_home(self.robot, f_home)
         self.cfc.controller.dq_0 = None
+
+    @property
+    def failure(self) -> str | None:
+        """Why the force watch holds the loop (a running program has failed), None while it does not."""
+        return None if self.watch.fault is None else self.watch.fault.message
 
     def set_parameter(self, node: str, parameter: str, value) -> None:
         """A parameter command of a program (M103/M104, M101/M102) applied to the stage it names."""
@@ -210,8 +216,13 @@ class ControlLoop:
             samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
         offset, offset_faults = self.offsets.update(t, samples)
         faults += offset_faults
+        tripped = self.watch.update(f, robot.cable.f_min, robot.cable.f_max, x_d, offset, dq_cfc, dist.f,
+                                    None if braking(faults) else x)     # (braking, the robot lags by design)
+        if tripped is not None:
+            faults.append(tripped)
         hold = any(fault.holds for fault in faults)
-        theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold)     # s = 0: IK only (2.3.2)
+        theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold,     # s = 0: IK only (2.3.2)
+                                      safe=None if tripped is None else self.watch.safe, f=f)
         self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
                                self.estimator.result.converged, hpfc,
                                {name: out.x for name, out in outputs.items()}, x_hpfc)

@@ -5,11 +5,14 @@ tuning on top of them.
 One source of truth per value: the nodes declare their parameters with the dataclass defaults
 (:data:`DEFAULTS`), and :func:`control_loop_params` reads the same robot file into the
 :class:`~cdpr_control.control.loop.ControlLoopParams` of the single-process loop, so the closed-loop
-tests, the benchmarks and the node graph run one configuration.
+tests, the benchmarks and the node graph run one configuration. :func:`shipped_configuration`
+adds the sections that are not stages of :class:`~cdpr_control.control.loop.ControlLoopParams`:
+load compensation (an offset stage, with the force distribution's ``payload_input``) and hand
+guiding (the admittance controller, a set-point source).
 """
 from __future__ import annotations
 
-from dataclasses import fields, replace
+from dataclasses import dataclass, fields, replace
 from importlib import resources
 
 import numpy as np
@@ -21,6 +24,9 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.friction_compensation import FrictionCompensationParams
 from cdpr_control.control.ospc import OSPCParams
 from cdpr_control.control.safety import SafetyConfig
+from cdpr_control.control.admittance import AdmittanceController, settings_from
+from cdpr_control.control.hybrid_force_control import HPFCParams
+from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
 
 # node name -> (ControlLoopParams field, dataclass) whose fields the node's parameters of the
 # same name set
@@ -61,22 +67,68 @@ def load_params_file(robot_name: str) -> dict:
     return {node: (entry or {}).get("ros__parameters", {}) or {} for node, entry in doc.items()}
 
 
+def _section(cls, values: dict):
+    """An instance of the dataclass cls from the parameters of its node that it has fields for."""
+    known = {f.name for f in fields(cls)}
+    return cls(**{k: (np.asarray(v, dtype=float) if isinstance(v, list) else v) for k, v in values.items() if k in known})
+
+
 def control_loop_params(robot, **switches) -> ControlLoopParams:
-    """ControlLoopParams of the robot's parameter file over the dataclass defaults.
+    """ControlLoopParams of the robot's parameter file over the dataclass defaults, the hybrid
+    position/force control (section 5.1) included when the file has its section.
 
     robot: a Robot (its file name is the robot name) or a robot name. ``switches`` (mode,
-    cfc_enabled, ospc_enabled, transfer_time) override the file.
+    cfc_enabled, ospc_enabled, transfer_time, hpfc_enabled ...) override the file.
     """
     name = robot if isinstance(robot, str) else robot.file.stem
     loop = ControlLoopParams()
-    for node, values in load_params_file(name).items():
+    file = load_params_file(name)
+    if "hybrid_force_controller" in file:
+        values = file["hybrid_force_controller"]
+        loop = replace(loop, hpfc=_section(HPFCParams, values), hpfc_enabled=bool(values.get("enabled", False)))
+    for node, values in file.items():
         if node in STAGES:
             attr, cls = STAGES[node]
-            known = {f.name for f in fields(cls)}
-            stage = {k: (np.asarray(v, dtype=float) if isinstance(v, list) else v)
-                     for k, v in values.items() if k in known}
-            loop = replace(loop, **{attr: replace(getattr(loop, attr), **stage)})
+            loop = replace(loop, **{attr: _section(cls, values)})
         for key, value in values.items():
             if (node, key) in SWITCHES:
                 loop = replace(loop, **{SWITCHES[node, key]: value})
     return replace(loop, **switches)
+
+
+@dataclass
+class ShippedConfiguration:
+    """Everything a robot's parameter file configures for the in-process loop."""
+
+    dt: float                                   # s, control period ("/**" control_period)
+    loop: ControlLoopParams                     # the stages of Fig. 3.4 and the contact control (5.1)
+    load_compensation: LoadCompensationParams   # section 4.1 (its ``enabled``: x_d,LC in the joint command)
+    payload_input: bool                         # force_distribution: the identified payload as the known
+                                                # part of the disturbance (3.24), docs/load_compensation.md
+    admittance: dict                            # flat admittance_controller parameters (section 5.2)
+    hand_guiding: bool                          # the admittance controller is the set-point source
+
+    def offset_stages(self, robot) -> dict:
+        """The offset stages of the shipped graph's joint command besides OSPC and HPFC."""
+        return {"load_compensation": LoadCompensationStage(robot, self.dt, self.load_compensation,
+                                                           feed_force_setpoint=self.payload_input)}
+
+    def admittance_controller(self, robot, overrides: dict | None = None) -> AdmittanceController:
+        """The hand-guiding controller of the file (``overrides``: further flat parameters)."""
+        params, zones, loaded = settings_from({**self.admittance, **(overrides or {})}, robot)
+        return AdmittanceController(loaded, self.dt, params, zones)
+
+
+def shipped_configuration(robot, **switches) -> ShippedConfiguration:
+    """The complete configuration of the robot's parameter file (missing sections: the library
+    defaults); ``switches`` go to :func:`control_loop_params`."""
+    name = robot if isinstance(robot, str) else robot.file.stem
+    file = load_params_file(name)
+    admittance = dict(file.get("admittance_controller", {}))
+    return ShippedConfiguration(
+        dt=float(file.get("/**", {}).get("control_period", 1e-3)),
+        loop=control_loop_params(robot, **switches),
+        load_compensation=_section(LoadCompensationParams, file.get("load_compensation", {})),
+        payload_input=bool(file.get("force_distribution", {}).get("payload_input", False)),
+        admittance={k: v for k, v in admittance.items() if k != "hand_guiding"},
+        hand_guiding=bool(admittance.get("hand_guiding", False)))

@@ -4,10 +4,18 @@ The monitor looks at one control period's inputs and reports faults; the joint c
 (:mod:`cdpr_control.control.joint_command`) holds its last safe set-point while a holding fault is present.
 Faults: cable force beyond its limits, position lag error beyond a bound, forward kinematics not
 converged, a stale input, and non-finite input values.
+
+The force watch (:class:`ForceWatch`, on by default) is the latched part: a cable force outside
+[f_min - tol, f_max + tol] for longer than ``force_limit_time``, a force rate beyond
+``max_force_rate`` force ranges per second (a growing oscillation), or a position error beyond
+``max_position_lag`` trips it once and for good (until released). The joint command then goes to
+the last command that the forces followed within their limits for ``safe_history`` seconds, and
+stays there: the controllers' outputs of that moment frozen, not the diverging ones.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from math import isfinite
 from dataclasses import dataclass
 
@@ -19,6 +27,7 @@ FK_NOT_CONVERGED = "fk_not_converged"
 STALE_INPUT = "stale_input"
 NON_FINITE = "non_finite"
 WORKSPACE = "workspace"          # the set-point left the wrench-feasible workspace (joint command)
+FORCE_WATCH = "force_watch"      # the latched force watch tripped (ForceWatch)
 
 
 def all_finite(values) -> bool:
@@ -29,6 +38,13 @@ def all_finite(values) -> bool:
     if isinstance(values, np.ndarray):
         values = values.ravel().tolist()
     return isfinite(sum(values)) or all(map(isfinite, values))
+
+
+def braking(faults: list) -> bool:
+    """Whether a holding fault other than the position lag is present: the joint command then
+    brakes while the set-point may go on, so the position error says nothing about the control
+    (the force watch leaves it out)."""
+    return any(fault.holds and fault.code != POSITION_LAG for fault in faults)
 
 
 def _floats(value) -> list:
@@ -62,11 +78,31 @@ class SafetyConfig:
     max_position_lag: float = 0.05      # m, |r_d - r|
     max_orientation_lag: float = 0.1    # rad, |phi_d - phi|
     stale_timeout: float = 0.05         # s without a new input
-    hold_on_force_limit: bool = False   # a force fault holds the command (else it is reported only)
+    hold_on_force_limit: bool = False   # a force fault holds the command while it lasts (else it is reported only)
+    # the latched force watch (ForceWatch); the times and the rate were chosen from measurement on
+    # the Mini (docs/control.md, "Safety"): the shipped programs and contacts stay below a quarter
+    # of max_force_rate, the diverging gains of issue 28 cross it within 10 ms (tests/control/test_force_watch.py)
+    force_watch: bool = True            # trip the latched hold to the last safe command
+    force_band: float = 0.05            # -, the watch's tolerance beyond [f_min, f_max] as a share of f_max - f_min
+    force_limit_time: float = 0.05      # s a cable force may stay beyond the band
+    max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
+    force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
+    safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
+    # s from the first period before the force rate is watched: the start-up transient (the plant
+    # settling from its initial tension while the encoders calibrate Δq_0, 0.1 s) is no oscillation
+    # (measured: 66 kN/s on an IPAnema 3 cable 9 ms after start at a border pose, limit 58 kN/s)
+    rate_watch_delay: float = 0.3
 
     def validate(self) -> None:
-        if min(self.force_tolerance, self.max_position_lag, self.max_orientation_lag, self.stale_timeout) < 0:
-            raise ValueError("safety bounds must be >= 0")
+        bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
+                  "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
+                  "force_band": self.force_band, "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
+                  "safe_history": self.safe_history, "rate_watch_delay": self.rate_watch_delay}
+        bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
+        if not self.max_force_rate > 0:
+            bad.append(f"max_force_rate = {self.max_force_rate} (must be > 0)")
+        if bad:
+            raise ValueError(f"safety bounds must be >= 0: {', '.join(bad)}")
 
 
 @dataclass
@@ -133,3 +169,159 @@ class SafetyMonitor:
                     # (a fixed text: the report on /diagnostics changes with the message, not every period)
                     faults.append(Fault(STALE_INPUT, f"stale input {name}: older than {1e3 * c.stale_timeout:.0f} ms", True))
         return faults
+
+
+class ForceWatch:
+    """The latched safety hold of the joint command: detects a runaway and names the command to hold.
+
+    Per period (:meth:`update`) it watches the measured cable forces f and the pose error:
+
+    * a cable outside [f_min - tol, f_max + tol], tol = ``force_band`` (f_max - f_min), for longer
+      than ``force_limit_time`` (consecutive periods);
+    * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, away
+      from the force set-point f_d (a force that follows a step of its set-point, a new tension
+      level, moves towards it) beyond ``max_force_rate`` (f_max - f_min) per second on any cable.
+      A rate, not an energy: it is per cable, needs no model of the platform, and on the Mini
+      crossed the limit within 10 ms of an unstable gain while the shipped programs and contacts stayed
+      below a quarter of it;
+    * a position error |r_d - r| beyond ``max_position_lag``.
+
+    The first of these trips it: :attr:`fault` (code FORCE_WATCH, holding) stays set until
+    :meth:`release`. :attr:`safe` is what the joint command holds then: the set-point pose x_d of
+    the tripping period (on the planned path, where the platform is) with the force-control outputs
+    and the force set-point frozen at the newest period that was followed by ``safe_history``
+    seconds of clean periods (every force within the band, every rate below half the limit):
+    θ_d = IK(x_safe + Σ offsets_safe) - Δq_CFC,safe, the tension the forces followed within their
+    limits, not the diverging outputs (before a clean stretch, the first period's outputs); the
+    joint command restores f_d,safe slowly on top (:mod:`cdpr_control.control.joint_command`). The thesis
+    has no such layer (its safety is the drives' own limits); it is the project's.
+    """
+
+    def __init__(self, config: SafetyConfig, dt: float):
+        config.validate()
+        self.config, self.dt = config, dt
+        self.fault: Fault | None = None
+        self.safe: tuple | None = None               # (x_safe (6,), offset_safe (6,), Δq_CFC,safe (m,), f_d,safe) once tripped
+        self._outputs: tuple | None = None           # (offset, Δq_CFC, f_d) of the newest safe period
+        self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
+        self._clean = 0
+        self._outside: list | None = None            # per cable, periods beyond the band in a row
+        self._f_prev: list | None = None
+        self._rate: list | None = None               # per cable, filtered df/dt [N/s]
+        self._away: list | None = None               # per cable, that rate away from f_d [N/s]
+        self._bounds_key, self._bounds = None, None
+        self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
+        self.configure(config)
+
+    def configure(self, config: SafetyConfig) -> None:
+        """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
+        config.validate()
+        self.config = config
+        self._limit_periods = int(round(config.force_limit_time / self.dt))
+        self._rate_from = int(round(config.rate_watch_delay / self.dt))
+        self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
+        self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
+        self._bounds_key = None
+
+    def release(self) -> None:
+        """End the hold (an operator's decision): the watch starts again from the next period."""
+        self.fault = None
+        self._outside = self._f_prev = self._rate = self._away = None
+        self._clean = self._periods = 0
+        self._history.clear()
+        self.safe = self._outputs = None
+
+    def _limits(self, f_min, f_max, m: int) -> tuple:
+        """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
+        while the limits' bytes repeat (the robot's, every period)."""
+        f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
+        key = (f_min.tobytes(), f_max.tobytes(), m)
+        if key != self._bounds_key:
+            f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
+            tol = self.config.force_band * (f_max - f_min)
+            self._bounds_key = key
+            self._bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
+                                                      self.config.max_force_rate * (f_max - f_min)))
+        return self._bounds
+
+    def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
+        """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
+        limits, the set-point pose x_d (6,), the period's summed offset (6,) and Δq_CFC (m,) as the
+        joint command adds them, the force set-point f_d (m,) (None: unknown), the estimated pose x
+        (None: not watched) -> the latched fault, None while all is well."""
+        if self.fault is not None or not self.config.force_watch:
+            return self.fault
+        self._remember(np.array(offset, dtype=float), np.array(dq_cfc, dtype=float),
+                       None if f_d is None else np.array(f_d, dtype=float))
+        values = None if f is None else _floats(f)
+        if values is None or not all_finite(values):
+            self._clean = 0
+            return None
+        bounds = self._limits(f_min, f_max, len(values))
+        clean = self._watch_forces(values, None if f_d is None else _floats(f_d), bounds)
+        self._periods += 1
+        self.fault = (self._band(values, bounds) or (self._oscillation(values, bounds) if self._periods > self._rate_from
+                                                     else None) or self._lag(x_d, x))
+        self._clean = self._clean + 1 if clean else 0
+        if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
+            self._outputs = self._history[0]
+        if self.fault is not None:
+            self.safe = (np.array(x_d, dtype=float), *self._outputs)
+        return self.fault
+
+    def _remember(self, offset: np.ndarray, dq_cfc: np.ndarray, f_d) -> None:
+        if self._outputs is None:
+            self._outputs = (offset, dq_cfc, f_d)    # the first period: the robot stood there
+        self._history.append((offset, dq_cfc, f_d))
+
+    def _watch_forces(self, f: list, f_d: list | None, bounds: tuple) -> bool:
+        """One period of the per-cable counters and rates, on Python floats (at 1 kHz numpy's
+        per-call cost on 8 values is more than the arithmetic) -> whether the period is clean."""
+        m = len(f)
+        lower, upper, limit = bounds[3], bounds[4], bounds[5]
+        if self._rate is None or len(self._rate) != m:
+            self._outside, self._rate, self._away, self._f_prev = [0] * m, [0.0] * m, [0.0] * m, list(f)
+        outside, rate, away, prev, alpha, inv_dt = self._outside, self._rate, self._away, self._f_prev, self._alpha, 1.0 / self.dt
+        clean = True
+        for i in range(m):
+            fi = f[i]
+            out = fi < lower[i] or fi > upper[i]
+            outside[i] = outside[i] + 1 if out else 0
+            r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
+            # towards f_d is following a set-point (a new tension level); away from it is not
+            away[i] = abs(r) if f_d is None else (r if fi > f_d[i] else -r if fi < f_d[i] else 0.0)
+            clean = clean and not out and abs(r) < 0.5 * limit[i]
+        self._f_prev = f
+        return clean
+
+    def _band(self, f: list, bounds: tuple) -> Fault | None:
+        """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
+        longest = max(self._outside)
+        if longest <= self._limit_periods:
+            return None
+        f_min, f_max, tol, lower = bounds[:4]
+        i = self._outside.index(longest)
+        side = f"below f_min {f_min[i]:.1f} N" if f[i] < lower[i] else f"above f_max {f_max[i]:.1f} N"
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
+                     f"for {1e3 * longest * self.dt:.0f} ms (limit {1e3 * self.config.force_limit_time:.0f} ms)", True)
+
+    def _oscillation(self, f: list, bounds: tuple) -> Fault | None:
+        """The filtered force rate away from f_d (any direction without f_d) beyond max_force_rate
+        force ranges per second."""
+        limit = bounds[5]
+        excess = [a / lim for a, lim in zip(self._away, limit)]
+        worst = max(excess)
+        if worst <= 1.0:
+            return None
+        i = excess.index(worst)
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._rate[i]):.0f} N/s beyond "
+                     f"{limit[i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
+
+    def _lag(self, x_d, x) -> Fault | None:
+        if x_d is None or x is None:
+            return None
+        dr = math.dist(_floats(x_d)[:3], _floats(x)[:3])
+        if not dr > self.config.max_position_lag:
+            return None
+        return Fault(FORCE_WATCH, f"force watch: position error {1e3 * dr:.1f} mm beyond "
+                     f"{1e3 * self.config.max_position_lag:.1f} mm", True)

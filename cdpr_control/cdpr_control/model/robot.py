@@ -3,7 +3,10 @@
 A robot file holds geometry (thesis tables 2.3/2.4), cable, drive, platform, sensor and friction
 parameters in SI units (keys ending in ``_deg`` are degrees and converted to rad here). Every key is
 checked for presence, shape, sign and finiteness; any problem raises :class:`RobotFileError` naming
-the file and the dotted key, e.g. ``ipanema3.yaml: geometry.r_p[3]: must be > 0, got -0.05``.
+the file and the dotted key, e.g. ``ipanema3.yaml: geometry.r_p[3]: must be > 0, got -0.05``. The
+file is read by :mod:`cdpr_control.model.yaml_file` (a key given twice, deep nesting and text that is not
+UTF-8 are refused in words), at most MAX_CABLES cables are taken, and the home pose must lie inside
+the frame and in the wrench-feasible workspace (2.39)-(2.40).
 
 Per-cable values may be written as one scalar, which applies to every cable.
 """
@@ -13,12 +16,18 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.force_distribution import quadratic_program, wrench_feasible
+from cdpr_control.model.workspace import static_problem
+from cdpr_control.model.yaml_file import YamlFileError, load_yaml
 
 ROBOTS_DIR = Path(__file__).parents[1] / "robots"
 MAX_VALUES = 100_000      # scalars a robot file may expand to (a YAML alias bomb is refused early)
+# Cable robots are built with up to about a dozen cables (the thesis' have 8); 32 leaves room for
+# research designs while a file with thousands of cables is refused before the per-cable arrays,
+# the pairwise anchor check and the workspace check at home are computed.
+MAX_CABLES = 32
 
 
 class RobotFileError(ValueError):
@@ -314,6 +323,27 @@ def _check_geometry(r: _Reader, robot: Robot) -> None:
                       "the cables cannot balance every wrench (are the platform points b_i all alike?)")
 
 
+def _check_home(r: _Reader, robot: Robot) -> None:
+    """The home pose inside the frame (the box the anchors a_i span) and in the wrench-feasible
+    workspace (2.39)-(2.40): cable forces within [f_min, f_max] hold the platform's weight there.
+    The program check, the simulator and the interpreter all start from home."""
+    lo, hi = robot.a.min(axis=0), robot.a.max(axis=0)
+    position = robot.home[:3]
+    for i, axis in enumerate("xyz"):
+        if not lo[i] < position[i] < hi[i]:
+            raise r.error("home", f"position {position.tolist()} m is outside the frame: the anchors geometry.a "
+                          f"span {axis} in ({lo[i]:g}, {hi[i]:g}) m")
+    AT, w = static_problem(robot, robot.home)
+    f_min, f_max = robot.cable.f_min, robot.cable.f_max
+    if robot.m - robot.n <= 2:                   # the exact test of the workspace code
+        held = wrench_feasible(AT, w, f_min, f_max)
+    else:                                        # beyond its kernel dimension: the QP (3.27)-(3.28)
+        held = quadratic_program(AT, w, f_min, f_max, backend="daqp").feasible
+    if not held:
+        raise r.error("home", f"{robot.home.tolist()} is outside the wrench-feasible workspace (2.39)-(2.40): "
+                      f"no cable forces within [f_min, f_max] hold the platform ({robot.platform.mass:g} kg) there")
+
+
 def _read_robot(r: _Reader) -> Robot:
     name = r.raw("name")
     if not isinstance(name, str) or not name:
@@ -324,6 +354,8 @@ def _read_robot(r: _Reader) -> Robot:
         raise r.error("n", f"only spatial robots with 6 DOF are supported, got {n}")
     if m < n:
         raise r.error("m", f"needs at least n = {n} cables, got {m}")
+    if m > MAX_CABLES:
+        raise r.error("m", f"at most {MAX_CABLES} cables are supported, got {m}")
     ws_min = r.array("workspace_box.min", (3,))
     ws_max = r.array("workspace_box.max", (3,))
     if np.any(ws_min >= ws_max):
@@ -363,6 +395,7 @@ def _read_robot(r: _Reader) -> Robot:
         energy=_read_energy(r, m) if "energy" in r.data else None,
     )
     _check_geometry(r, robot)
+    _check_home(r, robot)
     r.check_unknown()
     return robot
 
@@ -449,6 +482,8 @@ def robot_path(name_or_path: str | Path) -> Path:
     if candidate.suffix in (".yaml", ".yml"):
         return candidate
     shipped = ROBOTS_DIR / f"{name_or_path}.yaml"
+    if not shipped.exists() and candidate.exists():   # a file (or directory) of another name: say what it is
+        return candidate
     if not shipped.exists():
         raise RobotFileError(
             f"unknown robot {str(name_or_path)!r}; shipped robots: {', '.join(available_robots())}"
@@ -460,13 +495,9 @@ def load_robot(name_or_path: str | Path) -> Robot:
     """Load and validate a robot description; raises RobotFileError naming file and key."""
     path = robot_path(name_or_path)
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise RobotFileError(f"{path}: cannot read robot file: {exc.strerror}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise RobotFileError(f"{path}: not valid YAML: {exc}") from None
+        data = load_yaml(path, "robot file")     # duplicate keys, nesting and encoding refused in words
+    except YamlFileError as exc:
+        raise RobotFileError(str(exc)) from None
     if not isinstance(data, dict):
         raise RobotFileError(f"{path}: expected a mapping at the top level")
     if _count_values(data, MAX_VALUES) > MAX_VALUES:

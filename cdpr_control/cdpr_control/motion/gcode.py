@@ -34,6 +34,8 @@ PARAMETER_MCODES: dict[int, tuple[str, str, bool | None]] = {
     103: ("hybrid_force_controller", "enabled", True),
     104: ("hybrid_force_controller", "enabled", False),
 }
+#: Range of the P word of parameter-setting M-codes: the tension level of (3.27) is 0 (f_min) .. 1 (f_max).
+PARAMETER_MCODE_RANGES: dict[int, tuple[float, float]] = {100: (0.0, 1.0)}
 _STOP_MCODES = {0, 1, 2, 30}
 
 _AXES = "XYZABCUVW"  # letter -> index in the path vector q
@@ -359,6 +361,9 @@ class _Parser:
             if value is None:
                 if p is None:
                     raise _LineError(m.column, m.text, f"M{code} needs the value P")
+                low, high = PARAMETER_MCODE_RANGES.get(code, (-math.inf, math.inf))
+                if not low <= p.value <= high:
+                    raise _LineError(p.column, p.text, f"M{code} sets {node}.{parameter}: P must be in [{low:g}, {high:g}]")
                 return [ParameterCommand(node, parameter, p.value, lineno)]
             blocks = [ParameterCommand(node, parameter, value, lineno)]
         if p is not None:
@@ -373,7 +378,9 @@ def _feed_si(feed: float | None, scale: float, metric: int, motion: int) -> floa
     return feed * scale / 60.0 if metric == 0 else math.radians(feed) / 60.0
 
 
-def _as_text(source: object) -> str:
+def program_text(source: object) -> str:
+    """The program as text: a str as is, bytes decoded as UTF-8; GCodeError with the line:col of the
+    first byte that is not UTF-8 (a Latin-1 or UTF-16 file) or when ``source`` is neither."""
     if isinstance(source, str):
         return source
     if isinstance(source, (bytes, bytearray)):
@@ -383,8 +390,8 @@ def _as_text(source: object) -> str:
             before = bytes(source[:exc.start])
             line = before.count(b"\n") + 1
             column = len(before) - (before.rfind(b"\n") + 1) + 1
-            bad = repr(bytes(source[exc.start:exc.end]))
-            raise GCodeError([Diagnostic(line, column, bad, "not UTF-8 text")]) from None
+            bad = "byte " + " ".join(f"0x{b:02x}" for b in bytes(source[exc.start:exc.end]))
+            raise GCodeError([Diagnostic(line, column, bad, "not UTF-8 text (a Latin-1, UTF-16 or binary file?)")]) from None
     raise GCodeError([Diagnostic(1, 1, type(source).__name__, "a program must be text")])
 
 
@@ -393,7 +400,7 @@ def parse_gcode(source: str | bytes, start_pose=None, start_force=None) -> Progr
 
     Raises GCodeError with every error (line:column, offending text, message); lines after M2/M30
     are not read. The start is needed because moves may give only some axes or be incremental."""
-    text = _as_text(source)
+    text = program_text(source)
     start = np.zeros(9)
     if start_pose is not None:
         start[:6] = np.asarray(start_pose, dtype=float).reshape(6)

@@ -20,7 +20,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from ruckig import ControlInterface, DurationDiscretization, InputParameter, Result, Ruckig, Trajectory
+from ruckig import (ControlInterface, DurationDiscretization, InputParameter, Result, Ruckig, RuckigError,
+    Trajectory)
 
 from cdpr_control.motion.path import Chain, joins_smoothly
 from cdpr_control.motion.program import (Diagnostic, Dwell, GCodeError, Motion, ParameterCommand, Program,
@@ -125,6 +126,12 @@ class PlanningError(ValueError):
     """A motion that the time law cannot be planned for."""
 
 
+def _first_line(exc: Exception) -> str:
+    """The first non-empty line of ruckig's message, without its tag and the dump of its input."""
+    line = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+    return line.removeprefix("[ruckig]").removesuffix("input:").strip()
+
+
 class _Planner:
     """1-DoF ruckig on the normalised path parameter u = s/L in [0, 1], durations on the dt grid."""
 
@@ -145,6 +152,9 @@ class _Planner:
             result = self.otg.calculate(inp, trajectory)
         except (ValueError, RuntimeError) as exc:     # codes the bindings lack, e.g. -101 (duration)
             raise PlanningError(f"the time law cannot be planned ({exc})") from None
+        except RuckigError as exc:   # limits ruckig's arithmetic cannot join (e.g. a tiny F beside a huge jerk)
+            raise PlanningError(f"the time law cannot be planned at this feed (ruckig: {_first_line(exc)}); "
+                                "change F or the move's length") from None
         if result not in (Result.Working, Result.Finished):
             raise PlanningError(f"the time law cannot be planned (ruckig: {result})")
         return trajectory

@@ -29,6 +29,7 @@ from std_srvs.srv import SetBool
 
 from cdpr_control.control.admittance import AdmittanceController, default_parameters, settings_from
 from cdpr_control.control.ospc import AXES
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg,
@@ -45,6 +46,7 @@ _DESCRIPTIONS = {
     "dead_band": ("dead band of the user wrench per axis [N, N m]", (0.0, 1e3)),
     "w_max": ("saturation of the user wrench per axis [N, N m]", (1e-6, 1e4)),
     "tare_on_enable": ("at switch-on take the remaining wrench as zero (the thesis' w_init)", None),
+    "tare_time": ("the tare is the mean remaining wrench over this time after switch-on [s]", (0.0, 10.0)),
     "inertia_compensation": ("remove the platform's inertia wrench of the set-point (m_p xddot_d of (5.9))", None),
     "payload_mass": ("known payload on the platform [kg], removed from the measured wrench", (0.0, 1e4)),
     "payload_center_of_gravity": ("its centre of gravity in the platform frame [m]", None),
@@ -133,11 +135,11 @@ class AdmittanceControllerNode(CdprNode):
         out = self.controller.step(w, x_d, xdot_d, xddot_d, periods)
         xdot, xddot = out.twist()
         header = self.header(t_ns, sp.header.frame_id or "base")
-        self.setpoint_pub.publish(OperationalSetpoint(
+        self.setpoint_pub.publish(builder(OperationalSetpoint)(
             header=header, pose=pose_to_msg(out.x), velocity=twist_to_msg(xdot), acceleration=accel_to_msg(xddot),
             force=sp.force, line=0))
         x_0 = self.controller.zones.x_0
-        self.state_pub.publish(ControllerState(
+        self.state_pub.publish(builder(ControllerState)(
             header=header, controller="admittance_controller", enabled=out.active, names=list(AXES),
             reference=x_0.tolist(), feedback=out.w_user.tolist(), error=(out.x - x_0).tolist(),
             feedforward=out.xd.tolist(), output=out.x.tolist(), saturated=out.limited.tolist()))
@@ -157,7 +159,7 @@ class AdmittanceControllerNode(CdprNode):
         out._force, out._line = sp.force, 0
         self.setpoint_pub.publish(out)
         x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
-        self.state_pub.publish(ControllerState(
+        self.state_pub.publish(builder(ControllerState)(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
             reference=x_0, feedback=_ZEROS, error=[a - b for a, b in zip(x_d, x_0)],
             feedforward=_ZEROS, output=x_d, saturated=[False] * 6))

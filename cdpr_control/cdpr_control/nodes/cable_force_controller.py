@@ -20,6 +20,10 @@ period, as the in-process loop does.
 
 While ``joint_command`` runs IK-only (its mode on ``joint_command/mode``, :mod:`.mode`) Δq_CFC is
 not applied and the integrator is held (the filter and the calibration stay current).
+
+Gains that make the loop unstable by the stability analysis (thesis 3.4,
+:func:`cdpr_control.analysis.stability.cfc_instability`) are refused with the margins, unless
+``allow_unstable`` is true.
 """
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.control.hybrid_force_control import ContactCableForceControl, HPFCParams, parse_state
 from cdpr_control.control.safety import all_finite
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg
@@ -53,6 +58,7 @@ PARAMS = [
               "nonlinear (secant of (2.16)-(2.17))", choices=("linear", "nonlinear")),
     ParamSpec("T_MA", HPFCParams().T_MA, "moving average T_MA,HPFC of the set-point after a contact [s], "
               "table 5.1 (section 5.1.2)", range=(0.0, 60.0)),
+    ParamSpec("allow_unstable", False, "accept gains that the stability analysis (thesis 3.4) calls unstable"),
 ]
 HAND_OVER_NAMES = ["x", "y", "z", "a", "b", "c"]
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose <name>/state pauses this "
@@ -68,7 +74,10 @@ class CableForceControllerNode(CdprNode):
         self.dq_held = np.zeros(self.robot.m)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
+        self._live = False                          # (the start-up set is not analysed: see _validate)
         self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m), self._validate, self._apply)
+        self._live = True
         self.stage.calibration = startup_calibration(self.robot, self.params.values)   # Δq_0 of (3.23)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
         follow_mode(self, self._on_mode)
@@ -92,8 +101,24 @@ class CableForceControllerNode(CdprNode):
                          stiffness_model=v["stiffness_model"])
 
     def _validate(self, v: dict) -> None:
-        self._cfc_params(v).validate()
+        params = self._cfc_params(v)
+        params.validate()
         startup_calibration(self.robot, v)
+        # live changes only: the analysis (python-control, 0.1-0.3 s) would delay the node's start
+        # and the lockstep graph's first periods; the shipped sets are stable (tests/nodes/test_stability_refusal.py)
+        if self._live and v["enabled"] and not v["allow_unstable"]:
+            reason = self._instability(params)
+            if reason:
+                raise ValueError(f"{reason}; refused (set allow_unstable true to override)")
+
+    def _instability(self, params: CFCParams) -> str | None:
+        """cfc_instability of these gains, remembered per gain set (the analysis takes ~0.1 s)."""
+        from cdpr_control.analysis.stability import (cfc_instability)   # python-control: imported when first needed
+
+        key = (params.K_p, params.T_i, params.T_filter, params.stiffness_model)
+        if key not in self._instabilities:
+            self._instabilities[key] = cfc_instability(self.robot, params, self.dt)
+        return self._instabilities[key]
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
@@ -119,7 +144,7 @@ class CableForceControllerNode(CdprNode):
         # the constructor copies into the float64 arrays that f_d.tolist() and f.tolist() would fill
         if not _valid(self.robot.m, f_d_values, f_values, theta_values):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            self.publisher.publish(ControllerState(
+            self.publisher.publish(builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, output=[0.0] * self.robot.m))
             return
@@ -136,13 +161,13 @@ class CableForceControllerNode(CdprNode):
             saturated = c.pi.saturated.tolist()
             self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
                         "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_fb.tolist(), error=(f_ref - f_fb).tolist(),
                 integrator=c.pi.integrator.tolist(), feedforward=(f_d if f_ff is None else f_ff).tolist(),
                 output=self.dq_held.tolist(), saturated=saturated)
         else:
-            state = ControllerState(
+            state = builder(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
         self.publisher.publish(state)
@@ -169,7 +194,7 @@ class CableForceControllerNode(CdprNode):
         dq = contact.update(state, F_d0, x_d, f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
         F_a, z = contact.F_a, contact.z_t
         stage = self.stage
-        self.hand_over.publish(ControllerState(
+        self.hand_over.publish(builder(ControllerState)(
             header=header, controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
             output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))

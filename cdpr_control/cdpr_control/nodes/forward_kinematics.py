@@ -24,6 +24,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control.model import forward_kinematics as fk
 from cdpr_control.control.pose_estimator import PoseEstimator
 from cdpr_control.control.safety import all_finite
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key, pose_to_msg, wrench_to_msg
@@ -86,7 +87,7 @@ class ForwardKinematicsNode(CdprNode):
         m = self.robot.m
         if len(position) != m or len(forces) != m or not (all_finite(position) and all_finite(forces)
                                                           and x_d_finite):
-            self.diag_pub.publish(ForwardKinematicsDiagnostics(
+            self.diag_pub.publish(builder(ForwardKinematicsDiagnostics)(
                 header=header, formulation="elastic", termination=ForwardKinematicsDiagnostics.INVALID_INPUT,
                 converged=False))
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite)", stamp_ns=t_ns)
@@ -96,15 +97,15 @@ class ForwardKinematicsNode(CdprNode):
         x, w = self.estimator.update(theta, f, x_d)
         result = self.estimator.result
         solve_time = time.perf_counter() - start
-        self.diag_pub.publish(ForwardKinematicsDiagnostics(       # every field given: one constructor call
+        self.diag_pub.publish(builder(ForwardKinematicsDiagnostics)(  # every field given: one constructor call
             header=header, formulation="elastic", solve_time=solve_time, termination=TERMINATION[result.termination],
             converged=result.converged, iterations=result.iterations, residual_norm=float(result.residual_norm)))
         if result.converged:
             self.report(DiagnosticStatus.OK, "converged", stamp_ns=t_ns)
         else:
             self.report(DiagnosticStatus.WARN, f"not converged ({result.termination})", stamp_ns=t_ns)
-        self.pose_pub.publish(PoseStamped(header=header, pose=pose_to_msg(x)))
-        self.wrench_pub.publish(WrenchStamped(header=header, wrench=wrench_to_msg(w)))
+        self.pose_pub.publish(builder(PoseStamped)(header=header, pose=pose_to_msg(x)))
+        self.wrench_pub.publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(w)))
 
 
 def main(args=None):

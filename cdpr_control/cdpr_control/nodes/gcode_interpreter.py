@@ -57,6 +57,7 @@ from cdpr_control.motion.program import GCodeError, ParameterCommand
 from cdpr_control.motion.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
 from cdpr_control.model.kinematics import twist_from_pose_rates
 from cdpr_control.motion.program_check import check_program
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
@@ -367,9 +368,19 @@ class GCodeInterpreterNode(CdprNode):
             self._abort(f"no winch/state for {self.values['state_timeout']:g} s (the simulator or the drives stopped)",
                         brake=False)
 
+    def _clock_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _sim_clock_ns(self) -> int | None:
+        """Simulated time once /clock runs (nothing may be stamped ahead of it), else None."""
+        if not self.get_parameter("use_sim_time").value:
+            return None
+        now = self._clock_ns()
+        return now if now > 0 else None
+
     def _on_state(self, msg: JointState) -> None:
         stamp = stamp_ns(msg)                           # (only the stamp is used here)
-        problem = self.state_jumps.check("winch/state", stamp, lambda: self.get_clock().now().nanoseconds)
+        problem = self.state_jumps.check("winch/state", stamp, self._clock_ns, self._sim_clock_ns)
         if problem is not None:
             self.input_fault("winch/state", problem)
             return
@@ -459,11 +470,11 @@ class GCodeInterpreterNode(CdprNode):
     def _publish_setpoint(self, stamp: int) -> None:
         if self.guided is not None:
             g = self.guided
-            msg = OperationalSetpoint(
+            msg = builder(OperationalSetpoint)(
                 header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
                 acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
         else:
-            msg = OperationalSetpoint(header=self.header(stamp, self.frame_id), **self._setpoint_fields())
+            msg = builder(OperationalSetpoint)(header=self.header(stamp, self.frame_id), **self._setpoint_fields())
         self._last_setpoint = msg
         self.setpoint_pub.publish(msg)
 
@@ -484,10 +495,10 @@ class GCodeInterpreterNode(CdprNode):
         active = self.active
         if active is not None:
             interp = active.interp
-            status = ProgramStatus(state=_STATUS[interp.state], program=active.name, line=int(interp.line),
-                                   line_count=active.line_count, progress=float(interp.progress),
-                                   elapsed=float(interp.t), remaining=float(interp.duration * (1.0 - interp.progress)),
-                                   message=interp.error)
+            status = builder(ProgramStatus)(
+                state=_STATUS[interp.state], program=active.name, line=int(interp.line), line_count=active.line_count,
+                progress=float(interp.progress), elapsed=float(interp.t),
+                remaining=float(interp.duration * (1.0 - interp.progress)), message=interp.error)
         else:
             status = self.last_status
         key = (status.state, status.line, status.message)

@@ -40,6 +40,7 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceStage,
     format_state)
 from cdpr_control.control.ospc import AXES
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
@@ -127,7 +128,7 @@ class HybridForceControllerNode(CdprNode):
         feedforward = _ZEROS if s.state in (CONTACT, IDLE) else x     # the position-controlled x_t
         reference, feedback = s.F_d0.tolist() + _ZERO3, s.F_vec.tolist() + _ZERO3
         integrator = s.integrator
-        self.publisher.publish(ControllerState(
+        self.publisher.publish(builder(ControllerState)(
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
             integrator=[integrator * z for z in s.z_t.tolist()] + _ZERO3, feedforward=feedforward,

@@ -18,12 +18,17 @@ Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets
 (also when a controller reports itself enabled or disabled), and the command is rate-limited to
 the drives' v_max. Faults of the safety monitor (non-finite input, position lag, FK not converged, stale
 input, and optionally force limits) hold θ_d (braking on the path at ``a_brake``, see
-:mod:`cdpr_control.control.joint_command`); the command is never NaN. Also holding: a required input
+:mod:`cdpr_control.control.joint_command`); the command is never NaN. The force watch
+(:class:`cdpr_control.control.safety.ForceWatch`, ``force_watch``, on by default: a cable force beyond its
+band for ``force_limit_time``, a force rate beyond ``max_force_rate``, a position error beyond
+``max_position_lag``) holds for good: θ_d goes to the last safe command and stays there, reported
+as ERROR with ``abort: True`` (the running program fails) until the service ``~/release_hold``
+(std_srvs/Trigger) releases it. Also holding: a required input
 (``setpoint``, ``cable_force_controller/state``) more than ``input_deadline`` periods behind the
 winch state (its producer stopped: the command then comes on each winch state while braking,
 instead of waiting for the dead input), and a set-point outside the wrench-feasible workspace: the
 ``force_distribution`` status INFEASIBLE for ``infeasible_periods`` periods in a row. A holding
-report of a stale input or of the workspace on /diagnostics (ERROR, ``abort: True``) makes the
+report of a stale input, of the workspace or of the force watch on /diagnostics (ERROR, ``abort: True``) makes the
 G-code interpreter fail its program; the other holds (lag, FK not converged) last while their fault does.
 Invalid messages (lengths, non-finite values, frame) are dropped and reported (nodes/sync.py).
 """
@@ -35,19 +40,16 @@ from cdpr_msgs.msg import (CableForces, ControllerState, ForceDistribution, Forw
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from cdpr_control.control.bumpless import Blend
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
-from cdpr_control.control.safety import STALE_INPUT, WORKSPACE, Fault, SafetyConfig, SafetyMonitor
-
-# holding faults after which a program cannot go on (its input is gone, or its path left the
-# workspace): reported with ``abort: True``, the G-code interpreter then fails the program; the
-# others (lag, FK not converged, non-finite values) hold while they last
-ABORTING = frozenset({STALE_INPUT, WORKSPACE})
-
+from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
+                                          SafetyMonitor, braking)
+from cdpr_control.ros.message_builders import builder
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
@@ -59,6 +61,11 @@ OFFSET_INPUTS = ParamSpec("offset_inputs", ["ospc"], "controllers whose <name>/s
                           "to x_d in the IK (5.1)/(5.10); each must publish every period", read_only=True)
 DEFAULT_OFFSET = OffsetConfig()
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+# holding faults after which a program cannot go on (its input is gone, its path left the
+# workspace, the force watch holds): reported with ``abort: True``, the G-code interpreter then
+# fails the program; the others (lag, FK not converged, non-finite values) hold while they last
+ABORTING = frozenset({STALE_INPUT, WORKSPACE, FORCE_WATCH})
 
 
 def offset_params(name: str) -> list[ParamSpec]:
@@ -78,6 +85,18 @@ PARAMS = [
     ParamSpec("max_position_lag", _S.max_position_lag, "position lag |r_d - r| that holds θ_d [m]", range=(0.0, 10.0)),
     ParamSpec("max_orientation_lag", _S.max_orientation_lag, "orientation lag |phi_d - phi| that holds θ_d [rad]", range=(0.0, 3.2)),
     ParamSpec("stale_timeout", _S.stale_timeout, "age of an input that holds θ_d [s]", range=(0.0, 10.0)),
+    ParamSpec("force_watch", _S.force_watch, "the latched force watch: a runaway holds θ_d at the last safe command "
+              "until ~/release_hold, and fails the running program"),
+    ParamSpec("force_band", _S.force_band, "force watch: tolerance beyond [f_min, f_max] as a share of f_max - f_min [-]",
+              range=(0.0, 10.0)),
+    ParamSpec("force_limit_time", _S.force_limit_time, "force watch: time a cable force may stay beyond its band [s]",
+              range=(0.0, 10.0)),
+    ParamSpec("max_force_rate", _S.max_force_rate, "force watch: filtered |df/dt| that holds, in force ranges "
+              "(f_max - f_min) per second [1/s]", range=(1e-3, 1e6)),
+    ParamSpec("force_rate_filter", _S.force_rate_filter, "force watch: PT1 time constant of the force rate [s]",
+              range=(0.0, 1.0)),
+    ParamSpec("safe_history", _S.safe_history, "force watch: clean time after a command that makes its controller "
+              "outputs the safe ones [s]", range=(1e-3, 10.0)),
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
     ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
               "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
@@ -94,6 +113,7 @@ class JointCommandNode(CdprNode):
         self.command = JointCommand(self.robot, self.dt)
         self.blend_cfc = Blend(0.0, self.dt)        # bumpless transfer of Δq_CFC (offsets: self.offsets)
         self.monitor = SafetyMonitor()
+        self.watch = ForceWatch(SafetyConfig(), self.dt)
         self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
         names = list(self.get_parameter(OFFSET_INPUTS.name).value)
         self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
@@ -124,13 +144,23 @@ class JointCommandNode(CdprNode):
                               optional=tuple(f"offset:{name}" for name in names),
                               sizes={"cfc": self.robot.m, **{f"offset:{name}": 6 for name in names}},
                               on_stale=self._hold_cycle)
+        self.create_service(Trigger, "~/release_hold", self._on_release_hold)
+
+    def _on_release_hold(self, request, response):
+        """End the force watch's hold (an operator who has removed its cause); no step: θ_d moves
+        from where it is towards the next command at v_max."""
+        response.success = self.watch.fault is not None
+        response.message = f"released: {self.watch.fault.message}" if response.success else "not holding"
+        self.watch.release()
+        return response
 
     def _keep(self, name: str, topic: str):
         m = self.robot.m
 
         def keep(msg):
             t = stamp_ns(msg)
-            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync._reference)
+            problem = input_problem(msg, m) or self.watched_stamps.check(name, t, self.sync.reference,
+                                                                          self.sync.clock)
             if problem is not None:
                 self.input_fault(topic, problem)
                 return
@@ -144,9 +174,10 @@ class JointCommandNode(CdprNode):
 
     @staticmethod
     def _safety(v: dict) -> SafetyConfig:
-        return SafetyConfig(force_tolerance=v["force_tolerance"], max_position_lag=v["max_position_lag"],
-                            max_orientation_lag=v["max_orientation_lag"], stale_timeout=v["stale_timeout"],
-                            hold_on_force_limit=v["hold_on_force_limit"])
+        return SafetyConfig(**{k: v[k] for k in ("force_tolerance", "max_position_lag", "max_orientation_lag",
+                                                 "stale_timeout", "hold_on_force_limit", "force_watch", "force_band",
+                                                 "force_limit_time", "max_force_rate", "force_rate_filter",
+                                                 "safe_history")})
 
     def _offset_configs(self, v: dict) -> dict[str, OffsetConfig]:
         return {n: OffsetConfig(enabled=v[f"offsets.{n}.enabled"], deadline=v[f"offsets.{n}.deadline"])
@@ -167,6 +198,7 @@ class JointCommandNode(CdprNode):
         self.infeasible_periods = int(v["infeasible_periods"])
         self.blend_cfc.set_transfer_time(v["transfer_time"])
         self.monitor = SafetyMonitor(self._safety(v))
+        self.watch.configure(self._safety(v))
         self.offsets.configure(self._offset_configs(v), v["transfer_time"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
@@ -181,13 +213,34 @@ class JointCommandNode(CdprNode):
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
         faults = self._faults(t_ns, x_d) + offset_faults
-        hold = any(f.holds for f in faults)
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
-        theta_d = self.command.update(x_d, [offset], s_cfc * np.asarray(cfc._output), hold=hold)  # IK only at 0
+        dq_cfc = s_cfc * np.asarray(cfc._output)
+        forces = self._watch(x_d, offset, dq_cfc, faults)
+        hold = any(f.holds for f in faults)
+        theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold, safe=self.watch.safe if self.watch.fault else None,
+                                      f=forces)                          # IK only at s_cfc = 0
         self._standing = False
         self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
         self._publish(t_ns, theta_d, faults, hold)
+
+    def _watch(self, x_d, offset, dq_cfc, faults: list):
+        """One period of the force watch (x_d None: a period without a set-point, forces only);
+        its fault first in ``faults`` (the report names it) -> the measured forces (or None)."""
+        f_msg, fd_msg, x_msg = self.latest.get("f"), self.latest.get("fd"), self.latest.get("x")
+        f = None if f_msg is None else np.asarray(f_msg.f)
+        f_d = None if fd_msg is None or len(fd_msg.f_d) != self.robot.m else np.asarray(fd_msg.f_d)
+        # the position error only while no other fault holds: braking for one, the robot lags the
+        # set-point by design
+        x = None if x_msg is None or x_d is None or braking(faults) else pose_from_msg(x_msg.pose)
+        c = self.robot.cable
+        if x_d is None:
+            tripped = self.watch.fault
+        else:
+            tripped = self.watch.update(f, c.f_min, c.f_max, x_d, offset, dq_cfc, f_d, x)
+        if tripped is not None:
+            faults.insert(0, tripped)
+        return f
 
     def _setpoint_pose(self, pose) -> np.ndarray:
         """x_d of the set-point's pose; the array of the last period again (read, never written) when
@@ -208,14 +261,16 @@ class JointCommandNode(CdprNode):
         self._last_cycle_ns = t_ns
         moving = bool(self.command.velocity.any())
         faults = self._faults(t_ns, None)
-        theta_d = self.command.update(None, hold=True)
+        forces = self._watch(None, None, None, faults)
+        theta_d = self.command.update(None, hold=True, safe=self.watch.safe if self.watch.fault else None, f=forces)
         self._publish(t_ns, theta_d, faults, True,
                       send=moving or self.sync_mode == "latest" or not self._standing)
         self._standing = not moving
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            self.publisher.publish(JointState(header=self.header(t_ns), name=self.names, position=theta_d.tolist()))
+            self.publisher.publish(builder(JointState)(header=self.header(t_ns), name=self.names,
+                                                       position=theta_d.tolist()))
         if faults:
             level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),

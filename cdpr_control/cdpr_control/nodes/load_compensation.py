@@ -31,6 +31,7 @@ from cdpr_control.control.load_compensation import (ACCELERATION_SOURCES, OFFSET
     LoadCompensation, LoadCompensationParams)
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.ospc import AXES
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
@@ -123,13 +124,13 @@ class LoadCompensationNode(CdprNode):
         else:
             x_lc = lc.x_lc.copy() if lc.params.enabled else np.zeros(6)     # hold: never NaN
         enabled = lc.params.enabled
-        self.state_pub.publish(ControllerState(
+        self.state_pub.publish(builder(ControllerState)(
             header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
             reference=reference, feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
             saturated=lc.rate_limited.tolist()))
         com = (0.0, 0.0, 0.0) if lc.cog is None else lc.cog
-        self.payload_pub.publish(InertiaStamped(header=self.header(t_ns, "platform"),
-                                                inertia=Inertia(m=float(lc.m_c), com=vector3(com))))
+        self.payload_pub.publish(builder(InertiaStamped)(header=self.header(t_ns, "platform"),
+                                                         inertia=builder(Inertia)(m=float(lc.m_c), com=vector3(com))))
         if not valid:
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite): holding", stamp_ns=t_ns)
         elif lc.guarded:

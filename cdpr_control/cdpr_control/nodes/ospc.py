@@ -7,6 +7,9 @@ hybrid force controller, it also subscribes ``<force_controller>/state`` and doe
 the force direction while that controller makes, holds or releases contact (states A-D, R;
 Raibert and Craig's selection, Fig. 5.2). While ``joint_command`` runs IK-only (its mode on
 ``joint_command/mode``, :mod:`.mode`) the output is not applied and the integrator is held.
+Gains that make the loop unstable by the stability analysis (thesis 3.4,
+:func:`cdpr_control.analysis.stability.ospc_instability`) are refused with the margins, unless
+``allow_unstable`` is true.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_st
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
@@ -34,6 +38,7 @@ PARAMS = [
     ParamSpec("K_p", _D.K_p.tolist(), "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
+    ParamSpec("allow_unstable", False, "accept gains that the stability analysis (thesis 3.4) calls unstable"),
 ]
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose force axis is not "
                              "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
@@ -51,7 +56,10 @@ class OSPCNode(CdprNode):
         self._x_d_key, self._x_d = None, (None, None, False)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
+        self._live = False                          # (the start-up set is not analysed: see _validate)
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self._live = True
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
         follow_mode(self, self._on_mode)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "pose": (PoseStamped, "platform/pose")}
@@ -66,7 +74,23 @@ class OSPCNode(CdprNode):
                           x_sat=np.array(v["x_sat"], dtype=float))
 
     def _validate(self, v: dict) -> None:
-        self._ospc_params(v).validate()
+        params = self._ospc_params(v)
+        params.validate()
+        # live changes only: the analysis (python-control, 0.1-0.3 s) would delay the node's start
+        # and the lockstep graph's first periods; the shipped sets are stable (tests/nodes/test_stability_refusal.py)
+        if self._live and v["enabled"] and not v["allow_unstable"]:
+            reason = self._instability(params)
+            if reason:
+                raise ValueError(f"{reason}; refused (set allow_unstable true to override)")
+
+    def _instability(self, params: OSPCParams) -> str | None:
+        """ospc_instability of these gains, remembered per gain set (the analysis takes ~0.3 s)."""
+        from cdpr_control.analysis.stability import (ospc_instability)   # python-control: imported when first needed
+
+        key = (tuple(params.K_p.tolist()), tuple(params.T_i.tolist()))
+        if key not in self._instabilities:
+            self._instabilities[key] = ospc_instability(self.robot, params, self.dt)
+        return self._instabilities[key]
 
     def _apply(self, v: dict) -> None:
         params = self._ospc_params(v)
@@ -107,9 +131,9 @@ class OSPCNode(CdprNode):
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
         feedback = x.tolist()
         # e = x_d - x element by element: the bits of numpy's subtraction
-        state = ControllerState(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                names=self.names, reference=reference, feedback=feedback,
-                                error=[a - b for a, b in zip(reference, feedback)])
+        state = builder(ControllerState)(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
+                                         names=self.names, reference=reference, feedback=feedback,
+                                         error=[a - b for a, b in zip(reference, feedback)])
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
         if self.enabled and all_finite(feedback) and reference_finite:

@@ -28,6 +28,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cdpr_control.model import scene as sc
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, wrench_from_msg
@@ -81,7 +82,8 @@ class VisualizationNode(CdprNode):
 
 
 def _points(array) -> list[Point]:
-    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(array, dtype=float).reshape(-1, 3).tolist()]
+    point = builder(Point)
+    return [point(x=x, y=y, z=z) for x, y, z in np.asarray(array, dtype=float).reshape(-1, 3).tolist()]
 
 
 class Markers:
@@ -97,9 +99,9 @@ class Markers:
             m = self._made[ns, id] = Marker(ns=ns, id=id, type=kind, action=Marker.ADD, lifetime=Duration())
             m.header.frame_id = FRAME
             m.pose.orientation.w = 1.0
-            m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+            m.color = builder(ColorRGBA)(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
         m.header.stamp = stamp
-        m.scale = Vector3(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
+        m.scale = builder(Vector3)(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
         return m
 
     def build(self, view: sc.Scene, stamp, static: bool = True) -> MarkerArray:
@@ -124,7 +126,8 @@ class Markers:
             out.append(m)
         m = self._marker("cables", Marker.LINE_LIST, stamp, (1.0, 1.0, 1.0, 1.0), (1.5 * line, 0, 0))
         m.points = _points(view.cables)
-        m.colors = [ColorRGBA(r=c[0], g=c[1], b=c[2], a=1.0) for c in map(sc.force_colour, view.force_level)
+        colour = builder(ColorRGBA)
+        m.colors = [colour(r=c[0], g=c[1], b=c[2], a=1.0) for c in map(sc.force_colour, view.force_level)
                     for _ in (0, 1)]
         out.append(m)
         m = self._marker("platform", Marker.TRIANGLE_LIST, stamp, (0.95, 0.6, 0.1, 0.8))
@@ -138,7 +141,7 @@ class Markers:
             m = self._marker("wrench", Marker.ARROW, stamp, (0.8, 0.1, 0.8, 1.0), (line * 2, line * 4, line * 6))
             m.points = _points(view.force_arrow)
             out.append(m)
-        return MarkerArray(markers=out)
+        return builder(MarkerArray)(markers=out)
 
 
 def main(args=None):

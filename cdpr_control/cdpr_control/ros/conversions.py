@@ -9,6 +9,7 @@ These run several times per control period in every node, so new messages are bu
 every field (``Pose()`` builds a Point and a Quaternion that the caller replaces at once) and
 import inside ``__init__``, about 10 us a Pose here against 2 us. Only the fixed-size types below,
 with every field set, are built so; the messages are equal to (and serialize like) constructed ones.
+Other messages the nodes build every period come from ``message_builders.builder``.
 """
 from __future__ import annotations
 
@@ -18,7 +19,6 @@ import struct
 import numpy as np
 from geometry_msgs.msg import Accel, Point, Pose, Quaternion, Twist, Vector3, Wrench
 
-from cdpr_control.ros import (message_init)  # noqa: F401  (the message classes' fast constructors, installed on import)
 
 
 def bare(cls):

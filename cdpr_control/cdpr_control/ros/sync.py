@@ -14,7 +14,12 @@ Faults at the input (issue "faults, bad input and crashes"), in both modes:
 - a stamp that jumps, more than ``input_deadline`` periods ahead of that input's newest stamp and
   of the node's time (its newest input, its simulated clock), or back behind the input's newest, is
   dropped and reported unless the next message of the input continues from it (a restarted
-  publisher; one spoofed far stamp cannot discard every real period);
+  publisher; one spoofed far stamp cannot discard every real period); on simulated time a stamp
+  more than ``input_deadline`` periods ahead of the node's clock is dropped every time (a stream of
+  far-future stamps cannot pass for a restarted publisher and stop the loop);
+- in lockstep, a stamp behind the input's newest but of a period not yet run (a foreign publisher a
+  few periods ahead of the real one) goes into that period's bucket, so the real stream still
+  completes every period;
 - a required input whose newest stamp falls more than ``input_deadline`` periods behind the newest
   stamp of the node's other inputs (or the node's clock: simulated time, or :meth:`StampSync.advance`) is *stale*: its
   producer stopped. It is reported once, naming the topic, and listed in :attr:`StampSync.stale`
@@ -148,22 +153,35 @@ def input_problem(msg, m: int, size: int | None = None) -> str | None:
 
 class StampJumps:
     """Stamps of input streams: a stamp more than ``limit_ns`` ahead of the stream's newest (and of
-    ``reference``, the receiver's clock), or behind it, is a jump, refused unless the stream's next
-    stamp continues from it (a restarted publisher)."""
+    ``reference``, the receiver's time), or behind it, is a jump, refused unless the stream's next
+    stamp continues from it (a restarted publisher). Where the receiver has a ``clock`` of its own
+    (simulated time from /clock), a stamp more than ``limit_ns`` ahead of that clock is refused
+    every time: no publisher can be ahead of time, and a stream of far-future stamps (a clock
+    fault, a foreign publisher) repeating the same stamp must not pass for a restarted publisher."""
 
     def __init__(self, periods: int, limit_ns: int):
         self.periods, self.limit_ns = periods, limit_ns
         self.newest: dict[str, int] = {}
         self.jumped: dict[str, int] = {}
 
-    def check(self, name: str, t: int, reference: Callable[[], int] | None = None) -> str | None:
+    def check(self, name: str, t: int, reference: Callable[[], int] | None = None,
+              clock: Callable[[], int | None] | None = None) -> str | None:
         """None if ``t`` is accepted (and now the newest of ``name``), else the reason it is refused.
-        ``reference()``: the receiver's time now [ns] (asked only when ``t`` is ahead of its stream)."""
+        ``reference()``: the receiver's time now [ns] (asked only when ``t`` is ahead of its stream);
+        ``clock()``: the receiver's own clock [ns], None while it has none (e.g. before /clock)."""
         last = self.newest.get(name)
         if last is None or last <= t <= last + self.limit_ns \
                 or (last < t and reference is not None and t <= reference() + self.limit_ns):
             self.newest[name] = t
             return None
+        if last < t and clock is not None:
+            now = clock()
+            if now is not None:
+                if t > now + self.limit_ns:
+                    return (f"stamp {t * 1e-9:.3f} s is more than {self.periods} periods ahead of the clock "
+                            f"{now * 1e-9:.3f} s")
+                self.newest[name] = t               # the clock vouches for it
+                return None
         jumped = self.jumped.pop(name, None)
         if jumped is not None and jumped <= t <= jumped + self.limit_ns:
             self.newest[name] = t
@@ -202,6 +220,7 @@ class StampSync:
         self.jumps = StampJumps(self.deadline, self.deadline_ns)
         self.newest = self.jumps.newest      # newest accepted stamp per input
         self.now = -1                        # the newest stamp of any input (or advance())
+        self.done = -1                       # lockstep: the stamp of the newest period run
         self.stale: tuple[str, ...] = ()     # required inputs older than the deadline
         self.on_stale = on_stale             # called with t for each new period while an input is stale
         self.sim_time = node.has_parameter("use_sim_time") and bool(node.get_parameter("use_sim_time").value)
@@ -225,12 +244,20 @@ class StampSync:
         if input_fault is not None:
             input_fault(self.topics[name], reason)
 
-    def _reference(self) -> int:
+    def reference(self) -> int:
         """The node's time now: its newest input, or its (simulated) clock."""
         return max(self.now, self.node.get_clock().now().nanoseconds) if self.sim_time else self.now
 
+    def clock(self) -> int | None:
+        """The node's own clock [ns] where it has one independent of its inputs (simulated time once
+        /clock runs), else None."""
+        if not self.sim_time:
+            return None
+        now = self.node.get_clock().now().nanoseconds
+        return now if now > 0 else None
+
     def _accept_stamp(self, name: str, t: int) -> bool:
-        reason = self.jumps.check(name, t, self._reference)
+        reason = self.jumps.check(name, t, self.reference, self.clock)
         if reason is not None:
             self._reject(name, reason)
         return reason is None
@@ -267,6 +294,10 @@ class StampSync:
             last = newest.get(name)
             if last is not None and last <= t <= last + limit_ns:
                 newest[name] = t                    # the common case of StampJumps.check, inline
+            elif lockstep and last is not None and self.done < t < last and t >= last - limit_ns:
+                pass    # behind the stream's newest but for a period not yet run: its bucket takes it
+                #         (a foreign publisher a few periods ahead must not make the real stream's
+                #         messages "older" and leave the lockstep period incomplete)
             elif not self._accept_stamp(name, t):
                 return
             if t > self.now:
@@ -274,7 +305,8 @@ class StampSync:
                 self._check_deadlines(t)
             elif self.stale and name in self.stale:
                 self._check_deadlines(self.now, tick=False)
-            latest[name] = msg
+            if t >= newest[name]:
+                latest[name] = msg
             if lockstep:
                 bucket = pending.get(t)
                 if bucket is None:
@@ -284,6 +316,7 @@ class StampSync:
                     # complete: run this period and forget it and anything older
                     for old in [s for s in pending if s <= t]:
                         del pending[old]
+                    self.done = max(self.done, t)
                     self.callback(bucket, t)
                 elif len(pending) > 100:            # an input stopped: drop the oldest period
                     del pending[min(pending)]

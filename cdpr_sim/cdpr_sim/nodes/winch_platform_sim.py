@@ -30,6 +30,7 @@ unstretched cable length.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -50,6 +51,7 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import stamp_ns
 from cdpr_control.ros.timing import DurationStats
 from cdpr_control.control.safety import all_finite
+from cdpr_control.ros.message_builders import builder
 
 from cdpr_sim.contacts import ContactMaterial, Cylinder, Plane, PlatformShape, default_tool
 from cdpr_sim.simulator import SimConfig, Simulator
@@ -113,6 +115,8 @@ def _validate(v: dict) -> None:
     for name in ("wall_normal", "cylinder_axis"):
         if not np.linalg.norm(v[name]) > 0.0:
             raise ValueError(f"{name} must not be zero")
+    if not math.isfinite(v["floor_height"]):     # the one float without a range (a floor may be anywhere)
+        raise ValueError(f"floor_height must be a finite height [m], got {v['floor_height']}")
 
 
 class WinchPlatformSimNode(CdprNode):
@@ -323,29 +327,29 @@ class WinchPlatformSimNode(CdprNode):
         out = self.sim.output
         t_ns = self.sim.steps * self.period_ns
         header = self.header(t_ns)
-        self.clock_pub.publish(Clock(clock=header.stamp))
+        self.clock_pub.publish(builder(Clock)(clock=header.stamp))
         if not self.lockstep:
             self._states_sent[t_ns] = time.perf_counter()
             if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
                 del self._states_sent[next(iter(self._states_sent))]
-        self.state_pub.publish(JointState(header=header, name=self.names, position=out.theta.tolist(),
-                                          velocity=out.thetadot.tolist(), effort=out.F_s.tolist()))
+        self.state_pub.publish(builder(JointState)(header=header, name=self.names, position=out.theta.tolist(),
+                                                   velocity=out.thetadot.tolist(), effort=out.F_s.tolist()))
         if not self.publish_truth:
             return
         c = self.robot.cable
         pubs = self.truth_pubs
         # ground truth is for recording and watching: built only when someone takes it
         if has_subscribers(pubs["pose"]):
-            pubs["pose"].publish(PoseStamped(header=header, pose=pose_to_msg(out.x)))
+            pubs["pose"].publish(builder(PoseStamped)(header=header, pose=pose_to_msg(out.x)))
         if has_subscribers(pubs["twist"]):
-            pubs["twist"].publish(TwistStamped(header=header, twist=twist_to_msg(out.xdot)))
+            pubs["twist"].publish(builder(TwistStamped)(header=header, twist=twist_to_msg(out.xdot)))
         if has_subscribers(pubs["forces"]):
-            pubs["forces"].publish(CableForces(header=header, f=out.f.tolist(), f_min=c.f_min.tolist(),
-                                               f_max=c.f_max.tolist()))
+            pubs["forces"].publish(builder(CableForces)(header=header, f=out.f.tolist(), f_min=c.f_min.tolist(),
+                                                        f_max=c.f_max.tolist()))
         if has_subscribers(pubs["external"]):
-            pubs["external"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(out.w_ext)))
+            pubs["external"].publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(out.w_ext)))
         if "contact" in pubs and has_subscribers(pubs["contact"]):
-            pubs["contact"].publish(WrenchStamped(header=header, wrench=wrench_to_msg(out.w_contact)))
+            pubs["contact"].publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(out.w_contact)))
 
     def _report(self) -> None:
         sim = self.sim

@@ -6,9 +6,10 @@ published at a fixed rate with the bag time, so nodes with ``use_sim_time`` foll
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
-from typing import Iterable
+from typing import Callable, Iterable
 
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
@@ -19,6 +20,8 @@ from cdpr_tools.bag.qos import playback_qos
 from cdpr_tools.bag.reader import BagReader
 from cdpr_tools.message_convert import message_class
 
+PROGRESS_PERIOD = 1.0  # s of wall time between progress reports
+
 DEFAULT_CLOCK_HZ = 40.0  # rosbag2's default for `ros2 bag play --clock`
 
 
@@ -26,20 +29,30 @@ class BagPlayer:
     """Plays ``bag`` on ``node``'s publishers.
 
     ``topics``: only these (default all); ``start_offset``: seconds into the bag to start at;
-    ``clock_hz``: publish /clock at this rate (0: not at all); ``loop``: start over at the end.
+    ``clock_hz``: publish /clock at this rate (0: not at all); ``loop``: start over at the end;
+    ``remap``: bag topic -> topic to publish it on (as ``ros2 bag play --remap``); ``progress(done,
+    total)``: called about once a second of wall time with the bag time played and the bag's span [s].
     """
 
     def __init__(self, node: Node, bag: BagReader, *, rate: float = 1.0, topics: Iterable[str] | None = None,
-                 start_offset: float = 0.0, clock_hz: float = 0.0, loop: bool = False):
-        if rate <= 0:
-            raise ValueError(f"rate must be positive, got {rate}")
-        if start_offset < 0:
-            raise ValueError(f"start offset must not be negative, got {start_offset}")
+                 start_offset: float = 0.0, clock_hz: float = 0.0, loop: bool = False,
+                 remap: dict[str, str] | None = None, progress: Callable[[float, float], None] | None = None):
+        if not (rate > 0 and math.isfinite(rate)):
+            raise ValueError(f"rate must be a finite number > 0, got {rate}")
+        if not (start_offset >= 0 and math.isfinite(start_offset)):
+            raise ValueError(f"start offset must be a finite number >= 0, got {start_offset}")
         self.node, self.bag, self.rate, self.loop = node, bag, rate, loop
         self.topics = sorted(topics) if topics else list(bag.topics)
         unknown = sorted(set(self.topics) - set(bag.topics))
         if unknown:
             raise ValueError(f"bag {bag.path} has no topic {', '.join(unknown)}; topics: {', '.join(bag.topics)}")
+        remap = dict(remap or {})
+        unknown = sorted(set(remap) - set(bag.topics))
+        if unknown:
+            raise ValueError(f"--remap names topics the bag does not have: {', '.join(unknown)}; "
+                             f"topics: {', '.join(bag.topics)}")
+        self.remap = {topic: remap.get(topic, topic) for topic in self.topics}
+        self.progress, self._next_progress = progress, 0.0
         self.publishers = {}
         for topic in self.topics:
             info = bag.topics[topic]
@@ -48,7 +61,8 @@ class BagPlayer:
             except LookupError as exc:
                 node.get_logger().warning(f"not playing {topic}: {exc}")
                 continue
-            self.publishers[topic] = node.create_publisher(msg_class, topic, playback_qos(info.offered_qos_profiles))
+            self.publishers[topic] = node.create_publisher(msg_class, self.remap[topic],
+                                                           playback_qos(info.offered_qos_profiles))
         self.start_ns = (bag.start_time_ns or 0) + int(start_offset * 1e9)
         self.clock_period = 1.0 / clock_hz if clock_hz > 0 else None
         self.clock_publisher = node.create_publisher(Clock, "/clock", QoSProfile(depth=10)) if clock_hz > 0 else None
@@ -82,6 +96,9 @@ class BagPlayer:
                 return
             self.publishers[m.topic].publish(m.data)
             self.published += 1
+            if self.progress is not None and time.monotonic() >= self._next_progress:
+                self._next_progress = time.monotonic() + PROGRESS_PERIOD
+                self.progress((m.log_time_ns - self.start_ns) * 1e-9, (self.bag.end_time_ns - self.start_ns) * 1e-9)
 
     def _wait_until(self, wall0: float, target: float, stop: threading.Event) -> bool:
         """Sleep until ``target`` (monotonic time), ticking /clock meanwhile; False when stopped."""

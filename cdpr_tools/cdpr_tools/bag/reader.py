@@ -4,9 +4,11 @@ Reads what :class:`~cdpr_tools.bag.writer.BagWriter` and ``ros2 bag record -s mc
 bag directory (metadata.yaml and one or more .mcap files) or a single .mcap file. Messages come in
 receive-time (log time) order and deserialise lazily with the installed message classes.
 
-A file without summary (a recording cut off by a crash) is read by a linear scan up to its last
-complete chunk (:mod:`.recovery`); what was lost is listed in :attr:`BagReader.problems`, and a
-chunk found corrupt while reading raises :class:`CorruptBagError` rather than being skipped.
+Each file is read chunk by chunk (:mod:`.recovery`): through its summary's chunk index, or by a
+linear scan when it has no summary (a recording cut off by a crash) or one that does not match the
+file. A chunk whose structure or CRC is bad is skipped and the reading goes on with the next one;
+every part skipped is in :attr:`BagReader.damage` (file offset, messages lost where the index
+tells) and, for the user, in :attr:`BagReader.problems`. A file that is not MCAP at all is refused.
 """
 from __future__ import annotations
 
@@ -19,18 +21,16 @@ from typing import Iterable, Iterator
 
 import numpy as np
 import yaml
-from mcap.reader import make_reader
-from mcap.stream_reader import CRCValidationError
 from rclpy.serialization import deserialize_message
 
 from cdpr_tools.bag.qos import parse_profiles
-from cdpr_tools.bag.recovery import ScanResult, scan
+from cdpr_tools.bag.recovery import ChunkError, Damage, McapLayout, NotMcapError, layout
 from cdpr_tools.message_convert import field_value, message_class
 from cdpr_tools.progress import track
 
 
 class CorruptBagError(ValueError):
-    """A chunk of a bag does not match its checksum (or cannot be decompressed)."""
+    """A bag that cannot be read at all (not MCAP), or a chunk that changed while it was read."""
 
 
 @dataclass(frozen=True)
@@ -71,71 +71,48 @@ class BagReader:
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
         self.files = _mcap_files(self.path)
+        self._layouts: list[McapLayout] = []
         self._channels: list[dict[int, tuple[str, str]]] = []  # per file: channel id -> (topic, type)
-        self._scans: list[ScanResult | None] = []               # per file: linear scan if unindexed
+        self.damage: list[Damage] = []                           # parts skipped, every file
         self.problems: list[str] = []                            # data lost or damage found, for the user
-        self.corrupt_chunks = 0                                  # chunks skipped by the linear scan
         topics: dict[str, dict] = {}
-        self.start_time_ns: int | None = None
-        self.end_time_ns: int | None = None
-        self.message_count = 0
         embedded: dict | None = None
         for file in self.files:
-            with open(file, "rb") as stream:
-                reader = make_reader(stream)
-                summary = _summary(reader)
-                if summary is None:
-                    found = scan(file)
-                    self._scans.append(found)
-                    self._add_scan(found, topics)
-                    if embedded is None:
-                        embedded = _embedded_metadata_records(found.metadata)
-                    continue
-                self._scans.append(None)
-                channels = {}
-                for cid, ch in summary.channels.items():
-                    schema = summary.schemas.get(ch.schema_id)
-                    type_name = schema.name if schema is not None else ""
-                    channels[cid] = (ch.topic, type_name)
-                    entry = topics.setdefault(ch.topic, {
-                        "type": type_name, "count": 0, "format": ch.message_encoding,
-                        "qos": parse_profiles(ch.metadata.get("offered_qos_profiles")),
-                        "hash": ch.metadata.get("topic_type_hash", "")})
-                    if summary.statistics is not None:
-                        entry["count"] += summary.statistics.channel_message_counts.get(cid, 0)
-                self._channels.append(channels)
-                stats = summary.statistics
-                if stats is not None and stats.message_count:
-                    self.message_count += stats.message_count
-                    self.start_time_ns = _min(self.start_time_ns, stats.message_start_time)
-                    self.end_time_ns = max(self.end_time_ns or 0, stats.message_end_time)
-                if embedded is None:
-                    embedded = _embedded_metadata(reader)
+            try:
+                found = layout(file)
+            except NotMcapError as exc:
+                raise CorruptBagError(str(exc)) from None
+            self._layouts.append(found)
+            if not found.indexed:
+                self.problems.append(f"{file.name}: no summary that matches the file (the recording was cut "
+                                     f"off?): read {found.message_count} messages by a linear scan; "
+                                     "`cdpr bag reindex` rebuilds the index")
+            self.damage.extend(found.damage)
+            self.problems.extend(str(d) for d in found.damage)
+            channels = {}
+            for cid, ch in found.channels.items():
+                schema = found.schemas.get(ch.schema_id)
+                channels[cid] = (ch.topic, schema.name if schema is not None else "")
+                entry = topics.setdefault(ch.topic, {
+                    "type": channels[cid][1], "count": 0, "format": ch.message_encoding,
+                    "qos": parse_profiles(ch.metadata.get("offered_qos_profiles")),
+                    "hash": ch.metadata.get("topic_type_hash", "")})
+                entry["count"] += found.counts.get(cid, 0)
+            self._channels.append(channels)
+            if embedded is None:
+                embedded = _embedded_metadata_records(found.metadata)
+        self.message_count = sum(f.message_count for f in self._layouts)
+        starts = [f.start_time for f in self._layouts if f.message_count]
+        self.start_time_ns: int | None = min(starts, default=None)
+        self.end_time_ns: int | None = max((f.end_time for f in self._layouts if f.message_count), default=None)
         self.topics = {name: TopicInfo(name, e["type"], e["count"], e["format"], e["qos"], e["hash"])
                        for name, e in sorted(topics.items())}
         self.metadata = _directory_metadata(self.path) or embedded or {}
 
-    def _add_scan(self, found: ScanResult, topics: dict) -> None:
-        """Topics, counts and times of a file read by a linear scan."""
-        self.problems.append(f"{found.path.name}: no summary (the recording was cut off?): "
-                             f"read {len(found.messages)} messages by a linear scan; "
-                             "`cdpr bag reindex` rebuilds the index")
-        self.problems.extend(found.problems)
-        self.corrupt_chunks += found.corrupt_chunks
-        channels = {}
-        for cid, ch in found.channels.items():
-            schema = found.schemas.get(ch.schema_id)
-            channels[cid] = (ch.topic, schema.name if schema is not None else "")
-            entry = topics.setdefault(ch.topic, {
-                "type": channels[cid][1], "count": 0, "format": ch.message_encoding,
-                "qos": parse_profiles(ch.metadata.get("offered_qos_profiles")),
-                "hash": ch.metadata.get("topic_type_hash", "")})
-            entry["count"] += found.count(cid)
-        self._channels.append(channels)
-        if found.messages:
-            self.message_count += len(found.messages)
-            self.start_time_ns = _min(self.start_time_ns, found.messages[0].log_time)
-            self.end_time_ns = max(self.end_time_ns or 0, found.messages[-1].log_time)
+    @property
+    def lost_messages(self) -> tuple[int, int]:
+        """Messages lost in the skipped parts: ``(counted, parts whose loss is unknown)``."""
+        return (sum(d.lost or 0 for d in self.damage), sum(1 for d in self.damage if d.lost is None))
 
     @property
     def duration_ns(self) -> int:
@@ -161,26 +138,13 @@ class BagReader:
 
     def _file_messages(self, index: int, wanted, start_ns, end_ns) -> Iterator[BagMessage]:
         channels = self._channels[index]
-        found = self._scans[index]
-        if found is not None:
-            for message in found.messages:
-                topic, type_name = channels.get(message.channel_id, ("", ""))
-                if (wanted is None or topic in wanted) and (start_ns is None or message.log_time >= start_ns) \
-                        and (end_ns is None or message.log_time < end_ns):
-                    yield BagMessage(topic, type_name, message.log_time, message.publish_time, message.data)
-            return
-        with open(self.files[index], "rb") as stream:
-            reader = make_reader(stream, validate_crcs=True)
-            try:
-                for _, channel, message in reader.iter_messages(
-                        topics=sorted(wanted) if wanted is not None else None,
-                        starting_at=start_ns, ending_before=end_ns, log_time_order=True):
-                    topic, type_name = channels[channel.id]
-                    yield BagMessage(topic, type_name, message.log_time, message.publish_time, message.data)
-            except (CRCValidationError, OSError, ValueError) as exc:
-                raise CorruptBagError(f"{self.files[index]}: corrupt chunk ({exc}); the messages after it "
-                                      f"were not read. `cdpr bag reindex {self.path}` keeps every intact "
-                                      "chunk") from exc
+        ids = None if wanted is None else {cid for cid, (topic, _) in channels.items() if topic in wanted}
+        try:
+            for message in self._layouts[index].messages(ids, start_ns, end_ns):
+                topic, type_name = channels[message.channel_id]
+                yield BagMessage(topic, type_name, message.log_time, message.publish_time, message.data)
+        except ChunkError as exc:
+            raise CorruptBagError(str(exc)) from exc
 
     def series(self, topic: str, *fields: str, stamp: str = "log") -> tuple[np.ndarray, ...]:
         """Time series of fields of one topic: ``(t, values_1, ...)`` as numpy arrays.
@@ -212,13 +176,19 @@ def _mcap_files(path: Path) -> list[Path]:
         if metadata and metadata.get("relative_file_paths"):
             files = [path / Path(p).name for p in metadata["relative_file_paths"]]
         else:
-            files = sorted(path.glob("*.mcap"))
+            files = sorted(path.glob("*.mcap"), key=_split_order)
         missing = [f for f in files if not f.is_file()]
         if missing:
             raise FileNotFoundError(f"bag {path}: missing {', '.join(map(str, missing))}")
         if files:
             return files
     raise FileNotFoundError(f"no bag at {path}: expected a bag directory with .mcap files or an .mcap file")
+
+
+def _split_order(file: Path) -> tuple:
+    """``bag_2.mcap`` before ``bag_10.mcap`` (a split bag's files in order, without metadata.yaml)."""
+    stem, _, number = file.stem.rpartition("_")
+    return (stem, int(number)) if number.isdigit() else (file.stem, -1)
 
 
 def _directory_metadata(path: Path) -> dict | None:
@@ -228,27 +198,11 @@ def _directory_metadata(path: Path) -> dict | None:
     return (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information")
 
 
-def _summary(reader):
-    """The file's summary, or None when it has none or its footer is missing (a cut-off file)."""
-    try:
-        return reader.get_summary()
-    except Exception:                                     # noqa: BLE001 - no footer: scan instead
-        return None
-
-
-def _embedded_metadata(reader) -> dict | None:
-    return _embedded_metadata_records(reader.iter_metadata())
-
-
 def _embedded_metadata_records(records) -> dict | None:
     for record in records:
         if record.name == "rosbag2" and "serialized_metadata" in record.metadata:
             return yaml.safe_load(record.metadata["serialized_metadata"])
     return None
-
-
-def _min(a: int | None, b: int) -> int:
-    return b if a is None else min(a, b)
 
 
 def _stack(values: list, topic: str, path: str) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 
 from cdpr_tools.bag.encode import encoder, serialize
@@ -46,12 +46,21 @@ class BagRecorder(IntraProcessNode):
         self.declare_parameter("output", "", ParameterDescriptor(
             description="bag directory (or .mcap file); empty: bags/rosbag2_<date>-<time>", read_only=True))
         self.declare_parameter("queue_depth", DEFAULT_QUEUE_DEPTH, ParameterDescriptor(read_only=True))
-        self.declare_parameter("compression", "none", ParameterDescriptor(
-            description="chunk compression of the MCAP file: none, zstd or lz4 (as rosbag2's mcap storage)",
+        self.declare_parameter("compression", "zstd", ParameterDescriptor(
+            description="chunk compression of the MCAP file: zstd (default: a fifth of the size, compressed "
+                        "in the writer process), lz4 or none (as rosbag2's mcap storage)",
             read_only=True))
+        self.declare_parameter("max_bag_size", 0, ParameterDescriptor(
+            description="split the bag into files of about this many bytes (0: one file), as ros2 bag record",
+            read_only=True, integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)]))
+        self.declare_parameter("max_bag_duration", 0.0, ParameterDescriptor(
+            description="split the bag into files of this many seconds of log time (0: one file)", read_only=True,
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e9, step=0.0)]))
         output = self.get_parameter("output").value or default_bag_name()
         self.depth = self.get_parameter("queue_depth").value
-        self.writer = BagWriterProcess(output, compression=self.get_parameter("compression").value)
+        self.writer = BagWriterProcess(output, compression=self.get_parameter("compression").value,
+                                       max_bag_size=self.get_parameter("max_bag_size").value,
+                                       max_bag_duration=self.get_parameter("max_bag_duration").value)
         self._recording: dict[str, object] = {}  # topic -> subscription
         self._failure_logged = False
         self.selection = TopicSelection(self, "record", DISCOVERY_PERIOD, self._subscribe)

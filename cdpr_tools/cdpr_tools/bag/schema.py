@@ -47,11 +47,12 @@ def _msg_text(type_name: str) -> str:
     return _interface_file(type_name, ".msg").read_text()
 
 
-def _dependencies(type_name: str) -> list[str]:
-    """Nested message types named in a .msg file, as sorted ``pkg/Type`` names."""
+def _dependencies(type_name: str, text: str | None = None) -> list[str]:
+    """Nested message types named in a .msg file (or in ``text`` of that package), as sorted
+    ``pkg/Type`` names."""
     package = split_type_name(type_name)[0]
     deps = set()
-    for field_type in _FIELD_TYPE.findall(_msg_text(type_name)):
+    for field_type in _FIELD_TYPE.findall(_msg_text(type_name) if text is None else text):
         if field_type in _PRIMITIVES:
             continue
         deps.add(field_type if "/" in field_type else f"{package}/{field_type}")
@@ -61,17 +62,33 @@ def _dependencies(type_name: str) -> list[str]:
 @functools.lru_cache(maxsize=None)
 def message_definition(type_name: str) -> str:
     """Full ``ros2msg`` schema text of ``pkg/msg/Type`` with all nested definitions appended."""
+    return _with_dependencies(type_name, _msg_text(type_name))
+
+
+def _with_dependencies(type_name: str, text: str) -> str:
+    """``text`` (a definition in ``type_name``'s package) with every nested definition appended."""
     seen: set[str] = set()
 
-    def append(name: str) -> str:
-        text = _msg_text(name)
-        for dep in _dependencies(name):
+    def append(name: str, own: str | None = None) -> str:
+        out = _msg_text(name) if own is None else own
+        for dep in _dependencies(name, own):
             if dep not in seen:
                 seen.add(dep)
-                text += "\n" + SEPARATOR + f"MSG: {dep}\n" + append(dep)
-        return text
+                out += "\n" + SEPARATOR + f"MSG: {dep}\n" + append(dep)
+        return out
 
-    return append(type_name)
+    return append(type_name, text)
+
+
+@functools.lru_cache(maxsize=None)
+def service_definitions(type_name: str) -> tuple[str, str]:
+    """``ros2msg`` schema texts of the request and the response of ``pkg/srv/Type`` (the two
+    halves of its .srv file, each with its nested definitions), as Foxglove's service schemas."""
+    request, sep, response = _interface_file(type_name, ".srv").read_text().partition("\n---")
+    if not sep:
+        raise LookupError(f"{type_name}: no '---' between request and response")
+    return _with_dependencies(type_name, request.rstrip("\n") + "\n"), \
+        _with_dependencies(type_name, response.lstrip("\n"))
 
 
 @functools.lru_cache(maxsize=None)

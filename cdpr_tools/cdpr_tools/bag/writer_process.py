@@ -18,6 +18,12 @@ terminal or a launcher sends to the whole process group: it ends when its parent
 recording stopped by Ctrl-C is still closed by the parent. When idle the child puts the chunk in
 progress on disk after ``flush_interval`` seconds, so a long pause loses nothing either.
 
+A write that fails in the child (disk full: :class:`~cdpr_tools.bag.writer.BagWriteError`) ends
+the recording, not the loop: the child answers why and how many messages are on disk, and exits;
+the parent's next pipe write fails, it reads that answer (:attr:`BagWriterProcess.failed`) and goes
+on without recording. After :meth:`BagWriterProcess.close`, :attr:`~BagWriterProcess.message_count`
+is the count the child reports on disk, never what was merely sent.
+
 Frames on the pipe: one kind byte, a uint32 length, then the payload: ``O`` open (pickled
 arguments; the child answers one JSON line on stdout), ``T`` a topic (pickled ``add_topic``
 arguments, topics numbered in order), ``M`` messages (a pickled list of ``(topic index, log time
@@ -27,6 +33,7 @@ arguments, topics numbered in order), ``M`` messages (a pickled list of ``(topic
 from __future__ import annotations
 
 import atexit
+import builtins
 import fcntl
 import json
 import os
@@ -56,8 +63,8 @@ class BagWriterProcess:
     >>> bag.close()
     """
 
-    def __init__(self, path: str | os.PathLike, *, compression: str = "none", chunk_size: int = 1 << 20,
-                 flush_interval: float = 1.0, batch: int = BATCH):
+    def __init__(self, path: str | os.PathLike, *, compression: str = "zstd", chunk_size: int = 1 << 20,
+                 flush_interval: float = 1.0, batch: int = BATCH, max_bag_size: int = 0, max_bag_duration: float = 0.0):
         self.batch = batch
         # the parent's sys.path: the child imports the same cdpr_tools, however the parent found it
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
@@ -72,14 +79,16 @@ class BagWriterProcess:
         self.queue: deque = deque()             # what put() appends and send() hands over
         self._sent = 0
         self._closed = False
+        self._final: dict | None = None           # the child's last answer (it wrote what it could)
         self.failed: str | None = None            # why the child stopped taking messages, if it did
         self.topics: dict[str, str] = {}          # topic -> type, in the order of their indexes
         self._frame(b"O", pickle.dumps({"path": str(path), "compression": compression, "chunk_size": chunk_size,
-                                        "flush_interval": flush_interval}))
+                                        "flush_interval": flush_interval, "max_bag_size": max_bag_size,
+                                        "max_bag_duration": max_bag_duration}))
         reply = self._reply()
         if "error" in reply:
             self._proc.wait()
-            raise _ERRORS.get(reply["error"], RuntimeError)(reply["message"])
+            raise _exception(reply["error"])(reply["message"])
         self.path = Path(reply["path"])
         atexit.register(self.close)              # the queue still goes out if nobody closes
 
@@ -136,7 +145,10 @@ class BagWriterProcess:
 
     @property
     def message_count(self) -> int:
-        """Messages taken so far (sent to the child or queued)."""
+        """Messages taken so far (sent to the child or queued); after :meth:`close`, the messages
+        the bag holds on disk."""
+        if self._closed and self._final is not None:
+            return self._final["messages"]
         return self._sent + len(self.queue)
 
     def close(self) -> None:
@@ -152,11 +164,21 @@ class BagWriterProcess:
             self._pipe.close()
         except OSError:
             pass
-        reply = self._reply()
+        self._last_reply()
         self._proc.wait()
         self._proc.stdout.close()
-        if "error" in reply and self.failed is None:
-            self.failed = reply["message"]
+
+    def _last_reply(self) -> dict:
+        """The child's closing answer (read once): messages on disk, and why it failed if it did.
+        A child that ended without one (killed) leaves the count to a reading of the file."""
+        if self._final is None:
+            reply = self._reply()
+            if "messages" not in reply:
+                reply["messages"] = _count_on_disk(self.path)
+            if "error" in reply:
+                self.failed = reply["message"]
+            self._final = reply
+        return self._final
 
     def _frame(self, kind: bytes, payload: bytes) -> None:
         if self.failed is not None:
@@ -167,6 +189,7 @@ class BagWriterProcess:
                 data = data[self._pipe.write(data):]
         except (OSError, ValueError) as exc:      # the child died: the recording stops, the loop goes on
             self.failed = f"bag writer process ended ({exc}); messages are no longer recorded"
+            self._last_reply()                    # its reason, if it gave one (it has exited)
 
     def _reply(self) -> dict:
         line = self._proc.stdout.readline()
@@ -175,7 +198,18 @@ class BagWriterProcess:
         return json.loads(line)
 
 
-_ERRORS = {"FileExistsError": FileExistsError, "ValueError": ValueError, "LookupError": LookupError}
+def _exception(name: str) -> type:
+    """The built-in exception class the child named (OSError and its kinds included)."""
+    cls = getattr(builtins, name, None)
+    return cls if isinstance(cls, type) and issubclass(cls, Exception) else RuntimeError
+
+
+def _count_on_disk(path: Path) -> int:
+    from cdpr_tools.bag.reader import BagReader
+    try:
+        return BagReader(path).message_count
+    except Exception:                              # noqa: BLE001 - nothing readable: nothing on disk
+        return 0
 
 
 # -- the child's side --------------------------------------------------------------------------
@@ -201,7 +235,7 @@ def _answer(reply: dict) -> None:
 def main() -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent closes the bag, or end-of-file does
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    from cdpr_tools.bag.writer import BagWriter
+    from cdpr_tools.bag.writer import BagWriteError, BagWriter
     fd = sys.stdin.fileno()
     writer = None
     topics: list[str] = []                         # by index
@@ -227,22 +261,26 @@ def main() -> int:
                 args = pickle.loads(payload)
                 try:
                     writer = BagWriter(args.pop("path"), **args)
-                except (FileExistsError, ValueError, LookupError) as exc:
-                    _answer({"error": type(exc).__name__, "message": str(exc)})
+                except (OSError, ValueError, LookupError) as exc:   # exists, cannot be created, disk full
+                    kind_name = "OSError" if isinstance(exc, BagWriteError) else type(exc).__name__
+                    _answer({"error": kind_name, "message": str(exc)})
                     return 1
                 _answer({"path": str(writer.path)})
             elif kind == b"F":
                 writer.flush()
             elif kind == b"C":
                 break
+        if writer is not None:
+            writer.close()
+            _answer({"messages": writer.message_count})
+    except BagWriteError as exc:                   # disk full: the bag is cut at its last chunk
+        _answer({"error": "OSError", "message": str(exc), "messages": writer.messages_on_disk})
+        return 1
     except BaseException as exc:
         if writer is not None:
             writer.close()
         _answer({"error": type(exc).__name__, "message": f"bag writer process: {exc!r}"})
         raise
-    if writer is not None:
-        writer.close()
-        _answer({"messages": writer.message_count})
     return 0
 
 

@@ -28,11 +28,13 @@ import numpy as np
 from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.model.robot import load_robot
 
-TOPIC_STATE = "winch/state"
-TOPIC_COMMAND = "winch/command"
-TOPIC_FORCES = "ground_truth/cable_forces"
-TOPIC_POSE = "ground_truth/pose"
-TOPIC_SETPOINT = "setpoint"
+# fully qualified, as rosbag2 and the project's recorder (`cdpr launch --record`, `cdpr bag record`)
+# name the graph's topics: the identification reads the bags a robot records
+TOPIC_STATE = "/winch/state"
+TOPIC_COMMAND = "/winch/command"
+TOPIC_FORCES = "/ground_truth/cable_forces"
+TOPIC_POSE = "/ground_truth/pose"
+TOPIC_SETPOINT = "/setpoint"
 
 
 def smooth_moves(waypoints, velocity, pause: float, dt: float) -> np.ndarray:
@@ -101,38 +103,44 @@ class _Recorder:
         self.names = [f"cable_{i + 1}" for i in range(robot.m)]
 
     def _header(self, t: float):
+        from cdpr_control.ros.message_builders import builder
         from std_msgs.msg import Header
 
-        h = Header(frame_id="base")
+        h = builder(Header)(frame_id="base")
         ns = int(round(t * 1e9))
         h.stamp.sec, h.stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
         return h, ns
 
     def state(self, out) -> None:
         from cdpr_control.ros.conversions import pose_to_msg
+        from cdpr_control.ros.message_builders import builder
         from cdpr_msgs.msg import CableForces
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import JointState
 
         h, ns = self._header(out.t)
         c = self.robot.cable
-        self.bag.write(TOPIC_STATE, None, JointState(header=h, name=self.names, position=out.theta.tolist(),
-                                                    velocity=out.thetadot.tolist(), effort=out.F_s.tolist()),
+        self.bag.write(TOPIC_STATE, None, builder(JointState)(header=h, name=self.names, position=out.theta.tolist(),
+                                                             velocity=out.thetadot.tolist(), effort=out.F_s.tolist()),
                        ns, qos=self.qos)
-        self.bag.write(TOPIC_FORCES, None, CableForces(header=h, f=out.f.tolist(), f_min=np.broadcast_to(c.f_min, out.f.shape).tolist(),
-                                                      f_max=np.broadcast_to(c.f_max, out.f.shape).tolist()), ns, qos=self.qos)
-        self.bag.write(TOPIC_POSE, None, PoseStamped(header=h, pose=pose_to_msg(out.x)), ns, qos=self.qos)
+        self.bag.write(TOPIC_FORCES, None, builder(CableForces)(header=h, f=out.f.tolist(),
+                                                               f_min=np.broadcast_to(c.f_min, out.f.shape).tolist(),
+                                                               f_max=np.broadcast_to(c.f_max, out.f.shape).tolist()),
+                       ns, qos=self.qos)
+        self.bag.write(TOPIC_POSE, None, builder(PoseStamped)(header=h, pose=pose_to_msg(out.x)), ns, qos=self.qos)
 
     def command(self, t: float, theta_d, x_d=None) -> None:
         from cdpr_control.ros.conversions import pose_to_msg
+        from cdpr_control.ros.message_builders import builder
         from cdpr_msgs.msg import OperationalSetpoint
         from sensor_msgs.msg import JointState
 
         h, ns = self._header(t)
-        self.bag.write(TOPIC_COMMAND, None, JointState(header=h, name=self.names, position=list(map(float, theta_d))),
+        self.bag.write(TOPIC_COMMAND, None, builder(JointState)(header=h, name=self.names,
+                                                               position=list(map(float, theta_d))),
                        ns, qos=self.qos)
         if x_d is not None:
-            self.bag.write(TOPIC_SETPOINT, None, OperationalSetpoint(header=h, pose=pose_to_msg(x_d)), ns,
+            self.bag.write(TOPIC_SETPOINT, None, builder(OperationalSetpoint)(header=h, pose=pose_to_msg(x_d)), ns,
                            qos=self.qos)
 
 

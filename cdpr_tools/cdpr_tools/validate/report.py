@@ -1,0 +1,235 @@
+"""The sweep's results: JSON, one line per case (text), one summary line per family and a figure
+per family (the poses of each robot coloured by the family's headline metric against its band)."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_control.model.robot import load_robot
+
+from cdpr_tools.validate.cases import CaseResult
+from cdpr_tools.validate.criteria import band_for
+
+# the metric a family's summary line and figure show
+HEADLINE = {"contact": "overshoot_percent", "guiding": "rest_wrench_percent",
+            "payload": "estimate_error_percent", "program": "position_error_max_mm"}
+
+
+def where(r: CaseResult) -> str:
+    """The case's robot, pose, plant and variant, in one phrase."""
+    s = r.spec
+    pose = "program" if s.pose_index < 0 else f"#{s.pose_index} [{', '.join(f'{v:.3f}' for v in s.x[:3])}]"
+    if s.pose_index >= 0 and s.x[5]:
+        pose += f" c {np.rad2deg(s.x[5]):+.0f} deg"
+    plant = "nominal" if s.plant == "nominal" else f"mismatched seed {s.seed}"
+    variant = ", ".join(f"{k} {_short(v)}" for k, v in s.variant.items() if k != "poses")
+    return f"{s.robot} {pose}{' (border)' if s.border and s.pose_index >= 0 else ''}, {plant}, {variant}"
+
+
+def _short(v) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, (tuple, list)):
+        return "(" + " ".join(f"{a:g}" for a in v) + ")"
+    return str(v)
+
+
+def badness(metric: str, value: float, plant: str) -> float:
+    """How far a value is on the bad side of its band (larger is worse; NaN is worst)."""
+    if not np.isfinite(value):
+        return np.inf
+    band = band_for(metric, plant)
+    if band is None:
+        return value
+    if band.lo is not None and band.hi is not None:
+        return abs(value - 0.5 * (band.lo + band.hi))
+    return value if band.lo is None else -value
+
+
+def family_summary(results: list[CaseResult], family: str) -> dict:
+    """Counts by status, pass rate, and per metric: mean over the finite values, and for a metric
+    with a band its worst value and where, for one without its range."""
+    rs = [r for r in results if r.spec.family == family]
+    counts = {s: sum(r.status == s for r in rs) for s in ("passed", "failed", "diverged", "refused", "error")}
+    out = {"cases": len(rs), **counts, "pass_rate": counts["passed"] / len(rs) if rs else float("nan"), "metrics": {}}
+    names = sorted({m for r in rs for m in r.metrics})
+    for name in names:
+        have = [r for r in rs if name in r.metrics]
+        values = np.array([r.metrics[name] for r in have], dtype=float)
+        finite = values[np.isfinite(values)]
+        m = {"mean": float(finite.mean()) if len(finite) else float("nan"),
+             "out_of_band": sum(1 for r in have if not r.checks.get(name, True))}
+        if any(band_for(name, r.spec.plant) for r in have):
+            worst = max(have, key=lambda r: badness(name, r.metrics[name], r.spec.plant))
+            m.update(worst=float(worst.metrics[name]), where=where(worst))
+        elif len(finite):
+            m.update(min=float(finite.min()), max=float(finite.max()))
+        out["metrics"][name] = m
+    return out
+
+
+def summary_line(family: str, s: dict) -> str:
+    """One line: pass rate, the headline metric's mean and worst case with where, failures per metric."""
+    line = f"{family}: {s['passed']}/{s['cases']} passed ({100.0 * s['pass_rate']:.0f} %)"
+    extra = [f"{s[k]} {k}" for k in ("diverged", "refused", "error") if s[k]]
+    if extra:
+        line += " [" + ", ".join(extra) + "]"
+    m = s["metrics"].get(HEADLINE[family])
+    if m and "worst" in m:
+        line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, worst {m['worst']:.3g} at {m['where']}"
+    elif m and "max" in m:
+        line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, {m['min']:.3g} .. {m['max']:.3g}"
+    fails = [f"{name} {m['out_of_band']}" for name, m in s["metrics"].items() if m["out_of_band"] and name != "diverged"]
+    if fails:
+        line += "; out of band: " + ", ".join(fails)
+    return line
+
+
+def case_line(r: CaseResult) -> str:
+    metrics = ", ".join(f"{k} {v:.4g}{'' if r.checks.get(k, True) else ' (out)'}" for k, v in r.metrics.items())
+    return f"{r.spec.family:8s} {r.status:8s} {where(r)}: {metrics}{' - ' + r.note if r.note else ''}"
+
+
+def case_dict(r: CaseResult) -> dict:
+    return {**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s, "cpu_s": r.cpu_s,
+            "metrics": r.metrics, "checks": r.checks}
+
+
+class CaseLog:
+    """cases.jsonl in the output directory: one JSON line per case as it ends, so that an
+    interrupted sweep keeps what it measured (``cdpr validate --from-cases`` reports it)."""
+
+    def __init__(self, outdir):
+        self.path = Path(outdir) / "cases.jsonl"
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.file = self.path.open("w")
+        return self
+
+    def write(self, results) -> None:
+        for r in results:
+            self.file.write(json.dumps(case_dict(r), default=_json_default) + "\n")
+        self.file.flush()
+
+    def __exit__(self, *exc):
+        self.file.close()
+
+
+def read_cases(path) -> list[CaseResult]:
+    """The cases of a cases.jsonl (lines cut off by an interrupted run are skipped)."""
+    from cdpr_tools.validate.cases import CaseSpec
+
+    results = []
+    for line in Path(path).read_text().splitlines():
+        try:
+            d = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
+        results.append(CaseResult(spec, d["metrics"], d["checks"], d["status"], d["note"], d["wall_s"],
+                                  d.get("cpu_s", float("nan"))))
+    return results
+
+
+def to_json(results: list[CaseResult], meta: dict) -> dict:
+    families = sorted({r.spec.family for r in results}, key=list(HEADLINE).index)
+    return {"meta": meta,
+            "summary": {f: family_summary(results, f) for f in families},
+            "per_robot_plant": {f"{robot} {plant}": {f: _rate([r for r in results if r.spec.family == f
+                                                              and r.spec.robot == robot and _plant(r) == plant])
+                                                      for f in families}
+                                for robot in sorted({r.spec.robot for r in results})
+                                for plant in sorted({_plant(r) for r in results})},
+            "cases": [case_dict(r) for r in results]}
+
+
+def _plant(r: CaseResult) -> str:
+    return "nominal" if r.spec.plant == "nominal" else f"mismatched seed {r.spec.seed}"
+
+
+def _rate(rs) -> str:
+    return f"{sum(r.passed for r in rs)}/{len(rs)}" if rs else "-"
+
+
+def write(results: list[CaseResult], meta: dict, outdir) -> tuple[dict, list[Path]]:
+    """validation.json, validation.txt (one line per case) and validation_<family>.png in outdir."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    doc = to_json(results, meta)
+    (outdir / "validation.json").write_text(json.dumps(doc, indent=1, default=_json_default))
+    (outdir / "validation.txt").write_text("\n".join(case_line(r) for r in results) + "\n")
+    figures = [plot_family(results, family, outdir / f"validation_{family}.png") for family in doc["summary"]]
+    return doc, figures
+
+
+def _json_default(v):
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def plot_family(results: list[CaseResult], family: str, path: Path) -> Path:
+    """Per robot, the poses seen from above (x, y) coloured by the family's headline metric (the
+    worst of the pose's cases), the colour scale split at the band's limit; cases out of band are
+    ringed in red, refused or errored ones drawn as grey crosses."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    metric = HEADLINE[family]
+    robots = sorted({r.spec.robot for r in results if r.spec.family == family})
+    fig, axes = plt.subplots(1, len(robots), figsize=(5.2 * len(robots), 4.4), squeeze=False)
+    for ax, robot in zip(axes[0], robots):
+        rs = [r for r in results if r.spec.family == family and r.spec.robot == robot]
+        by_pose = {}
+        for r in rs:
+            key = tuple(np.round(r.spec.x[:3], 4)) if r.spec.pose_index >= 0 else tuple(np.round(r.spec.variant["poses"][0], 4))
+            by_pose.setdefault(key, []).append(r)
+        pts, vals, bad, skipped = [], [], [], []
+        for key, group in by_pose.items():
+            measured = [r for r in group if metric in r.metrics and r.status not in ("refused", "error")]
+            if not measured:
+                skipped.append(key)
+                continue
+            worst = max(measured, key=lambda r: badness(metric, r.metrics[metric], r.spec.plant))
+            pts.append(key)
+            vals.append(worst.metrics[metric])
+            bad.append(any(not r.passed for r in group))
+        band = band_for(metric, "nominal")
+        limit = band.hi if band is not None and band.hi is not None else None
+        if pts:
+            pts, vals = np.array(pts), np.array(vals, dtype=float)
+            shown = np.where(np.isfinite(vals), vals, np.nanmax(np.r_[vals[np.isfinite(vals)], 0.0]) * 2 + 1.0)
+            lo, hi = float(shown.min()), float(shown.max())
+            norm = (TwoSlopeNorm(limit, min(lo, limit - 1e-9), max(hi, limit + 1e-9)) if limit is not None else None)
+            sc = ax.scatter(pts[:, 0], pts[:, 1], c=shown, cmap="coolwarm", norm=norm, s=45, zorder=3)
+            ring = np.array(bad)
+            ax.scatter(pts[ring, 0], pts[ring, 1], s=130, facecolors="none", edgecolors="red", lw=1.2, zorder=2,
+                       label="a case out of band")
+            cb = fig.colorbar(sc, ax=ax)
+            cb.set_label(metric + (f" (band {band.text()})" if band else ""))
+            if limit is not None:
+                cb.ax.axhline(limit, color="k", lw=1.5)
+        if skipped:
+            sk = np.array(skipped)
+            ax.scatter(sk[:, 0], sk[:, 1], marker="x", color="0.5", s=40, label="refused / error")
+        s = family_summary(rs, family)
+        a = load_robot(robot).a                                   # the frame's anchors bound the view
+        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", xlim=(a[:, 0].min(), a[:, 0].max()),
+               ylim=(a[:, 1].min(), a[:, 1].max()), title=f"{robot}: {s['passed']}/{s['cases']} in band")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=7)
+    fig.suptitle(f"cdpr validate, {family}: worst {metric} per pose (plants round robin: mismatched seeds and nominal)",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=70)
+    plt.close(fig)
+    return path

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# `make test-stress`: the test suite while two busy loops load both cores, as on a laptop that is
+# doing other things. The suite must pass here too: no test may depend on wall-clock margins.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+LOADS=${CDPR_STRESS_LOADS:-2}
+pids=()
+stop() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; }
+trap stop EXIT INT TERM
+for _ in $(seq "$LOADS"); do
+  python3 -c 'while True: pass' &
+  pids+=($!)
+done
+echo "[test-stress] $LOADS busy loops running (pids ${pids[*]}); the suite follows"
+.venv/bin/python -m pytest -q tests "$@"
