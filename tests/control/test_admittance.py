@@ -231,3 +231,56 @@ def test_shipped_parameter_files_are_valid_for_their_robot(name):
     assert values.pop("hand_guiding") is False                  # off at start-up
     assert set(values) <= set(default_parameters())
     settings_from(values, load_robot(name))
+
+
+# ---- zones near the border of the WFW: shrunk to fit, not refused --------------------------------
+
+IPANEMA3 = load_robot("ipanema3")
+# a border pose of the validation grid (ipanema3 #1, 98 % of its ray's border distance)
+IPANEMA3_BORDER = [2.283, -3.842, 1.983, 0.0, 0.0, 0.0]
+
+
+def _shipped_values(robot, x):
+    from cdpr_control.control.params import load_params_file
+
+    values = dict(load_params_file(robot.file.stem)["admittance_controller"])
+    values.pop("hand_guiding")
+    return {**values, "zones.origin": (np.asarray(x) - robot.home).tolist()}
+
+
+def test_zones_that_fit_are_not_clipped():
+    from cdpr_control.control.admittance import fitted_settings
+
+    params, zones, _, clipping = fitted_settings(_shipped_values(IPANEMA3, IPANEMA3.home), IPANEMA3)
+    assert clipping is None
+    np.testing.assert_array_equal(zones.box, settings_from(_shipped_values(IPANEMA3, IPANEMA3.home), IPANEMA3)[1].box)
+
+
+def test_zones_leaving_the_wfw_near_the_border_are_shrunk_to_the_largest_that_fits():
+    from cdpr_control.control.admittance import fitted_settings
+    from cdpr_control.control.admittance_zones import scaled
+
+    values = _shipped_values(IPANEMA3, IPANEMA3_BORDER)
+    with pytest.raises(ValueError, match="wrench-feasible"):
+        settings_from(values, IPANEMA3)                            # as configured, it leaves the WFW
+    params, zones, loaded, clipping = fitted_settings(values, IPANEMA3)
+    configured = settings_from(values, IPANEMA3, check_workspace=False)[1]
+    assert 0.0 < clipping.scale < 1.0
+    np.testing.assert_allclose(zones.box, clipping.scale * configured.box)
+    assert zones.zones[0].size == pytest.approx(clipping.scale * configured.zones[0].size)   # the rest sphere too
+    np.testing.assert_array_equal(zones.x_0, IPANEMA3_BORDER)
+    for a, b in zip(zones.zones, configured.zones):                # the dynamics are kept
+        np.testing.assert_array_equal(a.c, b.c) and np.testing.assert_array_equal(a.m, b.m)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    with pytest.raises(ValueError):                                 # the largest: 2 % more leaves it
+        check_in_workspace(loaded, scaled(configured, 1.02 * clipping.scale), params.user.w_max, params.v_max)
+    assert f"scaled by {clipping.scale:.3g}" in clipping.text() and "clipped" in clipping.text()
+
+
+def test_where_not_even_the_walls_reach_fits_hand_guiding_is_refused_with_the_reason():
+    from cdpr_control.control.admittance import fitted_settings
+
+    x = np.array(IPANEMA3_BORDER)
+    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) / 0.98      # on the border itself
+    with pytest.raises(ValueError, match="wall's reach"):
+        fitted_settings(_shipped_values(IPANEMA3, x), IPANEMA3)

@@ -20,7 +20,10 @@ c R_1 to zero when the platform leaves the sphere: the thesis' "dragging two mag
 
 The wall zone never leaves the wrench-feasible workspace (WFW, section 2.2.1) when the *hard box*,
 the last box widened by the largest penetration a bounded user wrench and velocity can cause,
-lies in the WFW: :func:`max_penetration`, :func:`hard_box`, :func:`check_in_workspace`.
+lies in the WFW: :func:`max_penetration`, :func:`hard_box`, :func:`check_in_workspace`. Near the
+border of the WFW a configured zone set may not fit: :func:`fit_in_workspace` then shrinks the free
+box and the rest sphere by one factor until the hard box fits, and says so (:class:`Clipping`). This
+departs from the thesis, which guided the Mini about one pose only (docs/admittance.md).
 """
 from __future__ import annotations
 
@@ -233,3 +236,52 @@ def box_from_workspace(robot, x_0, shape, w_max, v_max, zones: ZoneSet, tol: flo
     if lo == 0.0:
         raise ValueError("no box of this shape fits: the origin's wall reach leaves the workspace")
     return lo * shape
+
+
+@dataclass(frozen=True)
+class Clipping:
+    """How :func:`fit_in_workspace` shrank a zone set: the free box and the rest sphere were scaled
+    by ``scale`` (< 1) so that the hard box lies in the WFW."""
+
+    scale: float
+    box: np.ndarray              # configured half-widths of the free box
+    rest_radius: float           # configured radius of the rest sphere [m]
+
+    def text(self) -> str:
+        box = np.round(self.scale * self.box, 4).tolist()
+        return (f"virtual workspace clipped to the wrench-feasible workspace: free box and rest sphere scaled "
+                f"by {self.scale:.3g} (box half-widths {box}, rest radius {self.scale * self.rest_radius:.4g} m; "
+                f"configured {np.round(self.box, 4).tolist()}, {self.rest_radius:g} m)")
+
+
+def scaled(zones: ZoneSet, k: float) -> ZoneSet:
+    """The zone set with its box and sphere zones scaled by k about x_0 (c, d, m kept)."""
+    return ZoneSet(tuple(Zone(z.name, z.shape, None if z.size is None else k * np.asarray(z.size), z.c, z.d, z.m,
+                              z.spring) for z in zones.zones), zones.x_0)
+
+
+def fit_in_workspace(robot, zones: ZoneSet, w_max, v_max, tol: float = 1e-3, f_min=None,
+                     f_max=None) -> tuple[ZoneSet, Clipping | None]:
+    """``zones`` if their hard box lies in the WFW of ``robot`` (None: not clipped); else the zones
+    scaled by the largest k < 1 (by bisection to ``tol`` relative) whose hard box does, with the
+    :class:`Clipping`. The wall's reach (:func:`max_penetration`) is kept: hand guiding keeps its
+    dynamics and bounds. ValueError when not even the wall's reach about x_0 fits."""
+    def fits(k):
+        try:
+            check_in_workspace(robot, scaled(zones, k), w_max, v_max, f_min, f_max)
+            return True
+        except ValueError:
+            return False
+
+    if fits(1.0):
+        return zones, None
+    lo, hi = 0.0, 1.0
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    if lo == 0.0:
+        reach = np.round(max_penetration(zones, w_max, v_max), 4).tolist()
+        raise ValueError(f"no virtual workspace fits at this origin: the wall's reach {reach} alone leaves the "
+                         "wrench-feasible workspace (move the zone origin inwards)")
+    spheres = [z.size for z in zones.zones if z.shape == "sphere"]
+    return scaled(zones, lo), Clipping(lo, zones.box, float(spheres[0]) if spheres else 0.0)
