@@ -305,7 +305,7 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
 
 def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:
     """The robot's EIGEN (c, d, m) on x in a rest sphere of EIGEN_ZONE, pushed along x for
-    EIGEN_PUSH s and released; the ground truth's oscillation fitted over EIGEN_WINDOW from 50 ms
+    EIGEN_PUSH s once the tare is taken, and released; the ground truth's oscillation fitted over EIGEN_WINDOW from 50 ms
     after the release, against (5.12) -> (metrics, ok, note, the run's hold or None)."""
     from cdpr_control.control.admittance import damped_eigenfrequency
     from cdpr_sim.hand import Segment
@@ -316,7 +316,9 @@ def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:
     overrides = {**EIGEN_ZONE, "zones.rest.c": [c] + rest.get("zones.rest.c", DEFAULT_REST_CDM[0])[1:],
                  "zones.rest.d": [d] + rest.get("zones.rest.d", DEFAULT_REST_CDM[1])[1:],
                  "zones.rest.m": [m] + rest.get("zones.rest.m", DEFAULT_REST_CDM[2])[1:]}
-    t_push = GUIDING_ENABLE + 0.05
+    # pushed 50 ms after the tare (w_init, averaged over tare_time after switching on): a push
+    # within it would be tared away and read as a user wrench the other way after the release
+    t_push = GUIDING_ENABLE + float(rest.get("tare_time", 0.0)) + 0.05
     release = t_push + EIGEN_PUSH
     metrics = {"eigenfrequency_Hz": float("nan"), "eigenfrequency_error_percent": float("nan")}
     try:
