@@ -277,10 +277,36 @@ def test_zones_leaving_the_wfw_near_the_border_are_shrunk_to_the_largest_that_fi
     assert f"scaled by {clipping.scale:.3g}" in clipping.text() and "clipped" in clipping.text()
 
 
-def test_where_not_even_the_walls_reach_fits_hand_guiding_is_refused_with_the_reason():
+def test_where_not_even_the_walls_reach_fits_the_limits_shrink_with_the_zones():
+    """Nearer the border the wall's reach (proportional to w_max and v_max) leaves the WFW with any
+    box: zones, v_max and w_max are scaled by one factor, the largest that fits (w_max not
+    below 1.25 x the dead band)."""
+    from cdpr_control.control.admittance import fitted_settings
+    from cdpr_control.control.admittance_zones import W_MAX_OVER_DEAD_BAND, per_axis, scaled
+
+    x = np.array(IPANEMA3_BORDER)
+    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.05     # 5 % further out
+    values = _shipped_values(IPANEMA3, x)
+    configured_params, configured, _ = settings_from(values, IPANEMA3, check_workspace=False)
+    w_max, v_max = (per_axis(v, "") for v in (configured_params.user.w_max, configured_params.v_max))
+    floor = W_MAX_OVER_DEAD_BAND * per_axis(configured_params.user.dead_band, "")
+    with pytest.raises(ValueError, match="wrench-feasible"):                      # box alone: none fits
+        check_in_workspace(IPANEMA3, scaled(configured, 1e-3), w_max, v_max)
+    params, zones, loaded, clipping = fitted_settings(values, IPANEMA3)
+    k = clipping.reach_scale
+    assert 0.0 < k < 1.0 and clipping.scale == k and "v_max and w_max scaled by" in clipping.text()
+    np.testing.assert_allclose(params.v_max, k * v_max)
+    np.testing.assert_allclose(params.user.w_max, np.maximum(k * w_max, floor))
+    np.testing.assert_allclose(zones.box, k * configured.box)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    with pytest.raises(ValueError):                                  # the largest
+        check_in_workspace(loaded, scaled(configured, 1.02 * k), np.maximum(1.02 * k * w_max, floor), 1.02 * k * v_max)
+
+
+def test_where_nothing_fits_hand_guiding_is_refused_with_the_reason():
     from cdpr_control.control.admittance import fitted_settings
 
     x = np.array(IPANEMA3_BORDER)
-    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) / 0.98      # on the border itself
-    with pytest.raises(ValueError, match="wall's reach"):
-        fitted_settings(_shipped_values(IPANEMA3, x), IPANEMA3)
+    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.08     # 8 % further out, still in the WFW
+    with pytest.raises(ValueError, match="no virtual workspace fits"):
+        fitted_settings({**_shipped_values(IPANEMA3, x), "dead_band": [90.0, 90.0, 90.0, 9.0, 9.0, 9.0]}, IPANEMA3)

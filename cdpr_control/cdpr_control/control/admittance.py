@@ -25,7 +25,7 @@ T_1 = 3 ms, DB a dead band per axis, then a saturation at w_max.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import expm
@@ -369,9 +369,13 @@ def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[Ad
 
 def fitted_settings(values: dict, robot):
     """:func:`settings_from`, but a virtual workspace that leaves the WFW is shrunk to fit
-    (:func:`~cdpr_control.control.admittance_zones.fit_in_workspace`) instead of refused ->
-    (params, zones, robot with the known payload, Clipping or None). ValueError for an invalid
-    set, or where not even the wall's reach fits."""
+    (:func:`~cdpr_control.control.admittance_zones.fit_in_workspace`: the zones, and where that is
+    not enough w_max and v_max too) instead of refused -> (params, zones, robot with the known
+    payload, Clipping or None). ValueError for an invalid set, or where nothing fits."""
     params, zones, loaded = settings_from(values, robot, check_workspace=False)
-    zones, clipping = fit_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    zones, w_max, v_max, clipping = fit_in_workspace(loaded, zones, params.user.w_max, params.v_max,
+                                                     params.user.dead_band)
+    if clipping is not None and clipping.reach_scale < 1.0:
+        params = replace(params, v_max=v_max, user=replace(params.user, w_max=w_max))
+        params.validate()
     return params, zones, loaded, clipping
