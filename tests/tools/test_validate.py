@@ -217,8 +217,9 @@ def test_a_metric_not_measured_is_reported_as_such_never_as_nan(tmp_path, capsys
 
     spec = CaseSpec("guiding", "ipanema3", 0, [0.0, 0.0, 0.5, 0, 0, 0], False, "mismatched", 1, {"direction": (1, 0, 0)})
     values = (1.0, -3.3, float("nan"))
-    results = [judge(replace(spec, pose_index=i), {"rest_wrench_percent": float("nan"), "eigenfrequency_error_percent": v},
-                     False) for i, v in enumerate(values)]
+    results = [judge(replace(spec, pose_index=i), {"rest_wrench_percent": float("nan"), "eigenfrequency_error_percent": v,
+                                                   "settling_s": float("inf") if i == 2 else 1.0}, False)
+               for i, v in enumerate(values)]
     with CaseLog(tmp_path) as log:
         log.write(results)
     assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
@@ -230,6 +231,8 @@ def test_a_metric_not_measured_is_reported_as_such_never_as_nan(tmp_path, capsys
     m = doc["summary"]["guiding"]["metrics"]["eigenfrequency_error_percent"]
     assert m["worst"] == -3.3 and "#1" in m["where"] and m["not_measured"] == 1 and m["out_of_band"] == 2
     assert doc["summary"]["guiding"]["metrics"]["rest_wrench_percent"]["mean"] is None
+    settling = doc["summary"]["guiding"]["metrics"]["settling_s"]             # never settled: the worst, said so
+    assert settling["worst"] == "inf" and "#2" in settling["where"] and settling["mean"] == 1.0
     assert "nan" not in (tmp_path / "r" / "validation.txt").read_text().lower()
     assert np.isnan(read_cases(tmp_path / "cases.jsonl")[2].metrics["eigenfrequency_error_percent"])
 

@@ -142,7 +142,7 @@ def read_cases(path) -> list[CaseResult]:
         except json.JSONDecodeError:
             continue
         spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
-        metrics = {k: float("nan") if v is None else v for k, v in d["metrics"].items()}
+        metrics = {k: float("nan") if v is None else float(v) for k, v in d["metrics"].items()}
         results.append(CaseResult(spec, metrics, d["checks"], d["status"], d["note"], d["wall_s"],
                                   d.get("cpu_s", float("nan"))))
     return results
@@ -180,8 +180,8 @@ def write(results: list[CaseResult], meta: dict, outdir) -> tuple[dict, list[Pat
 
 
 def dumps(doc, **kwargs) -> str:
-    """JSON text of ``doc`` with every non-finite number as null (JSON has no NaN or Infinity:
-    a metric not measured, or a force that never settled, is null)."""
+    """JSON text of ``doc`` without NaN or Infinity (JSON has neither): NaN (not measured) as null,
+    an infinite value (a force that never settled) as the string "inf" or "-inf"."""
     return json.dumps(_finite(doc), allow_nan=False, default=_json_default, **kwargs)
 
 
@@ -193,7 +193,9 @@ def _finite(v):
     if isinstance(v, np.ndarray):
         return _finite(v.tolist())
     if isinstance(v, (float, np.floating)):
-        return float(v) if np.isfinite(v) else None
+        if np.isnan(v):
+            return None
+        return float(v) if np.isfinite(v) else ("inf" if v > 0 else "-inf")
     return v
 
 
