@@ -322,7 +322,8 @@ def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:
     release = t_push + EIGEN_PUSH
     metrics = {"eigenfrequency_Hz": float("nan"), "eigenfrequency_error_percent": float("nan")}
     try:
-        rec, g, ok = _guided(spec, robot, overrides, [Segment(t_push, (e["push"], 0, 0, 0, 0, 0), "rectangle", EIGEN_PUSH)],
+        push = _eigen_push(spec, robot, overrides, e["push"])
+        rec, g, ok = _guided(spec, robot, overrides, [Segment(t_push, (push, 0, 0, 0, 0, 0), "rectangle", EIGEN_PUSH)],
                              release + 0.05 + EIGEN_WINDOW)
     except ValueError as exc:
         return metrics, True, f"eigenfrequency not measured, its zones refused: {exc}", None
@@ -335,6 +336,23 @@ def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:
     metrics.update(eigenfrequency_Hz=f_exp, eigenfrequency_error_percent=100.0 * (f_exp - f_theo) / f_theo)
     note = "" if g.clipping is None else "eigenfrequency zones: " + g.clipping.text()
     return metrics, True, note, rec.held
+
+
+def _eigen_push(spec: CaseSpec, robot, overrides: dict, push: float) -> float:
+    """The eigenfrequency run's push [N]: ``push``, its part above the dead band scaled with the
+    rest sphere where the zones are shrunk to the WFW at the pose (the oscillation's amplitude is
+    proportional to it: it stays inside the shrunk sphere, the zone whose c, d, m are measured)."""
+    from cdpr_control.control.admittance import fitted_settings
+    from cdpr_control.control.admittance_zones import per_axis
+    from cdpr_control.control.params import shipped_configuration
+
+    values = {**shipped_configuration(robot).admittance, **overrides,
+              "zones.origin": (np.asarray(spec.x, dtype=float) - robot.home).tolist()}
+    params, _, _, clipping = fitted_settings(values, robot)
+    if clipping is None:
+        return push
+    dead_band = per_axis(params.user.dead_band, "dead_band")[0]
+    return dead_band + clipping.scale * (push - dead_band)
 
 
 # ---- (c) payload --------------------------------------------------------------------------------
