@@ -253,3 +253,13 @@ def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault():
     r = judge(spec, {"rest_motion_mm": 0.1}, False, "", rec.held)
     assert r.status == "held" and not r.passed and "force_watch" in r.note
     assert judge(spec, {"rest_motion_mm": 0.1}, False).passed
+
+
+def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():
+    """Near the border the shipped zones leave the WFW: the case guides in zones shrunk to fit
+    (said in its note) instead of being refused, and rests within the bands."""
+    border = [p for p in sweep_poses(MINI, 4) if p.border][-1]          # the grid's #3
+    (r,) = run_case(_spec("guiding", {"direction": (0, 0, -1)}, border.x.tolist()))
+    assert r.status != "refused" and "clipped to the wrench-feasible workspace" in r.note, r.note
+    assert r.checks["rest_motion_mm"] and r.checks["rest_wrench_percent"], r.metrics
+    assert np.isfinite(r.metrics["eigenfrequency_error_percent"]) and r.checks["eigenfrequency_error_percent"]
