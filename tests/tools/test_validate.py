@@ -237,7 +237,7 @@ def test_a_metric_not_measured_is_reported_as_such_never_as_nan(tmp_path, capsys
     assert np.isnan(read_cases(tmp_path / "cases.jsonl")[2].metrics["eigenfrequency_error_percent"])
 
 
-def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault():
+def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault(tmp_path, capsys):
     from cdpr_control.control.safety import Fault
 
     robot = load_robot("ipanema3_mini")
@@ -253,6 +253,12 @@ def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault():
     r = judge(spec, {"rest_motion_mm": 0.1}, False, "", rec.held)
     assert r.status == "held" and not r.passed and "force_watch" in r.note
     assert judge(spec, {"rest_motion_mm": 0.1}, False).passed
+    from cdpr_tools.cli import main
+
+    with CaseLog(tmp_path) as log:                     # the command exits 1 and says so
+        log.write([r, judge(replace(spec, pose_index=1), {"rest_motion_mm": 0.1}, False)])
+    assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
+    assert "guiding: 1/2 passed (50 %) [1 held]" in capsys.readouterr().out
 
 
 def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():
