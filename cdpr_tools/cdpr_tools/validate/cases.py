@@ -60,9 +60,6 @@ PUSH_SHARE = 0.65                                  # of w_max (the Mini: 13 N, t
 GUIDING_ENABLE = 1.0
 # s after switching on: at rest; then the push rises (a hand, not a step), is held, released
 REST_TIME, PUSH_RISE, PUSH_HOLD, PUSH_AFTER = 0.5, 0.1, 1.0, 0.8
-DEFAULT_W_MAX = [20.0, 20.0, 20.0, 0.5, 0.5, 0.5]  # the library's (UserWrenchParams) where a file has none
-DEFAULT_REST_CDM = ([1000.0, 1000.0, 1000.0, 20.0, 20.0, 20.0], [40.0, 40.0, 40.0, 0.5, 0.5, 0.5],
-                    [2.0, 2.0, 2.0, 0.01, 0.01, 0.01])            # thesis_zones' rest zone
 # the eigenfrequency (5.12) on x, per robot (c [N/m], d [N s/m], m [kg]; push [N] for EIGEN_PUSH s):
 # the Mini: table 5.3, row 3 (1.0 Hz); the IPAnema 3: the same 1.0 Hz and damping ratio 0.04 with
 # the virtual mass of its shipped set (300 kg: a virtual mass below the 25 kg platform's excites
@@ -243,6 +240,13 @@ def _settled_watch(rec: Recorder, F_d: float):
 
 # ---- (b) hand guiding ---------------------------------------------------------------------------
 
+def _admittance_values(robot_name: str) -> dict:
+    """The flat admittance_controller parameters of the robot's file over the library defaults."""
+    from cdpr_control.control.admittance import default_parameters
+
+    return {**default_parameters(), **file_section(robot_name, "admittance_controller")}
+
+
 def _guided(spec: CaseSpec, robot, overrides: dict, segments, duration: float):
     """The library's hand-guiding run (:func:`cdpr_sim.hand_guiding.guiding_run`: the shipped
     configuration, zones about the pose shrunk to the WFW where they leave it) at the pose, switched
@@ -274,7 +278,7 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     from cdpr_sim.hand import Segment
 
     robot = load_robot(spec.robot)
-    w_max = per_axis(file_section(spec.robot, "admittance_controller").get("w_max", DEFAULT_W_MAX), "w_max")
+    w_max = per_axis(_admittance_values(spec.robot)["w_max"], "w_max")
     direction = np.asarray(spec.variant["direction"], dtype=float)
     push = np.r_[PUSH_SHARE * w_max[0] * direction / np.linalg.norm(direction), np.zeros(3)]
     t_push = GUIDING_ENABLE + REST_TIME
@@ -312,13 +316,12 @@ def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:
 
     e = EIGEN[spec.robot]
     c, d, m = e["cdm"]
-    rest = file_section(spec.robot, "admittance_controller")
-    overrides = {**EIGEN_ZONE, "zones.rest.c": [c] + rest.get("zones.rest.c", DEFAULT_REST_CDM[0])[1:],
-                 "zones.rest.d": [d] + rest.get("zones.rest.d", DEFAULT_REST_CDM[1])[1:],
-                 "zones.rest.m": [m] + rest.get("zones.rest.m", DEFAULT_REST_CDM[2])[1:]}
+    rest = _admittance_values(spec.robot)
+    overrides = {**EIGEN_ZONE, **{f"zones.rest.{k}": [v] + list(rest[f"zones.rest.{k}"][1:])
+                                  for k, v in zip("cdm", (c, d, m))}}
     # pushed 50 ms after the tare (w_init, averaged over tare_time after switching on): a push
     # within it would be tared away and read as a user wrench the other way after the release
-    t_push = GUIDING_ENABLE + float(rest.get("tare_time", 0.0)) + 0.05
+    t_push = GUIDING_ENABLE + float(rest["tare_time"]) + 0.05
     release = t_push + EIGEN_PUSH
     metrics = {"eigenfrequency_Hz": float("nan"), "eigenfrequency_error_percent": float("nan")}
     try:
