@@ -15,6 +15,8 @@ import numpy as np
 
 from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
+from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, expected_contact_wrench_of, task_axis
+from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
 from cdpr_control.control.safety import all_finite
 from cdpr_control.force_distribution import (BACKENDS, METHODS, BorderPolicy, DistributionResult,
     ForceDistributor)
@@ -65,6 +67,12 @@ class ForceSetpoint:
         self.level: float | None = None          # tension level in effect (ramping to the target)
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
+        self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
+        self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
+        self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
+        self._payload_kinematics: tuple = ()     # R c, g - a_c of that key (load_compensation.payload_kinematics)
+        self.z_t = np.array([0.0, 0.0, 1.0])     # task z axis of the hybrid force controller, kept in R
+        self._z_t_of: bytes | None = None        # F_d,0 (its bytes) of z_t
         self.set_params(params or ForceSetpointParams())
         kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
 
@@ -115,19 +123,57 @@ class ForceSetpoint:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
 
-    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None, w_dyn=None) -> DistributionResult:
+    def _model(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
+        """(w_dyn (2.33) of x_d, ẋ_d, ẍ_d; A^T (2.10) at x_d): the arrays of the last period again
+        (read, never written) while the set-point repeats (holding, a pause of a program)."""
+        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
+        key = (x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes(), kernels.ENABLED)
+        if key != self._model_key:
+            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
+            self._model_key, self._model_value = key, (w_dyn, AT)
+        return self._model_value
+
+    def payload_wrench(self, x_d, xdot_d, xddot_d, mass: float, cog) -> np.ndarray:
+        """The model wrench of a payload (a point mass [kg] at cog (3,) [m], platform frame) at the
+        set-point (:func:`cdpr_control.control.load_compensation.payload_wrench`), for ``w_model``:
+        its mass-free part kept while the set-point and the cog repeat, times the mass of the period."""
+        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
+        key = x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes() + np.asarray(cog, dtype=float).tobytes()
+        if key != self._payload_key:
+            self._payload_key = key
+            self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
+        return payload_wrench_of_mass(self._payload_kinematics, mass)
+
+    def _contact_wrench(self, contact) -> np.ndarray | None:
+        """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
+        wrench (:func:`expected_contact_wrench_of`) of contact = (state letter, F_d,0 (3,), F_vec (3,))
+        of the hybrid force controller; None while it does not act."""
+        state, F_d0, F_vec = contact
+        F_d0 = np.asarray(F_d0, dtype=float)
+        key = F_d0.tobytes()
+        if key != self._z_t_of:                  # task_axis of an unchanged F_d,0 keeps z_t
+            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
+        if state not in FORCE_CONTROLLED:        # idle: the expected contact wrench is zero
+            return None
+        return expected_contact_wrench_of(state, F_d0, F_vec, self.z_t)
+
+    def update(self, x_d, xdot_d, xddot_d, w, w_model=None, contact=None) -> DistributionResult:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
 
-        AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
-        known wrench beyond the platform's own (an identified payload, load_compensation): it is not
-        part of the saturated disturbance of (3.24), and the model-only set-point (3.1) includes it.
-        w_dyn: kernels.platform_wrench of x_d, ẋ_d, ẍ_d (2.33) when the caller has it (a node that
-        keeps it while the set-point repeats), else computed here; it is read, never written.
+        w_model: a known wrench beyond the platform's own (an identified payload, load_compensation):
+        it is not part of the saturated disturbance of (3.24), and the model-only set-point (3.1)
+        includes it. contact: (state, F_d,0, F_vec) of the hybrid force controller in this period
+        (:class:`cdpr_control.control.hybrid_force_control.HPFCState`'s state, F_d0, F_vec), or None
+        without one: while it acts, its desired contact force replaces the measured one in w.
         """
         if self.f_ref_override is None:
             self._ramp_level()
-        if w_dyn is None:
-            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)  # (2.33), A^T f = -w
+        w_dyn, AT = self._model(x_d, xdot_d, xddot_d)
+        if contact is not None:
+            dw = self._contact_wrench(contact)
+            if dw is not None:
+                w = w + dw
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and all_finite(w):
@@ -135,6 +181,4 @@ class ForceSetpoint:
                                                   self.wrench_filter, w_model)  # filtered, saturated
         else:
             self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
-        if AT is None:
-            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
         return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)
