@@ -269,3 +269,12 @@ def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():
     assert r.status != "refused" and "clipped to the wrench-feasible workspace" in r.note, r.note
     assert r.checks["rest_motion_mm"] and r.checks["rest_wrench_percent"], r.metrics
     assert np.isfinite(r.metrics["eigenfrequency_error_percent"]) and r.checks["eigenfrequency_error_percent"]
+
+
+def test_ik_only_slack_is_reported_not_judged_but_f_max_is():
+    """IK-only (section 2.3.2) does not control the cable forces: the program family reports its
+    slack cables, the f_max limit still fails it; under force control both are judged."""
+    from cdpr_tools.validate import criteria
+    assert criteria.band_for("force_below_f_min_N", "nominal", "ik_only") is None
+    assert criteria.band_for("force_above_f_max_N", "nominal", "ik_only") is not None
+    assert not criteria.band_for("force_below_f_min_N", "mismatched", "force_control").holds(3.0)

@@ -172,7 +172,7 @@ def judge(spec: CaseSpec, metrics: dict, diverged: bool, note: str = "", held: s
     metrics = {**metrics, "diverged": float(diverged)}
     checks = {}
     for name, value in metrics.items():
-        band = criteria.band_for(name, spec.plant)
+        band = criteria.band_for(name, spec.plant, spec.variant.get("controller"))
         if band is not None:
             checks[name] = band.holds(value)
     status = "diverged" if diverged else "held" if held else "passed" if all(checks.values()) else "failed"

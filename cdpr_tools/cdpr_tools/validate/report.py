@@ -69,9 +69,10 @@ def family_summary(results: list[CaseResult], family: str) -> dict:
         m = {"mean": float(finite.mean()) if len(finite) else None,
              "out_of_band": sum(1 for r in have if not r.checks.get(name, True)),
              "not_measured": len(have) - len(measured)}
-        if any(band_for(name, r.spec.plant) for r in have):
-            if measured:
-                worst = max(measured, key=lambda r: badness(name, float(r.metrics[name]), r.spec.plant))
+        judged = [r for r in measured if band_for(name, r.spec.plant, r.spec.variant.get("controller"))]
+        if any(band_for(name, r.spec.plant, r.spec.variant.get("controller")) for r in have):
+            if judged:
+                worst = max(judged, key=lambda r: badness(name, float(r.metrics[name]), r.spec.plant))
                 m.update(worst=float(worst.metrics[name]), where=where(worst))
         elif len(finite):
             m.update(min=float(finite.min()), max=float(finite.max()))
