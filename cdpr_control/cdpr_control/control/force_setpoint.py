@@ -6,6 +6,14 @@ through the Smith predictor (3.26), whose disturbance part w - w_dyn(t - T_d,w) 
 anticipated inertia wrench reaches w_d without the filter's lag; the distribution is solved for A^T at x_d with the tension level's reference force. A change
 of the tension level is ramped (``tension_rate``, full range per second) so that the internal forces
 move smoothly and the platform does not.
+
+A known payload (``w_model``, the identified payload of the load compensation) stretches the
+disturbance filter's time constant by sqrt((m_p + m_c) / m_p) (:func:`payload_filter_time`): the
+measured-wrench loop w -> PT1 -> w_d -> f_d -> cable forces -> w passes the platform's inertia
+through the filter, and a heavier platform's vertical mode (ω_n ∝ 1/sqrt(m)) moves towards the
+filter's corner, where it passes more of the inertia with less lag (the 90 kg divergence of
+docs/load_compensation.md). Keeping ω_n T_wrench_filter at the value the shipped filter has with
+the empty platform keeps that loop where it was measured stable.
 """
 from __future__ import annotations
 
@@ -21,6 +29,19 @@ from cdpr_control.control.safety import all_finite
 from cdpr_control.force_distribution import (BACKENDS, METHODS, BorderPolicy, DistributionResult,
     ForceDistributor)
 from cdpr_control.control.wrench_setpoint import WrenchSetpoint
+
+
+def payload_filter_time(T: float, w_dyn, w_model) -> float:
+    """The disturbance filter's time constant [s] for the platform carrying a known payload:
+    T sqrt((m_p + m_c) / m_p), the mass ratio read as |w_dyn + w_model| / |w_dyn| of the force parts
+    (both the weight less the inertia force at the same acceleration, (2.33)), at least 1 (a
+    negative estimate does not shorten it). T unchanged where the platform's own force part
+    vanishes (falling at g: the ratio is not defined)."""
+    own = float(np.linalg.norm(np.asarray(w_dyn, dtype=float)[:3]))
+    total = float(np.linalg.norm(np.asarray(w_dyn, dtype=float)[:3] + np.asarray(w_model, dtype=float)[:3]))
+    if not own > 1e-9 or not np.isfinite(total):
+        return T
+    return T * float(np.sqrt(max(total / own, 1.0)))
 
 
 @dataclass
@@ -145,6 +166,13 @@ class ForceSetpoint:
             self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
         return payload_wrench_of_mass(self._payload_kinematics, mass)
 
+    def _stretch_filter(self, w_dyn, w_model) -> None:
+        """The disturbance filter's time constant for the payload of this period (module doc)."""
+        T = self.params.T_wrench_filter if w_model is None else \
+            payload_filter_time(self.params.T_wrench_filter, w_dyn, w_model)
+        if T != self.wrench_filter.T:
+            self.wrench_filter.set_time_constant(T)
+
     def _contact_wrench(self, contact) -> np.ndarray | None:
         """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
         wrench (:func:`expected_contact_wrench_of`) of contact = (state letter, F_d,0 (3,), F_vec (3,))
@@ -177,6 +205,7 @@ class ForceSetpoint:
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and all_finite(w):
+            self._stretch_filter(w_dyn, w_model)
             self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
                                                   self.wrench_filter, w_model)  # filtered, saturated
         else:
