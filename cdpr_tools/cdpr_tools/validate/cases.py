@@ -19,7 +19,7 @@ no orientation and has no divergence stop.
 from __future__ import annotations
 
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,6 +50,7 @@ PAYLOAD_FRACTIONS = (0.25, 0.5, 1.0)               # of the pose's static capaci
 # (T_output 1 s) and the OSPC's integral part (T_i / K_p about 2.6 s) reach the static sag
 PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.7, 0.3, 4.0
 PAYLOAD_CONTROLLERS = ("force_control", "ik_lc")   # identify.load_steps.CONFIGS: the shipped graph; IK-only + (4.6)
+REFERENCE = "ik"                                    # the uncompensated sag: IK-only, no load compensation
 SAG_WINDOW = 0.3                                   # s: mean z error at the end of rest and dwell
 PUSH_DIRECTIONS = ((1, 0, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 1, -1), (-1, 1, 0))
 PUSH_SHARE = 0.65                                  # of w_max (the Mini: 13 N, the push of issue 25)
@@ -305,7 +306,9 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
 def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     """A payload step at the pose: REST tared empty, the step over PAYLOAD_RAMP (cosine, as a load
     put down by hand: an instantaneous step rings the lightly damped vertical mode), PAYLOAD_DWELL
-    after it -> (recorder, m_c (N,), ok)."""
+    after it -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
+    first hold (control.safety.ForceWatch, on by default) as (t [s], reason), else None: the
+    figures of a held run are those of the held robot, not of the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
 
@@ -315,19 +318,26 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
-    m_c = []
+    m_c, hold = [], []
 
     def put_down(k, loop, sim):
         if k > 0:
             m_c.append(stage.compensation.m_c)
+            if loop.failure is not None and not hold:
+                hold.append((float(sim.output.t), loop.failure))
         i = k - n_rest
         if 0 <= i < n_ramp + 1:
             sim.set_payload(mass * (0.5 * (1.0 - np.cos(np.pi * min(i + 1, n_ramp) / n_ramp))))
 
+    params = loop_params(config, spec.robot)
+    if config == REFERENCE:
+        # the reference measures the sag IK-only control leaves; its lower cables go slack under a
+        # payload (the Mini's at any payload worth compensating), which the force watch would hold
+        params = replace(params, safety=replace(params.safety, force_watch=False))
     rec = Recorder(robot, [put_down])
-    ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, loop_params(config, spec.robot),
+    ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, params,
                       x0=x, offset_stages={"load_compensation": stage}, config=sim_config(spec))
-    return rec, np.array(m_c, dtype=float), ok
+    return rec, np.array(m_c, dtype=float), ok, (hold[0] if hold else None)
 
 
 def _sag(rec) -> float:
@@ -345,8 +355,6 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     graph; ik_lc: IK-only with load compensation), one result each, and under IK-only without
     compensation (the reference sag). Estimate error from 1 s after the step began; sag cut
     against the reference."""
-    from dataclasses import replace
-
     from cdpr_control.motion.program_check import payload_capacity
 
     robot = load_robot(spec.robot)
@@ -357,24 +365,28 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     if mass < 0.1 * robot.platform.mass:
         return [CaseResult(s, dict(base), {}, "refused", f"static capacity {capacity:.3g} kg at this pose: no step to make")
                 for s in specs]
-    reference, _, ok_ref = _payload_run(spec, robot, "ik", mass)
+    reference, _, ok_ref, _ = _payload_run(spec, robot, REFERENCE, mass)       # (its force watch off)
     sag_reference = 1e3 * _sag(reference) if ok_ref else float("nan")
-    return [_payload_result(s, robot, mass, base, sag_reference, reference if not ok_ref else None) for s in specs]
+    note_ref = "" if ok_ref else f"the IK-only reference diverged at {reference.diverged_at:.3f} s"
+    return [_payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
 
 
-def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, failed_reference) -> CaseResult:
-    rec, m_c, ok = _payload_run(spec, robot, spec.variant["controller"], mass)
+def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, note_ref: str) -> CaseResult:
+    """One controller's run: a run that diverged or that the force watch held fails (as diverged:
+    the band every family has), with the reason in the note."""
+    rec, m_c, ok, hold = _payload_run(spec, robot, spec.variant["controller"], mass)
     after = rec.array("t") >= PAYLOAD_REST + 1.0
     f = rec.array("f")
-    sag = 1e3 * _sag(rec) if ok else float("nan")
-    metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if ok else float("nan"),
-               "sag_reference_mm": sag_reference, "sag_mm": sag,
+    usable = ok and hold is None
+    sag = 1e3 * _sag(rec) if usable else float("nan")
+    metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if usable
+               else float("nan"), "sag_reference_mm": sag_reference, "sag_mm": sag,
                "sag_cut_percent": criteria.sag_cut_percent(sag_reference, sag),
-               "max_force_N": float(f.max()) if len(f) else float("nan")}
-    note = "" if ok else f"diverged at {rec.diverged_at:.3f} s"
-    if failed_reference is not None:
-        note += f"; the IK-only reference diverged at {failed_reference.diverged_at:.3f} s"
-    return judge(spec, metrics, not ok, note.strip("; "))
+               "max_force_N": float(f.max()) if len(f) else float("nan"),
+               "held_at_s": float("nan") if hold is None else hold[0]}
+    notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s",
+             "" if hold is None else f"held by the force watch at {hold[0]:.3f} s ({hold[1]})", note_ref]
+    return judge(spec, metrics, not usable, "; ".join(n for n in notes if n))
 
 
 # ---- (d) program --------------------------------------------------------------------------------
