@@ -318,13 +318,13 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
-    m_c, hold = [], []
+    m_c, held = [], []
 
     def put_down(k, loop, sim):
         if k > 0:
             m_c.append(stage.compensation.m_c)
-            if loop.failure is not None and not hold:
-                hold.append((float(sim.output.t), loop.failure))
+            if loop.failure is not None and not held:
+                held.append((float(sim.output.t), loop.failure))
         i = k - n_rest
         if 0 <= i < n_ramp + 1:
             sim.set_payload(mass * (0.5 * (1.0 - np.cos(np.pi * min(i + 1, n_ramp) / n_ramp))))
@@ -337,7 +337,7 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     rec = Recorder(robot, [put_down])
     ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, params,
                       x0=x, offset_stages={"load_compensation": stage}, config=sim_config(spec))
-    return rec, np.array(m_c, dtype=float), ok, (hold[0] if hold else None)
+    return rec, np.array(m_c, dtype=float), ok, (held[0] if held else None)
 
 
 def _sag(rec) -> float:
@@ -374,18 +374,18 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
 def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, note_ref: str) -> CaseResult:
     """One controller's run: a run that diverged or that the force watch held fails (as diverged:
     the band every family has), with the reason in the note."""
-    rec, m_c, ok, hold = _payload_run(spec, robot, spec.variant["controller"], mass)
+    rec, m_c, ok, held = _payload_run(spec, robot, spec.variant["controller"], mass)
     after = rec.array("t") >= PAYLOAD_REST + 1.0
     f = rec.array("f")
-    usable = ok and hold is None
+    usable = ok and held is None
     sag = 1e3 * _sag(rec) if usable else float("nan")
     metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if usable
                else float("nan"), "sag_reference_mm": sag_reference, "sag_mm": sag,
                "sag_cut_percent": criteria.sag_cut_percent(sag_reference, sag),
                "max_force_N": float(f.max()) if len(f) else float("nan"),
-               "held_at_s": float("nan") if hold is None else hold[0]}
+               "held_at_s": float("nan") if held is None else held[0]}
     notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s",
-             "" if hold is None else f"held by the force watch at {hold[0]:.3f} s ({hold[1]})", note_ref]
+             "" if held is None else f"held by the force watch at {held[0]:.3f} s ({held[1]})", note_ref]
     return judge(spec, metrics, not usable, "; ".join(n for n in notes if n))
 
 
