@@ -348,9 +348,23 @@ def _sag(rec) -> float:
     return float(z[-n:].mean() - z[rest].mean())
 
 
+def planned_capacity(robot, x) -> float:
+    """The largest payload [kg] the shipped force distribution holds at rest at x: the static
+    capacity (:func:`cdpr_control.motion.program_check.payload_capacity`) with the distribution's
+    f_min of the parameter file (150 N on the IPAnema 3, 7.5 N on the Mini; the robot files' 100 N
+    and 5 N are the cables' limits, which the distribution keeps a margin above). A payload beyond
+    it is one the shipped configuration cannot distribute at all, so 100 % of the robot-limit
+    capacity was a step the controllers could not carry by construction."""
+    from cdpr_control.motion.program_check import payload_capacity
+    from cdpr_tools.validate.grid import planned_f_min
+
+    planned = replace(robot, cable=replace(robot.cable, f_min=planned_f_min(robot)))
+    return payload_capacity(planned, x)
+
+
 def payload_case(spec: CaseSpec) -> list[CaseResult]:
-    """Payload step of the variant's fraction of the pose's static capacity
-    (:func:`cdpr_control.motion.program_check.payload_capacity`) under each of PAYLOAD_CONTROLLERS
+    """Payload step of the variant's fraction of the pose's static capacity under the shipped
+    configuration (:func:`planned_capacity`) under each of PAYLOAD_CONTROLLERS
     (force_control: CFC + OSPC with the identified payload in the force set-point, the shipped
     graph; ik_lc: IK-only with load compensation), one result each, and under IK-only without
     compensation (the reference sag). Estimate error from 1 s after the step began; sag cut
@@ -358,10 +372,10 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     from cdpr_control.motion.program_check import payload_capacity
 
     robot = load_robot(spec.robot)
-    capacity = payload_capacity(robot, spec.x)
+    capacity = planned_capacity(robot, spec.x)
     mass = spec.variant["fraction"] * capacity
     specs = [replace(spec, variant={**spec.variant, "controller": c}) for c in PAYLOAD_CONTROLLERS]
-    base = {"capacity_kg": capacity, "payload_kg": mass}
+    base = {"capacity_kg": capacity, "capacity_robot_limits_kg": payload_capacity(robot, spec.x), "payload_kg": mass}
     if mass < 0.1 * robot.platform.mass:
         return [CaseResult(s, dict(base), {}, "refused", f"static capacity {capacity:.3g} kg at this pose: no step to make")
                 for s in specs]
