@@ -1,10 +1,13 @@
-"""The identified payload in the force set-point (force_distribution.payload_input): the disturbance
-filter of (3.24)-(3.26) stretched with the platform's total mass (force_setpoint.payload_filter_time)."""
+"""The identified payload in the force set-point (force_distribution.payload_input): fed forward
+through its own filter, both filters of the measured-wrench loop set from the vertical
+eigenfrequency (force_setpoint.loop_filter_times), and the experiments that report a held or
+diverged run."""
 import numpy as np
 import pytest
 
 from cdpr_control.model.dynamics import platform_wrench
-from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams, payload_filter_time
+from cdpr_control.control.force_setpoint import (OMEGA_T, ForceSetpoint, ForceSetpointParams, loop_filter_times,
+    total_mass_ratio, vertical_eigenfrequency)
 from cdpr_control.model.robot import load_robot
 
 DT = 1e-3
@@ -12,31 +15,58 @@ IPANEMA3 = load_robot("ipanema3")
 
 
 @pytest.mark.parametrize("a_z", [0.0, 3.0])
-def test_filter_time_grows_with_the_square_root_of_the_total_mass(a_z):
-    """A payload of 3 m_p quadruples the mass: the vertical mode's frequency halves, the time
-    constant doubles, at rest and accelerating (the ratio is that of the masses either way)."""
+def test_total_mass_ratio_from_the_model_wrenches(a_z):
+    """A payload of 3 m_p quadruples the mass, at rest and accelerating (the ratio is that of the
+    masses either way); an estimate below zero (sensor offsets) counts as none."""
     robot, x_d = IPANEMA3, IPANEMA3.home
     xddot = np.r_[0.0, 0.0, a_z, 0.0, 0.0, 0.0]
     fs = ForceSetpoint(robot, DT)
     w_dyn = platform_wrench(robot, x_d, np.zeros(6), xddot)
     w_payload = fs.payload_wrench(x_d, np.zeros(6), xddot, 3.0 * robot.platform.mass, np.zeros(3))
-    assert payload_filter_time(0.3, w_dyn, w_payload) == pytest.approx(0.6, rel=1e-9)
-    assert payload_filter_time(0.3, w_dyn, np.zeros(6)) == 0.3
-    # an estimate below zero (sensor offsets) does not shorten the filter
-    assert payload_filter_time(0.3, w_dyn, -0.5 * w_payload) == 0.3
+    assert total_mass_ratio(w_dyn, w_payload) == pytest.approx(4.0, rel=1e-9)
+    assert total_mass_ratio(w_dyn, -0.2 * w_payload) == 1.0
 
 
-def test_the_force_setpoint_filters_with_the_stretched_time_and_returns_without_payload():
-    robot, x_d, zero = IPANEMA3, IPANEMA3.home, np.zeros(6)
+def test_vertical_eigenfrequency_is_the_stability_analysis_one_and_sets_the_filters():
+    """At the 90 kg pose of issue 25 the vertical mode is the 2.38 Hz of `cdpr analyze stability`
+    (the QP forces with the payload); OMEGA_T / ω_n = 0.60 s there, the time constant measured
+    stable, and the shipped 0.3 s is the OMEGA_T of the empty platform at the same pose."""
+    from cdpr_control.analysis.eigenfrequencies import stiffness_map
+
+    x = np.r_[-1.8, 1.2, 1.0, 0.0, 0.0, 0.0]
+    f = stiffness_map(IPANEMA3, x, 0.0, 90.0).f[0]
+    omega = vertical_eigenfrequency(IPANEMA3, x, f, IPANEMA3.platform.mass + 90.0)
+    assert omega / (2 * np.pi) == pytest.approx(2.38, abs=0.01)
+    assert loop_filter_times(0.3, omega) == pytest.approx((OMEGA_T / omega, OMEGA_T / omega))
+    assert 0.59 < OMEGA_T / omega < 0.61
+    f0 = stiffness_map(IPANEMA3, x, 0.0).f[0]
+    omega0 = vertical_eigenfrequency(IPANEMA3, x, f0, IPANEMA3.platform.mass)
+    assert omega0 * 0.3 == pytest.approx(OMEGA_T, rel=0.02)
+    # a stiff, light platform (the Mini): the disturbance filter keeps 0.3 s, the feed-forward is fast
+    T_dist, T_ff = loop_filter_times(0.3, 2 * np.pi * 14.0)
+    assert T_dist == 0.3 and T_ff == pytest.approx(OMEGA_T / (2 * np.pi * 14.0))
+    assert loop_filter_times(0.3, float("nan")) == (0.3, 0.3)
+
+
+def test_the_payload_is_fed_forward_once_and_the_filter_returns_without_it():
+    """The known payload enters f_d through its own PT1 from zero (no step), the disturbance filter
+    sees only the rest: at rest with the payload measured, w_d settles at the measured wrench (not
+    the payload twice), with the filter times of the payload's ω_n; without a payload
+    T_wrench_filter again and no feed-forward."""
+    robot, x_d, zero = IPANEMA3, np.r_[-1.8, 1.2, 1.0, 0.0, 0.0, 0.0], np.zeros(6)
     fs = ForceSetpoint(robot, DT, ForceSetpointParams(T_wrench_filter=0.3))
     w_dyn = platform_wrench(robot, x_d, zero, zero)
     w_payload = fs.payload_wrench(x_d, zero, zero, 90.0, np.zeros(3))
-    fs.update(x_d, zero, zero, w_dyn + w_payload, w_model=w_payload)
-    m_p = robot.platform.mass
-    assert fs.wrench_filter.T == pytest.approx(0.3 * np.sqrt((m_p + 90.0) / m_p), rel=1e-9)
-    assert fs.wrench_filter.alpha == pytest.approx(1.0 - np.exp(-DT / fs.wrench_filter.T))
     fs.update(x_d, zero, zero, w_dyn)
-    assert fs.wrench_filter.T == 0.3
+    fs.update(x_d, zero, zero, w_dyn + w_payload, w_model=w_payload)
+    T_ff = fs.payload_filter.T
+    assert fs.wrench_filter.T == pytest.approx(T_ff) and 0.55 < T_ff < 0.7
+    np.testing.assert_allclose(fs.w_ff, (1.0 - np.exp(-DT / T_ff)) * w_payload, rtol=1e-9)
+    for _ in range(int(10 * T_ff / DT)):
+        fs.update(x_d, zero, zero, w_dyn + w_payload, w_model=w_payload)
+    np.testing.assert_allclose(fs.w_d, w_dyn + w_payload, atol=1e-3 * np.abs(w_payload).max())
+    fs.update(x_d, zero, zero, w_dyn)
+    assert fs.wrench_filter.T == 0.3 and not fs.w_ff.any()
 
 
 def _run(f, held_at=None, reason=""):
