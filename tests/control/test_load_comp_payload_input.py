@@ -116,3 +116,24 @@ def test_the_90_kg_payload_of_issue_25_stays_bounded_with_the_payload_input():
     last = run.t >= run.t[-1] - 1.0
     z_error = 1e3 * (run.x[last, 2] - run.x_d[last, 2])
     assert np.abs(z_error).max() < 25.0, np.abs(z_error).max()
+
+
+def test_load_compensation_names_the_cables_a_payload_slackens():
+    """The Mini under IK-only control with 4.4 kg: the four lower cables slack. The compensation
+    says so (the node puts it on /diagnostics as a warning) while it is enabled; tensed cables, or
+    the compensation disabled (force control), raise nothing."""
+    from cdpr_control.control.load_compensation import LoadCompensation, LoadCompensationParams
+    from test_load_compensation import MINI, _ik_only_state       # (this folder: pytest's rootdir-less import)
+
+    x = MINI.home
+    _, f_empty = _ik_only_state(MINI, x, 0.0)
+    _, f_loaded = _ik_only_state(MINI, x, 4.4)
+    for enabled, f, expected in ((True, f_empty, None), (True, f_loaded, 4), (False, f_loaded, None)):
+        lc = LoadCompensation(MINI, DT, LoadCompensationParams(enabled=enabled))
+        for _ in range(300):
+            lc.update(x, np.zeros(6), np.zeros(6), f, x=x[:3])
+        problem = lc.slack_problem()
+        if expected is None:
+            assert problem is None
+        else:
+            assert lc.slack_cables == expected and problem.startswith("4 of 8 cables slack under the payload")

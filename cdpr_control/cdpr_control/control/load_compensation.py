@@ -416,6 +416,7 @@ class LoadCompensation:
         self.output_filter.reset(np.zeros(6))
         self.x_lc = np.zeros(6)
         self.rate_limited = np.zeros(6, dtype=bool)
+        self.slack_cables = 0                                  # window-mean forces below f_slack
         self.settlement = SettlementModel(robot, dt)
         self.set_params(params or LoadCompensationParams())
 
@@ -559,6 +560,8 @@ class LoadCompensation:
         finite = all_finite(f_floats)
         if finite:
             f_mean = self.force_filter.push(f_floats)             # the forces of the window of (4.4)
+            f_slack = self.f_slack
+            self.slack_cables = sum(1 for v in f_mean if v < f_slack)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:
                 self.f_ref = f_mean                               # an unloaded state (see secant_offset)
             if self.params.enabled or self.settlement.ratio > 0.0:
@@ -593,6 +596,17 @@ class LoadCompensation:
         self.rate_limited = np.abs(change) > step
         self.x_lc = self.x_lc + np.clip(change, -step, step)
         return self.x_lc.copy()
+
+    def slack_problem(self) -> str | None:
+        """Why the compensation cannot hold the payload stiffly (None while it can, or is disabled):
+        cables the payload has slackened. x_d,LC is a pose offset, which cannot tension them (the
+        internal forces are not in its reach), so under position control they stay slack (on the
+        Mini, whose lower cables carry 5 N, under any payload worth compensating) and the force
+        watch may hold the robot; force control keeps them at f_min."""
+        if not self.params.enabled or not self.slack_cables:
+            return None
+        return (f"{self.slack_cables} of {self.robot.m} cables slack under the payload: x_d,LC cannot "
+                "tension them; carry this payload under force control")
 
     def payload_wrench(self, x_d, xdot_d, xddot_d) -> np.ndarray:
         """The wrench of the identified payload (point mass m_c at its cog, or at the platform origin
