@@ -65,6 +65,9 @@ def test_the_payload_is_fed_forward_once_and_the_filter_returns_without_it():
     for _ in range(int(10 * T_ff / DT)):
         fs.update(x_d, zero, zero, w_dyn + w_payload, w_model=w_payload)
     np.testing.assert_allclose(fs.w_d, w_dyn + w_payload, atol=1e-3 * np.abs(w_payload).max())
+    fs.set_params(ForceSetpointParams(T_wrench_filter=0.3))        # a parameter change keeps the payload's times
+    fs.update(x_d, zero, zero, w_dyn + w_payload, w_model=w_payload)
+    assert fs.wrench_filter.T > 0.55
     fs.update(x_d, zero, zero, w_dyn)
     assert fs.wrench_filter.T == 0.3 and not fs.w_ff.any()
 

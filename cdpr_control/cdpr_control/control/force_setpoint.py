@@ -150,6 +150,7 @@ class ForceSetpoint:
         if p.T_d_w != self.smith.T_d_w:
             self.smith.set_delay(p.T_d_w)
         self.wrench_filter.set_time_constant(p.T_wrench_filter)
+        self._eigen_in = 0                       # a known payload's filter times again from the next period
         weight = self.robot.platform.mass * float(np.linalg.norm(self.robot.gravity))
         radius = float(np.mean(np.linalg.norm(self.robot.b, axis=1)))
         self.w_dist_max = p.wrench_deviation_max * weight * np.r_[np.ones(3), np.full(3, radius)]
