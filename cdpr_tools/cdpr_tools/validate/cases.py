@@ -20,7 +20,7 @@ no orientation and has no divergence stop.
 from __future__ import annotations
 
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -51,6 +51,7 @@ PAYLOAD_FRACTIONS = (0.25, 0.5, 1.0)               # of the pose's static capaci
 # (T_output 1 s) and the OSPC's integral part (T_i / K_p about 2.6 s) reach the static sag
 PAYLOAD_REST, PAYLOAD_RAMP, PAYLOAD_DWELL = 0.7, 0.3, 4.0
 PAYLOAD_CONTROLLERS = ("force_control", "ik_lc")   # identify.load_steps.CONFIGS: the shipped graph; IK-only + (4.6)
+REFERENCE = "ik"                                    # the uncompensated sag: IK-only, no load compensation
 SAG_WINDOW = 0.3                                   # s: mean z error at the end of rest and dwell
 PUSH_DIRECTIONS = ((1, 0, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 1, -1), (-1, 1, 0))
 PUSH_SHARE = 0.65                                  # of w_max (the Mini: 13 N, the push of issue 25)
@@ -363,7 +364,9 @@ def _eigen_push(spec: CaseSpec, robot, overrides: dict, push: float) -> float:
 def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     """A payload step at the pose: REST tared empty, the step over PAYLOAD_RAMP (cosine, as a load
     put down by hand: an instantaneous step rings the lightly damped vertical mode), PAYLOAD_DWELL
-    after it -> (recorder, m_c (N,), ok)."""
+    after it -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
+    first hold (control.safety.ForceWatch, on by default) as (t [s], reason), else None: the
+    figures of a held run are those of the held robot, not of the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
 
@@ -373,19 +376,26 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
-    m_c = []
+    m_c, held = [], []
 
     def put_down(k, loop, sim):
         if k > 0:
             m_c.append(stage.compensation.m_c)
+            if loop.failure is not None and not held:
+                held.append((float(sim.output.t), loop.failure))
         i = k - n_rest
         if 0 <= i < n_ramp + 1:
             sim.set_payload(mass * (0.5 * (1.0 - np.cos(np.pi * min(i + 1, n_ramp) / n_ramp))))
 
+    params = loop_params(config, spec.robot)
+    if config == REFERENCE:
+        # the reference measures the sag IK-only control leaves; its lower cables go slack under a
+        # payload (the Mini's at any payload worth compensating), which the force watch would hold
+        params = replace(params, safety=replace(params.safety, force_watch=False))
     rec = Recorder(robot, [put_down])
-    ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, loop_params(config, spec.robot),
+    ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, params,
                       x0=x, offset_stages={"load_compensation": stage}, config=sim_config(spec))
-    return rec, np.array(m_c, dtype=float), ok
+    return rec, np.array(m_c, dtype=float), ok, (held[0] if held else None)
 
 
 def _sag(rec) -> float:
@@ -396,43 +406,59 @@ def _sag(rec) -> float:
     return float(z[-n:].mean() - z[rest].mean())
 
 
+def planned_capacity(robot, x) -> float:
+    """The largest payload [kg] the shipped force distribution holds at rest at x: the static
+    capacity (:func:`cdpr_control.motion.program_check.payload_capacity`) with the distribution's
+    f_min of the parameter file (150 N on the IPAnema 3, 7.5 N on the Mini; the robot files' 100 N
+    and 5 N are the cables' limits, which the distribution keeps a margin above). A payload beyond
+    it is one the shipped configuration cannot distribute at all, so 100 % of the robot-limit
+    capacity was a step the controllers could not carry by construction."""
+    from cdpr_control.motion.program_check import payload_capacity
+    from cdpr_tools.validate.grid import planned_f_min
+
+    planned = replace(robot, cable=replace(robot.cable, f_min=planned_f_min(robot)))
+    return payload_capacity(planned, x)
+
+
 def payload_case(spec: CaseSpec) -> list[CaseResult]:
-    """Payload step of the variant's fraction of the pose's static capacity
-    (:func:`cdpr_control.motion.program_check.payload_capacity`) under each of PAYLOAD_CONTROLLERS
+    """Payload step of the variant's fraction of the pose's static capacity under the shipped
+    configuration (:func:`planned_capacity`) under each of PAYLOAD_CONTROLLERS
     (force_control: CFC + OSPC with the identified payload in the force set-point, the shipped
     graph; ik_lc: IK-only with load compensation), one result each, and under IK-only without
     compensation (the reference sag). Estimate error from 1 s after the step began; sag cut
     against the reference."""
-    from dataclasses import replace
-
     from cdpr_control.motion.program_check import payload_capacity
 
     robot = load_robot(spec.robot)
-    capacity = payload_capacity(robot, spec.x)
+    capacity = planned_capacity(robot, spec.x)
     mass = spec.variant["fraction"] * capacity
     specs = [replace(spec, variant={**spec.variant, "controller": c}) for c in PAYLOAD_CONTROLLERS]
-    base = {"capacity_kg": capacity, "payload_kg": mass}
+    base = {"capacity_kg": capacity, "capacity_robot_limits_kg": payload_capacity(robot, spec.x), "payload_kg": mass}
     if mass < 0.1 * robot.platform.mass:
         return [CaseResult(s, dict(base), {}, "refused", f"static capacity {capacity:.3g} kg at this pose: no step to make")
                 for s in specs]
-    reference, _, ok_ref = _payload_run(spec, robot, "ik", mass)
+    reference, _, ok_ref, _ = _payload_run(spec, robot, REFERENCE, mass)       # (its force watch off)
     sag_reference = 1e3 * _sag(reference) if ok_ref else float("nan")
-    return [_payload_result(s, robot, mass, base, sag_reference, reference if not ok_ref else None) for s in specs]
+    note_ref = "" if ok_ref else f"the IK-only reference diverged at {reference.diverged_at:.3f} s"
+    return [_payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
 
 
-def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, failed_reference) -> CaseResult:
-    rec, m_c, ok = _payload_run(spec, robot, spec.variant["controller"], mass)
+def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, note_ref: str) -> CaseResult:
+    """One controller's run: a run that diverged fails as diverged, one the force watch held as held,
+    with the reason in the note."""
+    rec, m_c, ok, held = _payload_run(spec, robot, spec.variant["controller"], mass)
     after = rec.array("t") >= PAYLOAD_REST + 1.0
     f = rec.array("f")
-    sag = 1e3 * _sag(rec) if ok else float("nan")
-    metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if ok else float("nan"),
-               "sag_reference_mm": sag_reference, "sag_mm": sag,
+    usable = ok and held is None
+    sag = 1e3 * _sag(rec) if usable else float("nan")
+    metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if usable
+               else float("nan"), "sag_reference_mm": sag_reference, "sag_mm": sag,
                "sag_cut_percent": criteria.sag_cut_percent(sag_reference, sag),
-               "max_force_N": float(f.max()) if len(f) else float("nan")}
-    note = "" if ok else f"diverged at {rec.diverged_at:.3f} s"
-    if failed_reference is not None:
-        note += f"; the IK-only reference diverged at {failed_reference.diverged_at:.3f} s"
-    return judge(spec, metrics, not ok, note.strip("; "), rec.held)
+               "max_force_N": float(f.max()) if len(f) else float("nan"),
+               "held_at_s": float("nan") if held is None else held[0]}
+    notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s", note_ref]
+    held_text = rec.held or (None if held is None else f"held by the force watch at {held[0]:.3f} s ({held[1]})")
+    return judge(spec, metrics, not ok, "; ".join(n for n in notes if n), held_text)
 
 
 # ---- (d) program --------------------------------------------------------------------------------
