@@ -37,7 +37,7 @@ def _stand_in(robot, hold_at=None, diverged_at=None):
     return rec, np.full(len(t), 2.0), diverged_at is None, hold
 
 
-@pytest.mark.parametrize("hold_at, diverged_at, status", [(None, None, "failed"), (0.9, None, "diverged"),
+@pytest.mark.parametrize("hold_at, diverged_at, status", [(None, None, "failed"), (0.9, None, "held"),
                                                          (None, 1.2, "diverged")])
 def test_a_held_or_diverged_run_fails_with_its_reason(monkeypatch, hold_at, diverged_at, status):
     robot = load_robot("ipanema3_mini")
