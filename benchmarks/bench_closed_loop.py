@@ -76,7 +76,7 @@ def run(robot, compiled: bool) -> tuple[dict, list]:
                 ik_d, t0 = timed(kernels.inverse_kinematics, robot, x_d)
                 f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, ik_d.beta)
                 (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d, ik_d)
-                dist, t3 = timed(loop.force.update, x_d, xd, xdd, w, ik_d.AT)
+                dist, t3 = timed(loop.force.update, x_d, xd, xdd, w)
                 dq, t4 = timed(loop.cfc.update, dist.f, f, out.theta, dist.f_min, dist.f_max)
                 x_ospc, t5 = timed(loop.ospc.update, x_d, x)
                 _, t_safety = timed(loop.monitor.check, out.t, f=f, f_min=robot.cable.f_min,

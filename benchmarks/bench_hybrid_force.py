@@ -79,7 +79,7 @@ def main() -> None:
 
     def node_cfc_in_contact(k):
         a = task_force_direction(kernels.inverse_kinematics(robot, x_d).AT, z_t)
-        coupling_d.run("D", f_d[k], 500.0, a, coupled.controller, f[k])
+        coupling_d.run("D", f_d[k], a, coupled.controller, f[k])
 
     hand_over = ContactHandOver(0.3, DT)
     state_d = hpfc.update(F_d0, w[0])

@@ -11,7 +11,6 @@ Writes bench/validation.json. Run: .venv/bin/python benchmarks/bench_validation.
 from __future__ import annotations
 
 import argparse
-import json
 import pathlib
 import platform
 import sys
@@ -19,7 +18,7 @@ import sys
 from timing import python_calibration_us
 
 from cdpr_tools.validate.cases import FAMILIES
-from cdpr_tools.validate.report import HEADLINE
+from cdpr_tools.validate.report import HEADLINE, dumps
 from cdpr_tools.validate.sweep import ROBOTS, plants, validate
 from cdpr_tools.validate_cmd import _names, _seeds, add_parser
 
@@ -31,8 +30,9 @@ def family_figures(s: dict, family: str) -> dict:
     """A family's summary: counts, pass rate, its headline metric's mean and worst case with where."""
     headline = s["metrics"].get(HEADLINE[family], {})
     return {"cases": s["cases"], "passed": s["passed"], "pass_rate": s["pass_rate"], "diverged": s["diverged"],
-            "refused": s["refused"], "error": s["error"], "headline_metric": HEADLINE[family],
+            "held": s["held"], "refused": s["refused"], "error": s["error"], "headline_metric": HEADLINE[family],
             "mean": headline.get("mean"), "worst": headline.get("worst"), "where": headline.get("where"),
+            "not_measured": headline.get("not_measured", 0),
             "out_of_band": {k: m["out_of_band"] for k, m in s["metrics"].items() if m["out_of_band"]}}
 
 
@@ -53,8 +53,9 @@ def main(argv=None) -> None:
               "per_robot_plant": doc["per_robot_plant"], "python_calibration_us": calibration,
               "report": str(pathlib.Path(args.output) / "validation.json")}
     OUT.parent.mkdir(exist_ok=True)
-    OUT.write_text(json.dumps(result, indent=2))
-    print(json.dumps(result, indent=2))
+    text = dumps(result, indent=2)             # JSON without NaN: null where a metric was not measured
+    OUT.write_text(text)
+    print(text)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_control.control.admittance import AdmittanceController, fitted_settings
+from cdpr_control.control.admittance_zones import Clipping
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.params import shipped_configuration
 from cdpr_control.model.robot import load_robot
@@ -22,6 +24,7 @@ class GuidingRun:
     run: ClosedLoopRun
     source: HandGuiding      # its .outputs: the AdmittanceOutput of every period
     hand: Hand
+    clipping: Clipping | None   # how the zones were shrunk to fit the wrench-feasible workspace (None: as configured)
 
 
 def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = None, robot_name: str = "ipanema3_mini",
@@ -36,12 +39,17 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
     that of ``config`` (default: the mismatched one). The loop starts with the cable forces of the
     robot file's f_min and raises them to the planned ones within about 0.4 s; switched on before,
     the tare (the thesis' w_init) is taken while they still change, and the force sensors' gain
-    errors of the mismatched plant then read as a user wrench of a few N, N m (docs/admittance.md)."""
+    errors of the mismatched plant then read as a user wrench of a few N, N m (docs/admittance.md).
+
+    Near the border of the wrench-feasible workspace, zones that would leave it are shrunk to fit
+    (:func:`cdpr_control.control.admittance.fitted_settings`; how: ``GuidingRun.clipping``);
+    ValueError where not even the virtual wall's reach fits."""
     robot = load_robot(robot_name)
     shipped = shipped_configuration(robot)
     x_hold = np.array(robot.home if x_hold is None else x_hold, dtype=float)
     overrides = {"zones.origin": (x_hold - robot.home).tolist(), **(overrides or {})}
-    controller = shipped.admittance_controller(robot, overrides)
+    params, zones, loaded, clipping = fitted_settings({**shipped.admittance, **overrides}, robot)
+    controller = AdmittanceController(loaded, shipped.dt, params, zones)
     source, hand = HandGuiding(controller, x_hold), Hand(list(segments))
     k_enable = int(round(enable_at / shipped.dt))
 
@@ -53,4 +61,4 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
             before_step(k, loop, sim)
 
     result = run(robot, source, duration, loop_params or shipped.loop, x0=x_hold, before_step=step, config=config)
-    return GuidingRun(result, source, hand)
+    return GuidingRun(result, source, hand, clipping)

@@ -5,6 +5,12 @@ through the whole node graph of Fig. 3.4 (graphs/closed_loop.yaml: OSPC + CFC, Q
 tension), composed in one process; every topic is recorded to a bag under bags/. Then it prints
 the pose error against the simulator's ground truth, the cable forces against their limits, the
 real-time factor and the bag path, and writes PNG plots next to the bag.
+
+It exits 1 and says why when the run did not do what it was for: the program failed, the safety
+layer held the robot for good (a latched hold of the joint command on /diagnostics: the force
+watch, a lost input, the workspace left; a transient hold, such as a lag, is printed only),
+or the run diverged (a true cable force beyond DIVERGENCE_FACTOR f_max, or not finite), even when
+the program itself reached its end.
 """
 from __future__ import annotations
 
@@ -12,6 +18,8 @@ import json
 import time
 from datetime import datetime
 from pathlib import Path
+
+import numpy as np
 
 from cdpr_control import programs
 from cdpr_control.model.robot import load_robot
@@ -21,6 +29,7 @@ BAGS = Path(__file__).resolve().parents[2] / "bags"
 DEFAULT_PROGRAM = {"ipanema3_mini": "cuboid_mini", "ipanema3": "rectangle"}
 #: the surface a contact program (hybrid position/force control, section 5.1) presses on
 PROGRAM_SURFACE = {"floor_contact_ipanema3": "floor", "cylinder_contact_force": "cylinder"}
+DIVERGENCE_FACTOR = 1.5      # a true cable force beyond this times f_max: the run diverged (as cdpr validate)
 
 
 def add_parser(sub) -> None:
@@ -101,6 +110,8 @@ def run(args) -> int:
         print(f"[demo] program failed: {result.message}")
         return 1
     data = read_bag(bag)
+    latched, transient = holds(bag)
+    problems = run_problems(data, latched)
     summary = summarize(data)
     summary.update({"program": name, "robot": args.robot, "controller": args.controller, "mode": args.mode,
                     "program_duration_s": result.duration, "wall_time_s": wall,
@@ -115,7 +126,45 @@ def run(args) -> int:
     print(f"[demo] {data.t[-1]:.2f} s simulated in {wall:.1f} s wall: real-time factor {summary['real_time_factor']:.2f}")
     print(f"[demo] bag: {bag}")
     print("[demo] plots: " + ", ".join(str(p) for p in plots))
-    return 0
+    if transient:
+        print(f"[demo] the joint command held while a fault lasted ({transient[0]}"
+              f"{f'; {len(transient) - 1} more' if len(transient) > 1 else ''})")
+    for problem in problems:
+        print(f"[demo] run failed: {problem}")
+    return 1 if problems else 0
+
+
+def holds(bag) -> tuple[list[str], list[str]]:
+    """The holds the joint command reported on /diagnostics during the run, as "t = ... s: message"
+    (each change once, as reported) -> (latched: the force watch, a lost input, the workspace left,
+    which end the run; transient: a lag or a forward kinematics that did not converge, which hold
+    while they last)."""
+    from cdpr_tools.bag import BagReader
+
+    reader = BagReader(bag)
+    latched, transient = [], []
+    for m in reader.messages([t for t in reader.topics if t == "/diagnostics"]):
+        stamp = m.msg.header.stamp.sec + 1e-9 * m.msg.header.stamp.nanosec
+        for status in m.msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if status.name.endswith("joint_command") and values.get("holding") == "True":
+                (latched if values.get("abort") == "True" else transient).append(f"t = {stamp:.3f} s: {status.message}")
+    return latched, transient
+
+
+def run_problems(data, held: list[str]) -> list[str]:
+    """Why a run whose program ended did not do what it was for: the safety layer held it for good
+    (``held``: the latched holds of :func:`holds`), or a true cable force went beyond DIVERGENCE_FACTOR f_max or was not
+    finite ([] when neither)."""
+    problems = [f"the safety layer held the robot ({held[0]}{f'; {len(held) - 1} more' if len(held) > 1 else ''})"] \
+        if held else []
+    finite = np.isfinite(data.f).all(axis=1)
+    beyond = np.flatnonzero(~finite | (data.f > DIVERGENCE_FACTOR * data.f_max).any(axis=1))
+    if len(beyond):
+        i = beyond[0]
+        what = "not finite" if not finite[i] else f"{np.nanmax(data.f[i]):.4g} N > {DIVERGENCE_FACTOR} f_max"
+        problems.append(f"diverged: cable force {what} at t = {data.t[i]:.3f} s")
+    return problems
 
 
 RECORDED = {"/winch/state", "/winch/command", "/setpoint", "/ground_truth/pose", "/ground_truth/cable_forces",

@@ -12,6 +12,8 @@
 """
 from __future__ import annotations
 
+import sys
+
 
 def _force_arguments(parser) -> None:
     """The options of the identifications that need the cable forces at the platform."""
@@ -256,7 +258,16 @@ def run_load_steps(args) -> int:
                              lc_params=_lc_params(args.lc_params))
     for name, s in summary.items():
         print(f"{name:18s} sag {s['sag_mm_per_kg']:6.3f} mm/kg  worst static z error {s['max_abs_z_error_mm']:6.1f} mm")
-    return 0
+    return _outcome(summary)
+
+
+def _outcome(summary: dict) -> int:
+    """1 (with a line per run on stderr) when a run diverged or was held by the force watch: its
+    figures are not the controller's (cdpr_tools.identify.load_steps.run_outcome)."""
+    bad = {name: s["outcome"] for name, s in summary.items() if not s["ok"]}
+    for name, outcome in bad.items():
+        print(f"cdpr identify: {name}: {outcome}", file=sys.stderr)
+    return 1 if bad else 0
 
 
 def run_load_program(args) -> int:
@@ -273,7 +284,7 @@ def run_load_program(args) -> int:
     for key, s in summary.items():
         print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
               f"estimate error {s['max_estimate_error_percent']:5.1f} %")
-    return 0
+    return _outcome(summary)
 
 
 def _jit():

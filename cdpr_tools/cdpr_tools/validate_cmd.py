@@ -7,6 +7,7 @@ per family in the output directory.
 """
 from __future__ import annotations
 
+import math
 import sys
 
 from cdpr_tools.validate.cases import FAMILIES
@@ -79,7 +80,9 @@ def _summarise(results, doc, figures, outdir) -> int:
 
     for family, s in doc["summary"].items():
         print(report.summary_line(family, s))
-    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall, {doc['meta']['cpu_s']:.0f} s CPU; "
+    cpu = doc["meta"]["cpu_s"]
+    cpu = f"{cpu:.0f} s CPU" if math.isfinite(cpu) else "CPU time not recorded"
+    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall, {cpu}; "
           f"{outdir}/validation.json, "
           "validation.txt, " + ", ".join(f.name for f in figures))
     return 0 if all(r.passed for r in results) else 1

@@ -231,3 +231,82 @@ def test_shipped_parameter_files_are_valid_for_their_robot(name):
     assert values.pop("hand_guiding") is False                  # off at start-up
     assert set(values) <= set(default_parameters())
     settings_from(values, load_robot(name))
+
+
+# ---- zones near the border of the WFW: shrunk to fit, not refused --------------------------------
+
+IPANEMA3 = load_robot("ipanema3")
+# a border pose of the validation grid (ipanema3 #1, 98 % of its ray's border distance)
+IPANEMA3_BORDER = [2.283, -3.842, 1.983, 0.0, 0.0, 0.0]
+
+
+def _shipped_values(robot, x):
+    from cdpr_control.control.params import load_params_file
+
+    values = dict(load_params_file(robot.file.stem)["admittance_controller"])
+    values.pop("hand_guiding")
+    return {**values, "zones.origin": (np.asarray(x) - robot.home).tolist()}
+
+
+def test_zones_that_fit_are_not_clipped():
+    from cdpr_control.control.admittance import fitted_settings
+
+    params, zones, _, clipping = fitted_settings(_shipped_values(IPANEMA3, IPANEMA3.home), IPANEMA3)
+    assert clipping is None
+    np.testing.assert_array_equal(zones.box, settings_from(_shipped_values(IPANEMA3, IPANEMA3.home), IPANEMA3)[1].box)
+
+
+def test_zones_leaving_the_wfw_near_the_border_are_shrunk_to_the_largest_that_fits():
+    from cdpr_control.control.admittance import fitted_settings
+    from cdpr_control.control.admittance_zones import scaled
+
+    values = _shipped_values(IPANEMA3, IPANEMA3_BORDER)
+    with pytest.raises(ValueError, match="wrench-feasible"):
+        settings_from(values, IPANEMA3)                            # as configured, it leaves the WFW
+    params, zones, loaded, clipping = fitted_settings(values, IPANEMA3)
+    configured = settings_from(values, IPANEMA3, check_workspace=False)[1]
+    assert 0.0 < clipping.scale < 1.0
+    np.testing.assert_allclose(zones.box, clipping.scale * configured.box)
+    assert zones.zones[0].size == pytest.approx(clipping.scale * configured.zones[0].size)   # the rest sphere too
+    np.testing.assert_array_equal(zones.x_0, IPANEMA3_BORDER)
+    for a, b in zip(zones.zones, configured.zones):                # the dynamics are kept
+        np.testing.assert_array_equal(a.c, b.c) and np.testing.assert_array_equal(a.m, b.m)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    with pytest.raises(ValueError):                                 # the largest: 2 % more leaves it
+        check_in_workspace(loaded, scaled(configured, 1.02 * clipping.scale), params.user.w_max, params.v_max)
+    assert f"scaled by {clipping.scale:.3g}" in clipping.text() and "clipped" in clipping.text()
+
+
+def test_where_not_even_the_walls_reach_fits_the_limits_shrink_with_the_zones():
+    """Nearer the border the wall's reach (proportional to w_max and v_max) leaves the WFW with any
+    box: zones, v_max and w_max are scaled by one factor, the largest that fits (w_max not
+    below 1.25 x the dead band)."""
+    from cdpr_control.control.admittance import fitted_settings
+    from cdpr_control.control.admittance_zones import W_MAX_OVER_DEAD_BAND, per_axis, scaled
+
+    x = np.array(IPANEMA3_BORDER)
+    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.05     # 5 % further out
+    values = _shipped_values(IPANEMA3, x)
+    configured_params, configured, _ = settings_from(values, IPANEMA3, check_workspace=False)
+    w_max, v_max = (per_axis(v, "") for v in (configured_params.user.w_max, configured_params.v_max))
+    floor = W_MAX_OVER_DEAD_BAND * per_axis(configured_params.user.dead_band, "")
+    with pytest.raises(ValueError, match="wrench-feasible"):                      # box alone: none fits
+        check_in_workspace(IPANEMA3, scaled(configured, 1e-3), w_max, v_max)
+    params, zones, loaded, clipping = fitted_settings(values, IPANEMA3)
+    k = clipping.reach_scale
+    assert 0.0 < k < 1.0 and clipping.scale == k and "v_max and w_max scaled by" in clipping.text()
+    np.testing.assert_allclose(params.v_max, k * v_max)
+    np.testing.assert_allclose(params.user.w_max, np.maximum(k * w_max, floor))
+    np.testing.assert_allclose(zones.box, k * configured.box)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    with pytest.raises(ValueError):                                  # the largest
+        check_in_workspace(loaded, scaled(configured, 1.02 * k), np.maximum(1.02 * k * w_max, floor), 1.02 * k * v_max)
+
+
+def test_where_nothing_fits_hand_guiding_is_refused_with_the_reason():
+    from cdpr_control.control.admittance import fitted_settings
+
+    x = np.array(IPANEMA3_BORDER)
+    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.08     # 8 % further out, still in the WFW
+    with pytest.raises(ValueError, match="no virtual workspace fits"):
+        fitted_settings({**_shipped_values(IPANEMA3, x), "dead_band": [90.0, 90.0, 90.0, 9.0, 9.0, 9.0]}, IPANEMA3)

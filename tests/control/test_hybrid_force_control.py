@@ -94,57 +94,56 @@ def test_tare_at_the_approach_removes_a_sensor_offset():
 def test_cfc_runs_in_contact_with_the_average_feed_forward_and_the_live_contact_share():
     """Section 5.1.2: paused in A-C; in D the error acts on the live set-point and the feed-forward
     follows it through the moving average, but along a (the contact force's direction in cable
-    forces) it goes to the live one within HAND_OVER_TIME, its contact force F_ff handed to the
-    caller; back in I it blends back."""
+    forces) it goes to the live one within HAND_OVER_TIME; back in I it blends back."""
     c = CFCCoupling(0.01, 1e-3)                              # 10 samples
     a = np.r_[-np.ones(4), np.ones(4)] / np.sqrt(8.0)
     f0 = np.full(8, 100.0)
     f1 = f0 + np.r_[np.full(4, 50.0), np.full(4, 250.0)]      # more tension and a contact share
     for state in ("A", "B", "C"):
-        f_err, f_ff, paused, F_ff = c.contact_update(state, f0 if state == "A" else f1, 20.0, a)
-        assert paused and np.allclose(f_err, f0) and np.allclose(f_ff, f0) and F_ff == 0.0
-    f_err, f_ff, paused, F_ff = c.contact_update("D", f1, 500.0, a)
+        f_err, f_ff, paused = c.contact_update(state, f0 if state == "A" else f1, a)
+        assert paused and np.allclose(f_err, f0) and np.allclose(f_ff, f0)
+    f_err, f_ff, paused = c.contact_update("D", f1, a)
     share = 1e-3 / HAND_OVER_TIME                             # the hand-over ramps in
-    assert not paused and F_ff == pytest.approx(share * 500.0)
+    assert not paused
     P = np.eye(8) - np.outer(a, a)
     assert a @ f_err == pytest.approx(a @ f1)                 # the error: live along a,
     np.testing.assert_allclose(P @ f_err, P @ (f0 + share * (f1 - f0)))   # ramped across it
     assert a @ f_ff == pytest.approx(a @ (f0 + share * (f1 - f0)))       # feed-forward: ramped along a,
     np.testing.assert_allclose(P @ f_ff, P @ (0.9 * f0 + 0.1 * f1))      # averaged across it
     for _ in range(int(HAND_OVER_TIME / 1e-3)):
-        f_err, f_ff, paused, F_ff = c.contact_update("D", f1, 500.0, a)
+        f_err, f_ff, paused = c.contact_update("D", f1, a)
     np.testing.assert_allclose(f_ff, f1)
     np.testing.assert_allclose(f_err, f1)
-    assert F_ff == 500.0
-    outs = [c.contact_update("I", f0, 0.0, a) for _ in range(12)]
-    assert not outs[0][2] and np.allclose(outs[-1][1], f0) and outs[-1][3] == 0.0
+    outs = [c.contact_update("I", f0, a) for _ in range(12)]
+    assert not outs[0][2] and np.allclose(outs[-1][1], f0)
 
 
-def test_the_graphs_hand_over_offset_is_the_one_of_the_cfc_coupling():
-    """The node graph's x_comp (ContactHandOver, in hybrid_force_controller) presses with the
-    F_ff that CFCCoupling.contact_update hands the in-process loop, through the same PT1 of the
-    expected contact force: 0 while paused (A-C), ramped in over HAND_OVER_TIME in D, all of it in
-    R and I, x_comp = -F_ff / k_t z_t, and 0 while the CFC's output is not applied."""
+def test_the_hand_over_offset_ramps_in_with_the_cfc_feed_forward_along_the_task_axis():
+    """x_comp = -F_ff / k_t z_t (ContactHandOver, in HybridForceStage): F_ff the expected contact
+    force F_d through the PT1 of the force distribution's wrench filter, 0 while the CFC is paused
+    (A-C), ramped in over HAND_OVER_TIME in D (as CFCCoupling.contact_update ramps the feed-forward
+    along a), all of it in R and I; 0 while the CFC's output is not applied."""
     dt, k_t, T_c = 1e-3, 12600.0, 0.3
     z = np.array([0.0, 0.0, -1.0])
-    a = np.r_[-np.ones(4), np.ones(4)] / np.sqrt(8.0)
-    coupling, hand_over, off = CFCCoupling(2.0, dt), ContactHandOver(T_c, dt), ContactHandOver(T_c, dt)
+    hand_over, off = ContactHandOver(T_c, dt), ContactHandOver(T_c, dt)
     F_c = LowPass(T_c, dt)
+    n_ramp = int(round(HAND_OVER_TIME / dt))
     states = ["I"] * 5 + ["A"] * 50 + ["B"] * 30 + ["D"] * 400 + ["R"] * 100 + ["I"] * 100
     F_d = [500.0] * 485 + list(np.linspace(500.0, 0.0, 100)) + [0.0] * 100
-    seen = set()
+    k_d = states.index("D")
     for k, (state, F) in enumerate(zip(states, F_d)):
         hpfc = HPFCState(state, True, z, 500.0 * z, np.zeros(3), F, 0.0, F, 0.0, 0.0, 0.0, False, np.zeros(6))
-        F_exp = F_c.update(F if state != "I" else 0.0)
-        F_ff = coupling.contact_update(state, np.full(8, 100.0), float(F_exp), a)[3]
+        F_exp = float(F_c.update(F if state != "I" else 0.0))
         x_comp = hand_over.update(hpfc, k_t, True)
-        assert x_comp[:3] == pytest.approx(-F_ff / k_t * z, abs=1e-15), (k, state)
-        assert np.all(x_comp[3:] == 0.0) and np.all(off.update(hpfc, k_t, False) == 0.0)
-        if F_ff != 0.0:
-            seen.add(state)
-        if state == "D" and states[k - 1] == "B":
-            assert F_ff == pytest.approx(dt / HAND_OVER_TIME * F_exp)      # the ramp starts
-    assert seen == {"D", "R", "I"}
+        assert np.all(x_comp[3:] == 0.0) and np.all(x_comp[:2] == 0.0)
+        assert np.all(off.update(hpfc, k_t, False) == 0.0)
+        F_ff = -x_comp[2] / z[2] * k_t
+        if state in "ABC" or k < 5:
+            assert F_ff == 0.0, (k, state)
+        elif state == "D" and k - k_d < n_ramp:
+            assert F_ff == pytest.approx((k - k_d + 1) * dt / HAND_OVER_TIME * F_exp, rel=1e-9), (k, state)
+        else:
+            assert F_ff == pytest.approx(F_exp, rel=1e-12) and F_ff > 0.0, (k, state)
 
 
 def test_absorb_moves_x_t_and_its_integral_part_in_contact_only():

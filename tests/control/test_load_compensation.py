@@ -116,10 +116,34 @@ def test_secant_offset_is_the_command_that_holds_128_kg_at_the_set_point():
     np.testing.assert_allclose(c[3:], c_exact[3:], atol=0.1 * np.abs(c_exact[3:]).max())
     tangent = compliance(ik, f, cable_stiffness_model(IPANEMA3, ik, f, "nonlinear", 20.0)) @ w_c
     assert abs(tangent[2] - c_exact[2]) > 0.07 * c_exact[2]
-    # no payload, no offset; an ill-posed state (fewer than 6 tensed cables) raises
+    # no payload, no offset; no tensed cable, or one that cannot carry w_c, raises
     np.testing.assert_allclose(secant_offset(IPANEMA3, ik, f_0, np.zeros(6), f_ref=f_0), 0.0, atol=1e-12)
     with pytest.raises(np.linalg.LinAlgError):
-        secant_offset(IPANEMA3, ik, np.r_[f[:4], np.zeros(4)], w_c)
+        secant_offset(IPANEMA3, ik, np.zeros(8), w_c)
+    with pytest.raises(np.linalg.LinAlgError):
+        secant_offset(IPANEMA3, ik, np.r_[f[:1], np.zeros(7)], w_c)
+
+
+def test_secant_offset_with_four_slack_cables_is_the_command_that_holds_the_mini_payload():
+    """The Mini under IK-only control: its lower cables (5 N) go slack under half its static capacity
+    at home and the platform hangs on the four upper ones, so K_c has rank 4. The minimum-norm
+    secant offset still gives the command that puts the platform back (this raised before, and the
+    load compensation kept its first offset: no sag cut on the Mini)."""
+    x, m = MINI.home, 4.4
+    x_0, f_0 = _ik_only_state(MINI, x, 0.0)
+    command = x.copy()
+    for _ in range(30):
+        command -= _ik_only_state(MINI, x, m, command)[0] - x_0
+    x_c, f = _ik_only_state(MINI, x, m, command)
+    c_exact = command - x
+    assert np.sum(f < 0.2 * MINI.cable.f_min) == 4
+    ik = inverse_kinematics(MINI, x)
+    c = secant_offset(MINI, ik, f, compensating_wrench(m, MINI.gravity), f_ref=f_0)
+    assert c[2] == pytest.approx(c_exact[2], rel=0.02)
+    # the command x + c holds the loaded platform where it stood unloaded, to 2 % of the sag
+    x_held, _ = _ik_only_state(MINI, x, m, x + c)
+    sag = _ik_only_state(MINI, x, m)[0][2] - x_0[2]
+    assert abs(x_held[2] - x_0[2]) < 0.02 * abs(sag)
 
 
 def test_secant_offset_shortens_the_cables_by_their_settlement():

@@ -107,9 +107,15 @@ def test_parameters_are_validated_live_and_a_refusal_keeps_the_old_value():
     try:
         node = spinner.add(AdmittanceControllerNode)
         box = node.get_parameter("zones.free.box").value
+        result = node.set_parameters([Parameter("zones.rest.radius", value=0.05)])[0]   # outside the 0.03 m box
+        assert not result.successful and "rest sphere" in result.reason
+        assert node.get_parameter("zones.rest.radius").value == 0.01
+        # a box whose wall would leave the wrench-feasible workspace is shrunk to fit, and said so
         result = node.set_parameters([Parameter("zones.free.box", value=[0.3, 0.3, 0.3, 0.05, 0.05, 0.05])])[0]
-        assert not result.successful and "wrench-feasible" in result.reason
-        assert list(node.get_parameter("zones.free.box").value) == list(box)
+        assert result.successful and "clipped" in node.clipping_note
+        assert np.all(node.controller.zones.box < [0.3, 0.3, 0.3, 0.05, 0.05, 0.05])
+        assert node.set_parameters([Parameter("zones.free.box", value=list(box))])[0].successful
+        assert node.clipping_note == "" and list(node.controller.zones.box) == list(box)
         assert node.set_parameters([Parameter("zones.free.d", value=[100.0] * 6)])[0].successful
         assert node.controller.zones.zones[1].d[0] == 100.0                 # applied without a restart
         status = node.create_publisher(ProgramStatus, "program_status", STATUS)

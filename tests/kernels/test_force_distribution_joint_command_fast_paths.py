@@ -71,21 +71,28 @@ def test_joint_command_update_with_one_offset_is_the_general_path(robot):  # noq
     assert jc.held and np.all(np.abs(jc.velocity) <= np.abs(velocity))
 
 
-def test_force_setpoint_with_the_callers_model_wrench(robot):  # noqa: F811
-    """ForceSetpoint.update with w_dyn (and A^T) from the caller: the same result as computing them."""
+def test_force_setpoint_keeps_its_model_wrench_only_while_the_setpoint_repeats(robot):  # noqa: F811
+    """ForceSetpoint keeps w_dyn (2.33) and A^T (2.10) while the set-point repeats: the same results,
+    bit for bit, as a stage that computes them every period, also where the set-point changes in
+    one of its 18 values or a zero changes its sign."""
     rng = np.random.default_rng(5)
     params = ForceSetpointParams(tension_level=0.2)
     a, b = ForceSetpoint(robot, DT, params), ForceSetpoint(robot, DT, params)
     weight = np.r_[robot.platform.mass * robot.gravity, 0, 0, 0]
-    for x_d in _poses(robot, 40, rng, scale=0.01):
-        xdot_d, xddot_d = rng.uniform(-0.1, 0.1, 6), rng.uniform(-1, 1, 6)
+    x_d, xdot_d, xddot_d = robot.home.copy(), np.zeros(6), np.zeros(6)
+    for k in range(60):
+        if k % 4 == 1:                                     # one value of the set-point changes
+            v = (x_d, xdot_d, xddot_d)[k % 3].copy()
+            v[k % 6] += rng.uniform(-1e-3, 1e-3)
+            x_d, xdot_d, xddot_d = (v if i == k % 3 else u for i, u in enumerate((x_d, xdot_d, xddot_d)))
+        if k % 9 == 8:
+            xdot_d = np.where(xdot_d == 0.0, -xdot_d, xdot_d)     # -0.0 for 0.0: the same value
         w = -weight + rng.normal(0, 0.5, 6)
         w_model = payload_wrench(robot, x_d, xdot_d, xddot_d, 0.5)
         ra = a.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
-        w_dyn = kernels.platform_wrench(robot, x_d, xdot_d, xddot_d)
-        AT, = kernels.inverse_kinematics_fields(robot, x_d, "AT")
-        rb = b.update(x_d, xdot_d, xddot_d, w, AT, w_model, w_dyn)
-        assert same_bits(a.w_d, b.w_d) and same_bits(ra.f, rb.f)
+        b._model_key = None                                # b: computed every period
+        rb = b.update(x_d.copy(), xdot_d.copy(), xddot_d.copy(), w, w_model=w_model)
+        assert same_bits(a.w_d, b.w_d) and same_bits(ra.f, rb.f), f"period {k}"
         assert (ra.status, ra.residual, ra.iterations) == (rb.status, rb.residual, rb.iterations)
 
 

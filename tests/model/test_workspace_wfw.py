@@ -43,7 +43,7 @@ def test_membership_is_the_qp_feasibility_and_agrees_with_daqp(robot, grid_sets)
 
 def test_wrench_feasible_matches_brute_force_on_random_problems():
     """The Fourier-Motzkin test against the exact kernel QP and DAQP on hand-made robots."""
-    from test_force_distribution_methods import random_problems
+    from cdpr_test_nodes.force_problems import random_problems
 
     AT, w = random_problems(300, seed=7)
     member = fd.wrench_feasible(AT, w, 100.0, 3000.0)

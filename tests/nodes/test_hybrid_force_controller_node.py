@@ -99,9 +99,9 @@ def test_rejected_parameter_keeps_the_old_value(graph):
     hpfc = graph[0][0]
     result = hpfc.set_parameters([Parameter("K_p", value=0.0)])[0]
     assert not result.successful
-    assert hpfc.get_parameter("K_p").value == 22000.0 and hpfc.stage.params.K_p == 22000.0
+    assert hpfc.get_parameter("K_p").value == 22000.0 and hpfc.stage.control.params.K_p == 22000.0
     assert hpfc.set_parameters([Parameter("T_i", value=1.5)])[0].successful
-    assert hpfc.stage.params.T_i == 1.5
+    assert hpfc.stage.control.params.T_i == 1.5
 
 
 def test_force_distribution_plans_for_the_expected_contact_force(graph):

@@ -203,3 +203,78 @@ def test_border_program_under_force_control_keeps_the_cables_within_limits():
     (r,) = run_case(_spec("program", {"controller": "force_control", "poses": [border.x[:3].tolist()]}))
     assert np.isfinite(r.metrics["position_error_max_mm"])
     assert r.passed, (r.metrics, r.note)
+
+
+# ---- the report never shows NaN; a held run fails --------------------------------------------------
+
+def test_a_metric_not_measured_is_reported_as_such_never_as_nan(tmp_path, capsys):
+    """Two guiding cases measured the eigenfrequency error (one out of band), one could not: the
+    summary's worst case is the measured one with where, the third is counted as not measured, and
+    validation.json holds null (JSON has no NaN)."""
+    import json
+
+    from cdpr_tools.cli import main
+
+    spec = CaseSpec("guiding", "ipanema3", 0, [0.0, 0.0, 0.5, 0, 0, 0], False, "mismatched", 1, {"direction": (1, 0, 0)})
+    values = (1.0, -3.3, float("nan"))
+    results = [judge(replace(spec, pose_index=i), {"rest_wrench_percent": float("nan"), "eigenfrequency_error_percent": v,
+                                                   "settling_s": float("inf") if i == 2 else 1.0}, False)
+               for i, v in enumerate(values)]
+    with CaseLog(tmp_path) as log:
+        log.write(results)
+    assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
+    out = capsys.readouterr().out
+    assert "nan" not in out.lower() and "CPU time not recorded" not in out
+    assert "rest_wrench_percent not measured in 3 cases" in out
+    text = (tmp_path / "r" / "validation.json").read_text()
+    doc = json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in validation.json"))
+    m = doc["summary"]["guiding"]["metrics"]["eigenfrequency_error_percent"]
+    assert m["worst"] == -3.3 and "#1" in m["where"] and m["not_measured"] == 1 and m["out_of_band"] == 2
+    assert doc["summary"]["guiding"]["metrics"]["rest_wrench_percent"]["mean"] is None
+    settling = doc["summary"]["guiding"]["metrics"]["settling_s"]             # never settled: the worst, said so
+    assert settling["worst"] == "inf" and "#2" in settling["where"] and settling["mean"] == 1.0
+    assert "nan" not in (tmp_path / "r" / "validation.txt").read_text().lower()
+    assert np.isnan(read_cases(tmp_path / "cases.jsonl")[2].metrics["eigenfrequency_error_percent"])
+
+
+def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault(tmp_path, capsys):
+    from cdpr_control.control.safety import Fault
+
+    robot = load_robot("ipanema3_mini")
+    rec = Recorder(robot)
+    out = SimpleNamespace(t=0.001, x=np.zeros(6), f=np.full(8, 20.0), w_contact=np.zeros(6))
+    rec(1, SimpleNamespace(state=SimpleNamespace(faults=[Fault("lag", "a lag reported only", False)])),
+        SimpleNamespace(output=out))
+    assert rec.held is None
+    rec(2, SimpleNamespace(state=SimpleNamespace(faults=[Fault("force_watch", "cable 1 above f_max", True)])),
+        SimpleNamespace(output=SimpleNamespace(**{**vars(out), "t": 0.002})))
+    assert rec.held == "held at 0.002 s: force_watch: cable 1 above f_max"
+    spec = _spec("guiding", {"direction": (1, 0, 0)})
+    r = judge(spec, {"rest_motion_mm": 0.1}, False, "", rec.held)
+    assert r.status == "held" and not r.passed and "force_watch" in r.note
+    assert judge(spec, {"rest_motion_mm": 0.1}, False).passed
+    from cdpr_tools.cli import main
+
+    with CaseLog(tmp_path) as log:                     # the command exits 1 and says so
+        log.write([r, judge(replace(spec, pose_index=1), {"rest_motion_mm": 0.1}, False)])
+    assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
+    assert "guiding: 1/2 passed (50 %) [1 held]" in capsys.readouterr().out
+
+
+def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():
+    """Near the border the shipped zones leave the WFW: the case guides in zones shrunk to fit
+    (said in its note) instead of being refused, and rests within the bands."""
+    border = [p for p in sweep_poses(MINI, 4) if p.border][-1]          # the grid's #3
+    (r,) = run_case(_spec("guiding", {"direction": (0, 0, -1)}, border.x.tolist()))
+    assert r.status != "refused" and "clipped to the wrench-feasible workspace" in r.note, r.note
+    assert r.checks["rest_motion_mm"] and r.checks["rest_wrench_percent"], r.metrics
+    assert np.isfinite(r.metrics["eigenfrequency_error_percent"]) and r.checks["eigenfrequency_error_percent"]
+
+
+def test_ik_only_slack_is_reported_not_judged_but_f_max_is():
+    """IK-only (section 2.3.2) does not control the cable forces: the program family reports its
+    slack cables, the f_max limit still fails it; under force control both are judged."""
+    from cdpr_tools.validate import criteria
+    assert criteria.band_for("force_below_f_min_N", "nominal", "ik_only") is None
+    assert criteria.band_for("force_above_f_max_N", "nominal", "ik_only") is not None
+    assert not criteria.band_for("force_below_f_min_N", "mismatched", "force_control").holds(3.0)

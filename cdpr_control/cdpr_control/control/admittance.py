@@ -25,12 +25,12 @@ T_1 = 3 ms, DB a dead band per axis, then a saturation at w_max.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import expm
 
-from cdpr_control.control.admittance_zones import ZoneSet, hard_box, per_axis, thesis_zones
+from cdpr_control.control.admittance_zones import ZoneSet, fit_in_workspace, hard_box, per_axis, thesis_zones
 from cdpr_control.model.dynamics import dynamic_wrench, gravity_wrench
 from cdpr_control.control.filters import LowPass
 from cdpr_control.model.kinematics import twist_from_pose_rates
@@ -365,3 +365,17 @@ def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[Ad
     if check_workspace:
         check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
     return params, zones, loaded
+
+
+def fitted_settings(values: dict, robot):
+    """:func:`settings_from`, but a virtual workspace that leaves the WFW is shrunk to fit
+    (:func:`~cdpr_control.control.admittance_zones.fit_in_workspace`: the zones, and where that is
+    not enough w_max and v_max too) instead of refused -> (params, zones, robot with the known
+    payload, Clipping or None). ValueError for an invalid set, or where nothing fits."""
+    params, zones, loaded = settings_from(values, robot, check_workspace=False)
+    zones, w_max, v_max, clipping = fit_in_workspace(loaded, zones, params.user.w_max, params.v_max,
+                                                     params.user.dead_band)
+    if clipping is not None and clipping.reach_scale < 1.0:
+        params = replace(params, v_max=v_max, user=replace(params.user, w_max=w_max))
+        params.validate()
+    return params, zones, loaded, clipping

@@ -20,7 +20,10 @@ c R_1 to zero when the platform leaves the sphere: the thesis' "dragging two mag
 
 The wall zone never leaves the wrench-feasible workspace (WFW, section 2.2.1) when the *hard box*,
 the last box widened by the largest penetration a bounded user wrench and velocity can cause,
-lies in the WFW: :func:`max_penetration`, :func:`hard_box`, :func:`check_in_workspace`.
+lies in the WFW: :func:`max_penetration`, :func:`hard_box`, :func:`check_in_workspace`. Near the
+border of the WFW a configured zone set may not fit: :func:`fit_in_workspace` then shrinks the free
+box and the rest sphere by one factor until the hard box fits, and says so (:class:`Clipping`). This
+departs from the thesis, which guided the Mini about one pose only (docs/admittance.md).
 """
 from __future__ import annotations
 
@@ -233,3 +236,79 @@ def box_from_workspace(robot, x_0, shape, w_max, v_max, zones: ZoneSet, tol: flo
     if lo == 0.0:
         raise ValueError("no box of this shape fits: the origin's wall reach leaves the workspace")
     return lo * shape
+
+
+@dataclass(frozen=True)
+class Clipping:
+    """How :func:`fit_in_workspace` shrank a zone set so that its hard box lies in the WFW: the free
+    box and the rest sphere scaled by ``scale`` (< 1); where the wall's reach alone left the WFW,
+    also the user wrench's saturation w_max and the velocity limit v_max by ``reach_scale`` (< 1;
+    the reach is proportional to them)."""
+
+    scale: float
+    box: np.ndarray              # configured half-widths of the free box
+    rest_radius: float           # configured radius of the rest sphere [m]
+    reach_scale: float = 1.0
+
+    def text(self) -> str:
+        box = np.round(self.scale * self.box, 4).tolist()
+        reach = (f"; v_max and w_max scaled by {self.reach_scale:.3g} too (w_max at least "
+                 f"{W_MAX_OVER_DEAD_BAND:g} x the dead band)" if self.reach_scale < 1.0 else "")
+        return (f"virtual workspace clipped to the wrench-feasible workspace: free box and rest sphere scaled "
+                f"by {self.scale:.3g} (box half-widths {box}, rest radius {self.scale * self.rest_radius:.4g} m; "
+                f"configured {np.round(self.box, 4).tolist()}, {self.rest_radius:g} m){reach}")
+
+
+def scaled(zones: ZoneSet, k: float) -> ZoneSet:
+    """The zone set with its box and sphere zones scaled by k about x_0 (c, d, m kept)."""
+    return ZoneSet(tuple(Zone(z.name, z.shape, None if z.size is None else k * np.asarray(z.size), z.c, z.d, z.m,
+                              z.spring) for z in zones.zones), zones.x_0)
+
+
+def _largest(fits, lo: float, tol: float) -> float:
+    """The largest k in (lo, 1) with fits(k), by bisection to ``tol`` (lo: none fits)."""
+    hi = 1.0
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
+
+
+W_MAX_OVER_DEAD_BAND = 1.25   # a shrunk w_max stays this far above the dead band (a user wrench of 20 % of it)
+
+
+def fit_in_workspace(robot, zones: ZoneSet, w_max, v_max, dead_band=0.0, tol: float = 1e-3, f_min=None,
+                     f_max=None) -> tuple[ZoneSet, np.ndarray, np.ndarray, Clipping | None]:
+    """(zones, w_max, v_max, clipping) whose hard box lies in the WFW of ``robot``: as given when
+    it does (clipping None); else the zones scaled by the largest k < 1 that fits (by bisection to
+    ``tol``), the dynamics and limits kept; where no k does (the wall's reach
+    :func:`max_penetration` alone leaves the WFW), the zones, v_max and w_max all scaled by the
+    largest k that fits (the reach is proportional to v_max and w_max: near the border the user
+    guides slower and with less force), w_max kept W_MAX_OVER_DEAD_BAND above the dead band.
+    ValueError when nothing fits even so."""
+    w_max, v_max = per_axis(w_max, "w_max"), per_axis(v_max, "v_max")
+    w_floor = W_MAX_OVER_DEAD_BAND * per_axis(dead_band, "dead_band")
+
+    def fits(k, limits_too=False):
+        w, v = (np.maximum(k * w_max, np.minimum(w_floor, w_max)), k * v_max) if limits_too else (w_max, v_max)
+        try:
+            check_in_workspace(robot, scaled(zones, k), w, v, f_min, f_max)
+            return True
+        except ValueError:
+            return False
+
+    spheres = [z.size for z in zones.zones if z.shape == "sphere"]
+    radius = float(spheres[0]) if spheres else 0.0
+    if fits(1.0):
+        return zones, w_max, v_max, None
+    k = _largest(fits, 0.0, tol)
+    if k > 0.0:
+        return scaled(zones, k), w_max, v_max, Clipping(k, zones.box, radius)
+    k = _largest(lambda k: fits(k, True), 0.0, tol)
+    if k == 0.0:
+        reach = np.round(max_penetration(zones, w_max, v_max), 4).tolist()
+        raise ValueError(f"no virtual workspace fits at this origin: the wall's reach {reach} leaves the "
+                         "wrench-feasible workspace even with w_max and v_max scaled down (w_max to "
+                         f"{W_MAX_OVER_DEAD_BAND:g} x the dead band; move the zone origin inwards)")
+    w = np.maximum(k * w_max, np.minimum(w_floor, w_max))
+    return scaled(zones, k), w, k * v_max, Clipping(k, zones.box, radius, k)

@@ -6,6 +6,18 @@ through the Smith predictor (3.26), whose disturbance part w - w_dyn(t - T_d,w) 
 anticipated inertia wrench reaches w_d without the filter's lag; the distribution is solved for A^T at x_d with the tension level's reference force. A change
 of the tension level is ramped (``tension_rate``, full range per second) so that the internal forces
 move smoothly and the platform does not.
+
+A known payload (``w_model``, the identified payload of the load compensation) is fed forward:
+w_d = w_dyn + sat(PT1(w - w_ff - w_dyn(t - T_d,w))) + w_ff, w_ff = PT1_ff(w_model), so the
+disturbance filter sees only what the identification has not explained and the payload reaches
+f_d at the pace of the identification, not of the disturbance filter (on the Mini the lagging f_d
+let the lower cables go slack while a payload was put down). Both filters keep the
+measured-wrench loop w -> PT1 -> w_d -> f_d -> cable forces -> w where it was measured stable
+(:func:`loop_filter_times`): the loop passes the platform's inertia through the filter, and what
+decides it is ω_n T, the platform's vertical eigenfrequency (4.8) against the filter's time
+constant; a payload lowers ω_n (the 90 kg divergence of docs/load_compensation.md: 2.38 Hz,
+ω_n T = 4.5 with the 0.3 s filter; stable with 0.6 s, ω_n T = 9). Both time constants are
+therefore at least OMEGA_T / ω_n, the disturbance filter's never below ``T_wrench_filter``.
 """
 from __future__ import annotations
 
@@ -15,10 +27,50 @@ import numpy as np
 
 from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
+from cdpr_control.model import cable
+from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
+from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, expected_contact_wrench_of, task_axis
+from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
 from cdpr_control.control.safety import all_finite
 from cdpr_control.force_distribution import (BACKENDS, METHODS, BorderPolicy, DistributionResult,
     ForceDistributor)
 from cdpr_control.control.wrench_setpoint import WrenchSetpoint
+
+
+OMEGA_T = 9.0          # -, ω_n T of the measured-wrench loop: 90 kg at [-1.8, 1.2, 1.0] m on the IPAnema 3
+                       # (f_n 2.38 Hz) grew with T 0.3 s (ω_n T 4.5) and held with 0.6 s (9.0)
+EIGEN_PERIODS = 50     # periods between two evaluations of ω_n while a payload is known
+
+
+def total_mass_ratio(w_dyn, w_model) -> float:
+    """(m_p + m_c) / m_p read from the model wrenches: |w_dyn + w_model| / |w_dyn| of the force parts
+    (both the weight less the inertia force at the same acceleration, (2.33)), at least 1 (a negative
+    estimate counts as none); 1 where the platform's own force part vanishes (falling at g)."""
+    own = float(np.linalg.norm(np.asarray(w_dyn, dtype=float)[:3]))
+    total = float(np.linalg.norm(np.asarray(w_dyn, dtype=float)[:3] + np.asarray(w_model, dtype=float)[:3]))
+    if not own > 1e-9 or not np.isfinite(total):
+        return 1.0
+    return max(total / own, 1.0)
+
+
+def vertical_eigenfrequency(robot, x, f, mass: float) -> float:
+    """ω_n [rad/s] of the platform's vertical translation at pose x with the cable forces f (m,) [N]
+    and the total mass [kg]: sqrt(K_x,zz / mass), K_x = K_g + K_c (2.22) with the tangent cable
+    stiffness (2.20), the diagonal approximation of (4.8) that `cdpr analyze stability` uses."""
+    ik = kernels.inverse_kinematics(robot, np.asarray(x, dtype=float))
+    k_l = cable.tangent_stiffness(robot, f, cable.total_free_length(robot, ik.q))
+    K_zz = float((geometric_stiffness(ik, f) + cable_stiffness(ik, k_l))[2, 2])
+    return float(np.sqrt(K_zz / mass)) if K_zz > 0.0 and mass > 0.0 else float("nan")
+
+
+def loop_filter_times(T: float, omega_n: float) -> tuple[float, float]:
+    """(disturbance filter, payload feed-forward filter) time constants [s] for the vertical mode
+    ω_n [rad/s]: OMEGA_T / ω_n each, the disturbance filter at least T; where ω_n is not known
+    (no tensed cable stiffens z), T for both."""
+    if not (np.isfinite(omega_n) and omega_n > 0.0):
+        return T, T
+    T_loop = OMEGA_T / omega_n
+    return max(T, T_loop), T_loop
 
 
 @dataclass
@@ -62,9 +114,19 @@ class ForceSetpoint:
         self.distributor: ForceDistributor | None = None
         self.smith = WrenchSetpoint(0.01, dt)
         self.wrench_filter = LowPass(0.08, dt)
+        self.payload_filter = LowPass(0.0, dt)   # w_ff of the known payload (module doc)
+        self.w_ff = np.zeros(6)
+        self._eigen_in = 0                        # periods until ω_n is evaluated again
+        self.f_d: np.ndarray | None = None        # the last distribution's forces (for ω_n)
         self.level: float | None = None          # tension level in effect (ramping to the target)
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
+        self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
+        self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
+        self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
+        self._payload_kinematics: tuple = ()     # R c, g - a_c of that key (load_compensation.payload_kinematics)
+        self.z_t = np.array([0.0, 0.0, 1.0])     # task z axis of the hybrid force controller, kept in R
+        self._z_t_of: bytes | None = None        # F_d,0 (its bytes) of z_t
         self.set_params(params or ForceSetpointParams())
         kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
 
@@ -88,6 +150,7 @@ class ForceSetpoint:
         if p.T_d_w != self.smith.T_d_w:
             self.smith.set_delay(p.T_d_w)
         self.wrench_filter.set_time_constant(p.T_wrench_filter)
+        self._eigen_in = 0                       # a known payload's filter times again from the next period
         weight = self.robot.platform.mass * float(np.linalg.norm(self.robot.gravity))
         radius = float(np.mean(np.linalg.norm(self.robot.b, axis=1)))
         self.w_dist_max = p.wrench_deviation_max * weight * np.r_[np.ones(3), np.full(3, radius)]
@@ -115,26 +178,94 @@ class ForceSetpoint:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
 
-    def update(self, x_d, xdot_d, xddot_d, w, AT=None, w_model=None, w_dyn=None) -> DistributionResult:
+    def _model(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
+        """(w_dyn (2.33) of x_d, ẋ_d, ẍ_d; A^T (2.10) at x_d): the arrays of the last period again
+        (read, never written) while the set-point repeats (holding, a pause of a program)."""
+        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
+        key = (x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes(), kernels.ENABLED)
+        if key != self._model_key:
+            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
+            self._model_key, self._model_value = key, (w_dyn, AT)
+        return self._model_value
+
+    def payload_wrench(self, x_d, xdot_d, xddot_d, mass: float, cog) -> np.ndarray:
+        """The model wrench of a payload (a point mass [kg] at cog (3,) [m], platform frame) at the
+        set-point (:func:`cdpr_control.control.load_compensation.payload_wrench`), for ``w_model``:
+        its mass-free part kept while the set-point and the cog repeat, times the mass of the period."""
+        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
+        key = x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes() + np.asarray(cog, dtype=float).tobytes()
+        if key != self._payload_key:
+            self._payload_key = key
+            self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
+        return payload_wrench_of_mass(self._payload_kinematics, mass)
+
+    def _feed_forward(self, x_d, w_dyn, w_model) -> np.ndarray | None:
+        """w_ff = PT1_ff(w_model) (6,) of this period, None without a known payload; the filters'
+        time constants from ω_n (:func:`loop_filter_times`), evaluated every EIGEN_PERIODS periods
+        at the last distribution's forces. Without a payload the disturbance filter returns to
+        ``T_wrench_filter`` and w_ff to zero."""
+        T = self.params.T_wrench_filter
+        if w_model is None:
+            self.payload_filter.reset(None)
+            self.w_ff = np.zeros(6)
+            self._eigen_in = 0
+            if self.wrench_filter.T != T:
+                self.wrench_filter.set_time_constant(T)
+            return None
+        if self._eigen_in <= 0 and self.f_d is not None:
+            mass = self.robot.platform.mass * total_mass_ratio(w_dyn, w_model)
+            T_dist, T_ff = loop_filter_times(T, vertical_eigenfrequency(self.robot, x_d, self.f_d, mass))
+            self.wrench_filter.set_time_constant(T_dist)
+            self.payload_filter.set_time_constant(T_ff)
+            self._eigen_in = EIGEN_PERIODS
+        self._eigen_in -= 1
+        if self.payload_filter.y is None:
+            self.payload_filter.reset(np.zeros(6))      # the payload enters from zero, not by a step
+        self.w_ff = self.payload_filter.update(w_model).copy()
+        return self.w_ff
+
+    def _contact_wrench(self, contact) -> np.ndarray | None:
+        """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
+        wrench (:func:`expected_contact_wrench_of`) of contact = (state letter, F_d,0 (3,), F_vec (3,))
+        of the hybrid force controller; None while it does not act."""
+        state, F_d0, F_vec = contact
+        F_d0 = np.asarray(F_d0, dtype=float)
+        key = F_d0.tobytes()
+        if key != self._z_t_of:                  # task_axis of an unchanged F_d,0 keeps z_t
+            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
+        if state not in FORCE_CONTROLLED:        # idle: the expected contact wrench is zero
+            return None
+        return expected_contact_wrench_of(state, F_d0, F_vec, self.z_t)
+
+    def update(self, x_d, xdot_d, xddot_d, w, w_model=None, contact=None) -> DistributionResult:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
 
-        AT: the structure matrix at x_d when the caller has it (else computed here). w_model: a
-        known wrench beyond the platform's own (an identified payload, load_compensation): it is not
-        part of the saturated disturbance of (3.24), and the model-only set-point (3.1) includes it.
-        w_dyn: kernels.platform_wrench of x_d, ẋ_d, ẍ_d (2.33) when the caller has it (a node that
-        keeps it while the set-point repeats), else computed here; it is read, never written.
+        w_model: a known wrench beyond the platform's own (an identified payload, load_compensation):
+        it is not part of the saturated disturbance of (3.24), and the model-only set-point (3.1)
+        includes it. contact: (state, F_d,0, F_vec) of the hybrid force controller in this period
+        (:class:`cdpr_control.control.hybrid_force_control.HPFCState`'s state, F_d0, F_vec), or None
+        without one: while it acts, its desired contact force replaces the measured one in w.
         """
         if self.f_ref_override is None:
             self._ramp_level()
-        if w_dyn is None:
-            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)  # (2.33), A^T f = -w
+        w_dyn, AT = self._model(x_d, xdot_d, xddot_d)
+        if contact is not None:
+            dw = self._contact_wrench(contact)
+            if dw is not None:
+                w = w + dw
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and all_finite(w):
-            self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
-                                                  self.wrench_filter, w_model)  # filtered, saturated
+            w_ff = self._feed_forward(x_d, w_dyn, w_model)
+            if w_ff is None:
+                self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
+                                                      self.wrench_filter)           # filtered, saturated
+            else:                     # the payload fed forward; the filter and the saturation see the rest
+                self.w_d = self.smith.update_filtered(np.asarray(w, dtype=float) - w_ff, w_dyn,
+                                                      self.w_dist_max, self.wrench_filter) + w_ff
         else:
             self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
-        if AT is None:
-            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
-        return self.distributor.solve(AT, self.w_d, self.dt)                 # (3.27)-(3.28)
+        result = self.distributor.solve(AT, self.w_d, self.dt)               # (3.27)-(3.28)
+        self.f_d = result.f
+        return result

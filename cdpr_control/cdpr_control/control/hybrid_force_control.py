@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.safety import all_finite
 
@@ -53,7 +54,7 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
 # The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
-# (CFCCoupling.contact_update, in ControlLoop and in the node cable_force_controller).
+# (ContactCableForceControl, in ControlLoop and in the node cable_force_controller).
 CFC_PAUSED = (APPROACH, BRAKE, LOST)
 
 
@@ -433,26 +434,26 @@ class CFCCoupling:
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
 
 
-    def contact_update(self, state: str, f_d, F_c: float, a) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    def contact_update(self, state: str, f_d, a) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
-        wrench with the expected contact force, :func:`expected_contact_wrench`), F_c the expected
-        contact force as that wrench carries it, a of :func:`task_force_direction`
-        -> (set-point of the error (3.2), feed-forward (3.22), paused, F_ff).
+        wrench with the expected contact force, :func:`expected_contact_wrench`), a of
+        :func:`task_force_direction` -> (set-point of the error (3.2), feed-forward (3.22), paused).
 
         - A-C: paused, the set-point of the pause held (thesis).
         - D and R: the error acts on the live f_d (off a it goes there from the one held within
           HAND_OVER_TIME, so the resumed CFC does not step). The feed-forward starts from the one held and
           follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
-          control loop"), except along a, where it goes to the live f_d within HAND_OVER_TIME: its
-          contact force F_ff (F_c times the share handed over) is handed over from x_t by the caller (the joint command lifts the platform by F_ff over
-          the contact stiffness), so nothing of the contact force stays in Δq_CFC after the contact.
+          control loop"), except along a, where it goes to the live f_d within HAND_OVER_TIME: the
+          contact force it then presses with is handed over from x_t by :class:`ContactHandOver`
+          (the joint command lifts the platform by it over the contact stiffness), so nothing of
+          the contact force stays in Δq_CFC after the contact.
         - I: the feed-forward returns to the live set-point through the average as in
           :meth:`update`, again live along a.
         """
         f_d = np.asarray(f_d, dtype=float)
         if state == IDLE and self.weight == 0.0:     # idle, ramped out: f_d passes, whatever a is
             self.average.reset(None)
-            return f_d, f_d, False, float(F_c)
+            return f_d, f_d, False
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
 
@@ -465,7 +466,7 @@ class CFCCoupling:
                 self.hold = f_d.copy()
             self.weight = 1.0
             self.share = 0.0
-            return self.hold.copy(), self.hold.copy(), True, 0.0
+            return self.hold.copy(), self.hold.copy(), True
         if state in (CONTACT, RELEASE):
             if self.average.y is None or self.weight == 0.0:  # enabled in contact: no pause before
                 self.average.reset(f_d)
@@ -480,17 +481,17 @@ class CFCCoupling:
             if aa > 0.0:
                 y += a * (a @ (target - y)) / aa
                 f_err = target + a * (a @ (f_d - target)) / aa      # live along a
-            return f_err, y, False, float(self.share * F_c)
+            return f_err, y, False
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
-        return out, out, False, float(F_c)
+        return out, out, False
 
 
-    def run(self, state: str, f_d, F_c: float, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float, float]:
+    def run(self, state: str, f_d, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
         before that controller's update of the period: f the measured cable forces (m,) [N]
-        -> (set-point, feed-forward, paused, F_ff, F_a).
+        -> (set-point, feed-forward, paused, F_a).
 
         - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
           integral part takes the proportional part's step.
@@ -501,7 +502,7 @@ class CFCCoupling:
           nothing of it stays in Δq_CFC when the contact ends.
         """
         a = np.asarray(a, dtype=float)
-        f_set, f_ff, paused, F_ff = self.contact_update(state, f_d, F_c, a)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             c.feedback_filter.reset(f)
@@ -513,20 +514,18 @@ class CFCCoupling:
             share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
             c.pi.integrator = c.pi.integrator - share * a
             F_a = share * aa                            # the cables press with a . f along z_t
-        return f_set, f_ff, paused, F_ff, F_a
+        return f_set, f_ff, paused, F_a
 
 
 class ContactHandOver:
-    """The hand-over offset x_comp of section 5.1.2 for the node graph, where the hybrid force
-    controller, not the cable force controller, publishes it (``ControlLoop._hpfc_cfc`` computes
-    the same from :meth:`CFCCoupling.contact_update`'s F_ff).
+    """The hand-over offset x_comp of section 5.1.2 (part of :class:`HybridForceStage`).
 
-    The CFC's feed-forward presses along z_t with F_ff = share F_c: F_c the expected contact force
-    F_d through the PT1 of the force distribution's wrench filter (T_c, so F_ff is what f_d
-    carries), share ramped from 0 over HAND_OVER_TIME from the start of D or R (0 while the CFC is
-    paused, A-C), all of F_c in I. x_comp = -F_ff / k_t z_t lifts the position offset by what that
-    press pushes the robot, k_t the contact stiffness measured in B (else K_p); 0 while the CFC's
-    output is not applied.
+    The CFC's feed-forward presses along z_t with F_ff = share F_c (:meth:`CFCCoupling.contact_update`
+    puts the live f_d along a into it): F_c the expected contact force F_d through the PT1 of the
+    force distribution's wrench filter (T_c, so F_ff is what f_d carries), share ramped from 0 over
+    HAND_OVER_TIME from the start of D or R (0 while the CFC is paused, A-C), all of F_c in I.
+    x_comp = -F_ff / k_t z_t lifts the position offset by what that press pushes the robot, k_t the
+    contact stiffness measured in B (else K_p); 0 while the CFC's output is not applied.
     """
 
     def __init__(self, T_c: float, dt: float):
@@ -549,6 +548,90 @@ class ContactHandOver:
         if F_ff != 0.0 and cfc_on and math.isfinite(F_ff) and k_t > 0.0:
             x_comp[:3] = -F_ff / k_t * state.z_t
         return x_comp
+
+
+class HybridForceStage:
+    """The hybrid position/force control box of Fig. 5.3 as ``ControlLoop`` and the node
+    ``hybrid_force_controller`` both run it: :class:`HybridForceControl` ((5.1)-(5.3), Fig. 5.4)
+    with the hand-over of section 5.1.2. Per period:
+
+    1. :meth:`take_over` the contact force F_a [N] that the cable force controller's integral part
+       handed over in the last period (:meth:`CFCCoupling.run`): x_t moves by F_a / k_t;
+    2. :meth:`update`: the state machine and PID of F_d,0 and w, and x_comp of
+       :class:`ContactHandOver` -> (HPFCState, the offset x_d,HPFC + x_comp (6,)).
+
+    k_t is the contact stiffness measured in B (``HybridForceControl.k_contact``), else K_p. T_c is
+    the force distribution's ``T_wrench_filter`` (the PT1 through which f_d carries the contact).
+    """
+
+    def __init__(self, robot, dt: float, params: HPFCParams | None = None, T_c: float = 0.3,
+                 enabled: bool = False):
+        self.control = HybridForceControl(robot, dt, params, enabled=enabled)
+        self.hand_over = ContactHandOver(T_c, dt)
+
+    @property
+    def k_t(self) -> float:
+        return self.control.k_contact or self.control.params.K_p
+
+    def take_over(self, F_a: float) -> None:
+        """F_a [N] along z_t from the cable force controller's integral part (taken in D and R only,
+        :meth:`HybridForceControl.absorb`)."""
+        if self.control.state in (CONTACT, RELEASE):
+            self.control.absorb(F_a / self.k_t)
+
+    def update(self, F_d0, w, cfc_on: bool) -> tuple[HPFCState, np.ndarray]:
+        """F_d,0 (3,) [N], the measured wrench w (6,), cfc_on: Δq_CFC applied (in the last period)
+        -> (the period's HPFCState, x_d,HPFC + x_comp (6,) [m, rad])."""
+        s = self.control.update(F_d0, w)
+        return s, s.x + self.hand_over.update(s, self.k_t, cfc_on)
+
+
+class ContactCableForceControl:
+    """The cable force control under hybrid force control (section 5.1.2) as ``ControlLoop`` and the
+    node ``cable_force_controller`` both run it: :class:`CFCCoupling` around a
+    :class:`cdpr_control.control.cable_force_control.CableForceControl` (3.19)-(3.23), with
+    a = (A^T(x_d))_F^T z_t (:func:`task_force_direction`, A^T (2.10) of the set-point) and z_t the
+    direction of F_d,0 (5.2). Per period :meth:`update` -> Δq_CFC, held while paused (A-C);
+    :attr:`F_a` is the contact force the integral part handed over (for :meth:`HybridForceStage.take_over`
+    in the next period; 0 while the CFC is off or not calibrated).
+    """
+
+    def __init__(self, robot, cfc, T_MA: float, dt: float):
+        self.robot = robot
+        self.cfc = cfc
+        self.coupling = CFCCoupling(T_MA, dt)
+        self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis, kept while F_d,0 = 0 (task_axis)
+        self._F_d0: bytes | None = None             # F_d,0 (its bytes) of z_t
+        self.a_zero = np.zeros(robot.m)             # a without a set-point (never modified)
+        self.dq_cfc = np.zeros(robot.m)
+        self.F_a = 0.0
+
+    def needs_setpoint(self, state: str | None) -> bool:
+        """Whether :meth:`update` uses x_d: not while idle with the set-point's ramp-out done, where
+        the coupling passes f_d through whatever a is (the most frequent case by far)."""
+        return (state or IDLE) != IDLE or self.coupling.weight > 0.0
+
+    def update(self, state: str | None, F_d0, x_d, f_d, f, theta, f_min, f_max) -> np.ndarray:
+        """state: the hybrid force controller's (None: none, taken as idle); F_d,0 (3,) [N] and x_d
+        (6,) of the period, None where there is none (then a = 0: nothing handed over); f_d, f,
+        theta, f_min, f_max as :meth:`CableForceControl.update` -> Δq_CFC (m,) [m]."""
+        state = state or IDLE
+        if F_d0 is not None:
+            F_d0 = np.asarray(F_d0, dtype=float)
+            key = F_d0.tobytes()
+            if key != self._F_d0:                   # the same F_d,0 has the same axis
+                self.z_t, self._F_d0 = task_axis(F_d0, self.z_t), key
+        a = self.a_zero
+        if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
+            a = task_force_direction(AT, self.z_t)
+        cfc = self.cfc
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f)
+        self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
+        if not paused:                               # held during contact establishment
+            self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)
+        self.f_set, self.f_ff, self.paused = f_set, f_ff, paused
+        return self.dq_cfc
 
 
 def format_state(controller: str, state: str) -> str:

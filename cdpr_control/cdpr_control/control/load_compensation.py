@@ -55,6 +55,7 @@ OFFSET_MODELS = ("secant", "tangent")
 ACCELERATION_SOURCES = ("commanded", "estimated")
 VELOCITY_BASE = 0.01     # s, difference quotient of the estimated velocity (smooths sensor noise)
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
+KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
 COG_DECIMATION = 10      # the centre of gravity (slow) takes every 10th period into its window
 
@@ -212,9 +213,16 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
     :class:`SettlementModel`): the command shortens each cable by it as well,
     e_U = e_L - A c + s.
 
-    Raises numpy.linalg.LinAlgError where the tensed cables do not hold the platform (fewer than
-    six of them, or K_c ill-conditioned) or Newton's method does not converge: the offset is then
-    not determined by the measurement (a platform swinging with slack cables).
+    With fewer than six tensed cables (the Mini under IK-only control: its lower cables, pre-tensed
+    to 5 N, go slack under any payload worth compensating, and the platform hangs on the four upper
+    ones) K_c has rank below 6: the offsets along its null space do not change a tensed cable's
+    elongation, so they do not change what the cables carry. Each Newton step is then the
+    minimum-norm least-squares one (the pseudo-inverse of K_c), which leaves them at zero; the
+    equilibrium is still required to the tolerance, so a wrench the tensed cables cannot carry is
+    refused as not converged.
+
+    Raises numpy.linalg.LinAlgError where no cable is tensed or Newton's method does not converge:
+    the offset is then not determined by the measurement (a platform swinging with slack cables).
     """
     f = np.asarray(f, dtype=float)
     slack = f < (0.2 * float(np.min(robot.cable.f_min)) if f_slack is None else f_slack)
@@ -223,8 +231,8 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
     e_L = cable.elongation_from_force(robot, np.maximum(f, 0.0), l_t)
     f_fixed = np.zeros_like(f) if f_ref is None else np.maximum(np.asarray(f_ref, dtype=float), 0.0)
     w_c = np.asarray(w_c, dtype=float)
-    if np.count_nonzero(~slack) < 6:
-        raise np.linalg.LinAlgError("fewer than 6 tensed cables: K_c singular")
+    if not np.any(~slack):
+        raise np.linalg.LinAlgError("no tensed cable: the offset is not observable")
     if settlement is not None:
         e_L = e_L + np.asarray(settlement, dtype=float)
     c = np.zeros(6)
@@ -237,10 +245,11 @@ def secant_offset(robot, ik, f, w_c, f_ref=None, f_slack: float | None = None, i
             return c
         k = np.where(slack, 0.0, cable.tangent_stiffness(robot, f_U, l_t))
         K_c = (AT * k) @ AT.T
-        if not np.linalg.cond(K_c) < 1e10:
-            raise np.linalg.LinAlgError("K_c ill-conditioned: the tensed cables do not hold the platform")
-        c = c + np.linalg.solve(K_c, residual)
-    raise np.linalg.LinAlgError("secant offset: Newton's method did not converge")
+        # minimum-norm step: with fewer than six tensed cables K_c is singular (see above); the
+        # relative cut-off drops the directions the tensed cables do not stiffen
+        c = c + np.linalg.lstsq(K_c, residual, rcond=KC_RCOND)[0]
+    raise np.linalg.LinAlgError("secant offset: Newton's method did not converge (the tensed cables do not "
+                                "carry the compensating wrench)")
 
 
 class SettlementModel:
@@ -407,6 +416,7 @@ class LoadCompensation:
         self.output_filter.reset(np.zeros(6))
         self.x_lc = np.zeros(6)
         self.rate_limited = np.zeros(6, dtype=bool)
+        self.slack_cables = 0                                  # window-mean forces below f_slack
         self.settlement = SettlementModel(robot, dt)
         self.set_params(params or LoadCompensationParams())
 
@@ -550,6 +560,8 @@ class LoadCompensation:
         finite = all_finite(f_floats)
         if finite:
             f_mean = self.force_filter.push(f_floats)             # the forces of the window of (4.4)
+            f_slack = self.f_slack
+            self.slack_cables = sum(1 for v in f_mean if v < f_slack)
             if not self.guarded and abs(self.m_c) <= REFERENCE_FRACTION * self.m_p:
                 self.f_ref = f_mean                               # an unloaded state (see secant_offset)
             if self.params.enabled or self.settlement.ratio > 0.0:
@@ -584,6 +596,17 @@ class LoadCompensation:
         self.rate_limited = np.abs(change) > step
         self.x_lc = self.x_lc + np.clip(change, -step, step)
         return self.x_lc.copy()
+
+    def slack_problem(self) -> str | None:
+        """Why the compensation cannot hold the payload stiffly (None while it can, or is disabled):
+        cables the payload has slackened. x_d,LC is a pose offset, which cannot tension them (the
+        internal forces are not in its reach), so under position control they stay slack (on the
+        Mini, whose lower cables carry 5 N, under any payload worth compensating) and the force
+        watch may hold the robot; force control keeps them at f_min."""
+        if not self.params.enabled or not self.slack_cables:
+            return None
+        return (f"{self.slack_cables} of {self.robot.m} cables slack under the payload: x_d,LC cannot "
+                "tension them; carry this payload under force control")
 
     def payload_wrench(self, x_d, xdot_d, xddot_d) -> np.ndarray:
         """The wrench of the identified payload (point mass m_c at its cog, or at the platform origin

@@ -16,7 +16,9 @@ The ``gcode_interpreter`` with ``setpoint_source: admittance_controller`` forwar
 on ``setpoint`` while ``enabled`` and keeps the last one when it ends (docs/admittance.md), so the
 switch between program mode and hand guiding has no jump. Switch with the parameter
 ``hand_guiding`` or the service ``~/hand_guiding`` (std_srvs/SetBool); switching on is refused
-while a program runs. The zone the platform is in is reported on ``/diagnostics``.
+while a program runs. The zone the platform is in is reported on ``/diagnostics``. Zones whose hard
+box would leave the wrench-feasible workspace are shrunk to fit (``fitted_settings``), logged and
+reported (WARN) while guiding; refused only where not even the wall's reach fits.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from cdpr_control.control.admittance import AdmittanceController, default_parameters, settings_from
+from cdpr_control.control.admittance import AdmittanceController, default_parameters, fitted_settings
 from cdpr_control.control.ospc import AXES
 from cdpr_control.ros.message_builders import builder
 
@@ -77,6 +79,7 @@ class AdmittanceControllerNode(CdprNode):
         self.controller: AdmittanceController | None = None
         self._last_ns: int | None = None
         self._origin_of, self._origin_floats = None, []     # (see _origin)
+        self.clipping_note = ""          # how the zones were shrunk to fit the WFW (fitted_settings), reported while guiding
         self.program_state = ProgramStatus.IDLE
         self.create_subscription(ProgramStatus, "program_status", self._on_status, STATUS)
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
@@ -91,13 +94,16 @@ class AdmittanceControllerNode(CdprNode):
         self.program_state = msg.state
 
     def _validate(self, v: dict) -> None:
-        settings_from({k: v[k] for k in _D}, self.robot)
+        fitted_settings({k: v[k] for k in _D}, self.robot)
         switching_on = v["hand_guiding"] and (self.controller is None or not self.controller.enabled)
         if switching_on and self.program_state in _BUSY:
             raise ValueError("a program is running: hand guiding can start when it has ended")
 
     def _apply(self, v: dict) -> None:
-        params, zones, robot = settings_from({k: v[k] for k in _D}, self.robot)
+        params, zones, robot, clipping = fitted_settings({k: v[k] for k in _D}, self.robot)
+        self.clipping_note = "" if clipping is None else "; " + clipping.text()
+        if clipping is not None:
+            self.get_logger().warning(clipping.text())
         if self.controller is None:
             self.controller = AdmittanceController(robot, self.dt, params, zones)
         else:
@@ -146,8 +152,8 @@ class AdmittanceControllerNode(CdprNode):
         if out.active:
             zone = self.controller.zones.zones[out.zone].name
             state = "braking" if self.controller.braking else f"zone {zone}"
-            level = DiagnosticStatus.WARN if out.limited.any() else DiagnosticStatus.OK
-            self.report(level, f"hand guiding, {state}" + (" (limited)" if out.limited.any() else ""),
+            level = DiagnosticStatus.WARN if out.limited.any() or self.clipping_note else DiagnosticStatus.OK
+            self.report(level, f"hand guiding, {state}" + (" (limited)" if out.limited.any() else "") + self.clipping_note,
                         stamp_ns=t_ns)
 
     def _idle(self, sp: OperationalSetpoint, t_ns: int) -> None:

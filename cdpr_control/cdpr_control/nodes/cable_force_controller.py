@@ -10,7 +10,7 @@ of (3.23) and the pre-tension Δq_0, is :class:`cdpr_control.control.cable_force
 
 With ``force_controller`` naming the hybrid force controller (section 5.1.2), it also subscribes
 ``<force_controller>/state`` and ``setpoint`` (x_d, for the structure matrix A^T(x_d)) and runs
-:meth:`cdpr_control.control.hybrid_force_control.CFCCoupling.run`: Δq_CFC is held while that controller
+:class:`cdpr_control.control.hybrid_force_control.ContactCableForceControl` (as ControlLoop does): Δq_CFC is held while that controller
 makes or loses contact (states A-C); in D and R the CFC runs, its feed-forward through the moving
 average of ``T_MA`` except along the task axis, and the integral part along the task axis is
 handed over to x_t: published per period on ``cable_force_controller/hand_over``
@@ -32,10 +32,8 @@ from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, Opera
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
-from cdpr_control import kernels
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
-from cdpr_control.control.hybrid_force_control import (CFCCoupling, HPFCParams, parse_state, task_axis,
-    task_force_direction)
+from cdpr_control.control.hybrid_force_control import ContactCableForceControl, HPFCParams, parse_state
 from cdpr_control.control.safety import all_finite
 from cdpr_control.ros.message_builders import builder
 
@@ -72,7 +70,7 @@ class CableForceControllerNode(CdprNode):
         super().__init__("cable_force_controller", **kwargs)
         self.names = [f"cable_{i + 1}" for i in range(self.robot.m)]
         self.stage: CableForceControl | None = None
-        self.coupling: CFCCoupling | None = None
+        self.contact: ContactCableForceControl | None = None   # the stage under hybrid force control
         self.dq_held = np.zeros(self.robot.m)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
@@ -88,9 +86,6 @@ class CableForceControllerNode(CdprNode):
             "f": (CableForces, "cable_forces"),
             "theta": (JointState, "winch/state"),
         }
-        self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
-        self.F_d0 = None                            # F_d,0 of z_t
-        self.a_zero = np.zeros(self.robot.m)        # a of a period without a set-point (never modified)
         if self.force_controller:
             inputs["hpfc"] = (ControllerState, f"{self.force_controller}/state")
             inputs["setpoint"] = (OperationalSetpoint, "setpoint")
@@ -130,10 +125,10 @@ class CableForceControllerNode(CdprNode):
             self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"])
         else:
             self.stage.set_params(self._cfc_params(v), enabled=v["enabled"])
-        if self.coupling is None:
-            self.coupling = CFCCoupling(v["T_MA"], self.dt)
+        if self.contact is None:
+            self.contact = ContactCableForceControl(self.robot, self.stage, v["T_MA"], self.dt)
         else:
-            self.coupling.set_time_constant(v["T_MA"])
+            self.contact.coupling.set_time_constant(v["T_MA"])
 
     def _on_mode(self, ik_only: bool) -> None:
         self.stage.controller.pi.hold = ik_only      # bumpless: no wind-up while not applied
@@ -156,11 +151,10 @@ class CableForceControllerNode(CdprNode):
         f_d, f, theta = np.asarray(f_d_values), np.asarray(f_values), np.asarray(theta_values)
         f_ref, f_ff = f_d, None
         if self.force_controller:           # section 5.1.2: paused in A-C, running in D and R
-            f_d, f_ff, paused = self._contact(msgs, f_d, f, t_ns, header)
+            self.dq_held = self._contact(msgs, f_d, f, theta, fd_msg, t_ns, header)
+            f_d, f_ff = self.contact.f_set, self.contact.f_ff
         else:
-            paused = False
-        if not paused:
-            self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max), f_ff)
+            self.dq_held = stage.update(f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
         c = stage.controller
         f_fb = c.f_filtered
         if stage.enabled and f_fb is not None:
@@ -178,39 +172,33 @@ class CableForceControllerNode(CdprNode):
                 reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
         self.publisher.publish(state)
 
-    def _contact(self, msgs: dict, f_d, f, t_ns: int, header):
-        """CFCCoupling.run with the state of the hybrid force controller and a = (A^T(x_d))_F^T z_t
-        -> (set-point, feed-forward, paused); publishes the hand-over of the integral part."""
+    def _contact(self, msgs: dict, f_d, f, theta, fd_msg, t_ns: int, header) -> np.ndarray:
+        """The stage under hybrid force control (ContactCableForceControl) with the state of the
+        hybrid force controller, its F_d,0 and x_d -> Δq_CFC; publishes the hand-over of the
+        integral part."""
         hpfc, sp = msgs.get("hpfc"), msgs.get("setpoint")
         state = (parse_state(hpfc.controller) if hpfc is not None else None) or "I"
-        a = self.a_zero
+        F_d0 = x_d = None
         if hpfc is not None and sp is not None:
             F_d0 = hpfc.reference[:3]
-            # idle with the set-point's ramp-out done, the coupling passes f_d through whatever a
-            # is (CFCCoupling.contact_update): no IK then, the most frequent case by far (nor x_d,
-            # whose pose StampSync found finite)
-            x_d = pose_from_msg(sp.pose) if state != "I" or self.coupling.weight > 0.0 else None
-            if all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist())):
-                if F_d0 != self.F_d0:        # the same F_d,0 has the same axis (task_axis)
-                    self.z_t, self.F_d0 = task_axis(F_d0, self.z_t), F_d0
-                if x_d is not None:
-                    AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # the period's IK of x_d
-                    a = task_force_direction(AT, self.z_t)
-            else:
+            # x_d only where the stage uses it (not idle with the ramp-out done: the most frequent
+            # case by far); its pose StampSync found finite
+            x_d = pose_from_msg(sp.pose) if self.contact.needs_setpoint(state) else None
+            if not (all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist()))):
+                F_d0 = x_d = None
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
                             "no hand-over this period", stamp_ns=t_ns)
         elif state != "I":
             self.report(DiagnosticStatus.WARN, "no set-point: no hand-over this period", stamp_ns=t_ns)
+        contact = self.contact
+        dq = contact.update(state, F_d0, x_d, f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
+        F_a, z = contact.F_a, contact.z_t
         stage = self.stage
-        f_set, f_ff, paused, _, F_a = self.coupling.run(state, f_d, 0.0, a, stage.controller, f)
-        if not stage.enabled or stage.controller.dq_0 is None:
-            F_a = 0.0
-        z = self.z_t
         self.hand_over.publish(builder(ControllerState)(
             header=header, controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
             output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))
-        return f_set, f_ff, paused
+        return dq
 
 
 def _valid(m: int, *inputs) -> bool:

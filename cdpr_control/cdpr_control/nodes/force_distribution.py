@@ -34,12 +34,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import InertiaStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
-from cdpr_control import kernels
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
-from cdpr_control.control.hybrid_force_control import (FORCE_CONTROLLED, expected_contact_wrench_of,
-    parse_state, task_axis)
-from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
+from cdpr_control.control.hybrid_force_control import parse_state
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
@@ -53,10 +50,9 @@ from cdpr_control.ros.sync import StampSync
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
                              "replaces the measured one in the distributed wrench (5.1.2); empty: none",
                              read_only=True)
-# the raw values of a set-point (pose, twist, acceleration) and of a payload's cog: compared as
-# bytes, so that a repeated period is recognised exactly (a tuple would take -0.0 for 0.0)
+# the raw values of a set-point (pose, twist, acceleration): compared as bytes, so that a repeated
+# period is recognised exactly (a tuple would take -0.0 for 0.0)
 _SETPOINT_KEY = struct.Struct("19d").pack
-_COG_KEY = struct.Struct("3d").pack
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 _INFEASIBLE, _OVERLOADED = Status.INFEASIBLE, Status.OVERLOADED
 
@@ -93,9 +89,7 @@ class ForceDistributionNode(CdprNode):
         self.create_service(SetTensionLevel, "force_distribution/set_tension_level", self._on_set_tension_level)
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
-        self.z_t = np.array([0.0, 0.0, 1.0])       # task z axis of the hybrid force controller, kept in R
-        self.F_d0 = None                           # its reference F_d,0 that gave z_t
-        self._controller, self._state = None, None   # its last controller field and the state parsed from it
+        self._controller, self._state = None, None   # the hybrid force controller's last controller field, its state
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
@@ -103,12 +97,8 @@ class ForceDistributionNode(CdprNode):
             inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
                               optional=tuple(n for n in ("payload", "hpfc") if n in inputs))
-        # the model side of the last period, reused while the set-point (and payload) repeat: holding a
-        # pose, or a pause of a program, gives the same x_d, ẋ_d, ẍ_d, w_dyn and A^T every period
-        self._setpoint_key: tuple = (None, None)         # (key bytes, kernels.ENABLED)
-        self._model: tuple = ()                          # (x_d, ẋ_d, ẍ_d, w_dyn, A^T) of that key
-        self._payload_key: tuple | None = None          # (set-point key, cog bytes) of _payload_kinematics
-        self._payload_kinematics: tuple = ()            # R c, g - a_c of that key (load_compensation.payload_kinematics)
+        self._setpoint_key: bytes | None = None     # the raw values of the last set-point (its _arrays)
+        self._arrays: tuple = ()                     # its (x_d, ẋ_d, ẍ_d)
 
     @staticmethod
     def _stage_params(v: dict) -> ForceSetpointParams:
@@ -144,50 +134,36 @@ class ForceDistributionNode(CdprNode):
         return response
 
     def _setpoint(self, sp) -> tuple:
-        """(x_d, ẋ_d, ẍ_d, w_dyn (2.33), A^T at x_d) of the set-point message; the arrays of the last
-        period again (read, never written) when its values are."""
+        """(x_d, ẋ_d, ẍ_d) of the set-point message; the arrays of the last period again (read,
+        never written) when its values are."""
         pose, velocity, acceleration = sp.pose, sp.velocity, sp.acceleration
         p, o = pose._position, pose._orientation
         v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
-        key = (_SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
-                             a._x, a._y, a._z, al._x, al._y, al._z), kernels.ENABLED)
-        if key == self._setpoint_key:
-            return self._model
-        x_d, xdot_d, xddot_d = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
-        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)
-        AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
-        self._setpoint_key, self._model = key, (x_d, xdot_d, xddot_d, w_dyn, AT)
-        return self._model
+        key = _SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
+                            a._x, a._y, a._z, al._x, al._y, al._z)
+        if key != self._setpoint_key:
+            self._setpoint_key = key
+            self._arrays = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
+        return self._arrays
 
-    def _payload_wrench(self, payload, x_d, xdot_d, xddot_d):
-        """The identified payload's wrench at the set-point (load_compensation.payload_wrench): its
-        mass-free part kept while the set-point and the cog repeat, times the mass of the period."""
-        p = payload._inertia                  # (the slots: every period)
-        com = p._com
-        cog = com._x, com._y, com._z
-        key = (self._setpoint_key, _COG_KEY(*cog))
-        if key != self._payload_key:
-            self._payload_key = key
-            self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
-        return payload_wrench_of_mass(self._payload_kinematics, p._m)
+    def _contact(self, hpfc) -> tuple:
+        """(state letter, F_d,0, F_vec) of the hybrid force controller's state message."""
+        controller = hpfc.controller
+        if controller != self._controller:   # the state letter changes rarely: parsed on a change
+            self._controller, self._state = controller, parse_state(controller)
+        return self._state, np.asarray(hpfc.reference[:3], dtype=float), np.asarray(hpfc.feedback[:3], dtype=float)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        x_d, xdot_d, xddot_d, w_dyn, AT = self._setpoint(msgs["setpoint"])
+        x_d, xdot_d, xddot_d = self._setpoint(msgs["setpoint"])
         payload = msgs.get("payload")
-        w_model = None if payload is None else self._payload_wrench(payload, x_d, xdot_d, xddot_d)
-        w = wrench_from_msg(msgs["wrench"].wrench)
+        w_model = None
+        if payload is not None:
+            p = payload._inertia                  # (the slots: every period)
+            com = p._com
+            w_model = self.stage.payload_wrench(x_d, xdot_d, xddot_d, p._m, (com._x, com._y, com._z))
         hpfc = msgs.get("hpfc")
-        if hpfc is not None:                 # section 5.1.2: the expected contact force, not the measured
-            F_d0 = hpfc.reference[:3]
-            if F_d0 != self.F_d0:            # task_axis of an unchanged F_d,0 keeps z_t
-                self.F_d0, self.z_t = F_d0, task_axis(np.asarray(F_d0, dtype=float), self.z_t)
-            controller = hpfc.controller
-            if controller != self._controller:   # the state letter changes rarely: parsed on a change
-                self._controller, self._state = controller, parse_state(controller)
-            state = self._state
-            if state in FORCE_CONTROLLED:    # else the expected contact wrench is zero
-                w = w + expected_contact_wrench_of(state, np.asarray(F_d0, dtype=float), hpfc.feedback[:3], self.z_t)
-        res = self.stage.update(x_d, xdot_d, xddot_d, w, AT, w_model, w_dyn)
+        contact = None if hpfc is None else self._contact(hpfc)
+        res = self.stage.update(x_d, xdot_d, xddot_d, wrench_from_msg(msgs["wrench"].wrench), w_model, contact)
         max_violation = float(res.max_violation)
         self.publisher.publish(self._message(res, max_violation, t_ns))
         status = res.status

@@ -27,7 +27,7 @@ handed over in a period is taken on x_t (F_a / k_t, :meth:`HybridForceControl.ab
 start of the next period, as the in-process loop does; its ``enabled`` (Δq_CFC applied) switches
 x_comp. Without that topic x_comp is 0 and nothing is handed over.
 
-The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceControl`.
+The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceStage` (as ControlLoop runs it).
 """
 from __future__ import annotations
 
@@ -37,8 +37,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from cdpr_control.control.force_setpoint import ForceSetpointParams
-from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, RELEASE, STATE_NAMES, ContactHandOver,
-    HPFCParams, HybridForceControl, format_state)
+from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceStage,
+    format_state)
 from cdpr_control.control.ospc import AXES
 from cdpr_control.ros.message_builders import builder
 
@@ -49,7 +49,6 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
-ABSORBING = (CONTACT, RELEASE)      # the states in which HybridForceControl.absorb takes a hand-over
 _ZERO3, _ZEROS = [0.0] * 3, [0.0] * 6     # (the message constructor copies them)
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
@@ -75,8 +74,7 @@ PARAMS = [
 class HybridForceControllerNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__(NAME, **kwargs)
-        self.stage: HybridForceControl | None = None
-        self.hand_over: ContactHandOver | None = None
+        self.stage: HybridForceStage | None = None
         self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
         self.hand_overs: list = []         # hand-overs not yet taken on x_t
         self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
@@ -105,29 +103,25 @@ class HybridForceControllerNode(CdprNode):
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = HybridForceControl(self.robot, self.dt, self._hpfc_params(v), enabled=v["enabled"])
+            self.stage = HybridForceStage(self.robot, self.dt, self._hpfc_params(v), v["T_wrench_filter"],
+                                          enabled=v["enabled"])
         else:
-            self.stage.set_params(self._hpfc_params(v))
-            self.stage.enabled = v["enabled"]
-        if self.hand_over is None:
-            self.hand_over = ContactHandOver(v["T_wrench_filter"], self.dt)
-        else:
-            self.hand_over.set_time_constant(v["T_wrench_filter"])
+            self.stage.control.set_params(self._hpfc_params(v))
+            self.stage.control.enabled = v["enabled"]
+            self.stage.hand_over.set_time_constant(v["T_wrench_filter"])
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         stage = self.stage
-        k_t = stage.k_contact or stage.params.K_p
+        z_t = stage.control.z_t
         later = []
         for msg in self.hand_overs:        # in lockstep the one of period k - 1; each taken once
             if stamp_ns(msg) < t_ns:
-                if stage.state in ABSORBING:     # (absorb takes nothing in the other states)
-                    stage.absorb(float(stage.z_t @ np.asarray(msg.output[:3], dtype=float)) / k_t)
+                stage.take_over(float(z_t @ np.asarray(msg.output[:3], dtype=float)))
             else:
                 later.append(msg)
         self.hand_overs = later
-        cfc_on = self.cfc_on
-        s = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench))
-        x_comp = self.hand_over.update(s, stage.k_contact or stage.params.K_p, cfc_on)
+        s, output = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench),
+                                 self.cfc_on)
         # the fields' arithmetic in floats: element by element what numpy's would give, without
         # its call overhead on six numbers
         x = s.x.tolist()
@@ -138,7 +132,7 @@ class HybridForceControllerNode(CdprNode):
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
             integrator=[integrator * z for z in s.z_t.tolist()] + _ZERO3, feedforward=feedforward,
-            output=[a + b for a, b in zip(x, x_comp.tolist())], saturated=[bool(s.saturated)] * 6))
+            output=output.tolist(), saturated=[bool(s.saturated)] * 6))
         # published when state or saturation change (report() compares level and message; the
         # values are formatted only then)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK

@@ -135,6 +135,8 @@ class LoadCompensationNode(CdprNode):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite): holding", stamp_ns=t_ns)
         elif lc.guarded:
             self.report(DiagnosticStatus.WARN, "estimate held (acceleration near g or invalid wrench)", stamp_ns=t_ns)
+        elif (problem := lc.slack_problem()) is not None:
+            self.report(DiagnosticStatus.WARN, problem, stamp_ns=t_ns)
         else:
             self.report(DiagnosticStatus.OK, "ok" if enabled else "identifying (compensation disabled)",
                         stamp_ns=t_ns)

@@ -30,6 +30,7 @@ from cdpr_control.control.params import control_loop_params
 from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
 from cdpr_control.model.robot import load_robot
 
+DIVERGENCE_FACTOR = 1.5   # a cable force beyond this times f_max: the run diverged (as cdpr validate)
 CONFIGS = {
     "ik": (False, False, False, False), "ik_lc": (False, False, True, False), "ospc": (False, True, False, False),
     "ospc_lc": (False, True, True, False), "force_control": (True, True, False, True),
@@ -50,6 +51,17 @@ class PayloadRun:
     x: np.ndarray            # (N, 6) true pose
     x_lc: np.ndarray         # (N, 6) x_d,LC
     theta_d: np.ndarray      # (N, m) drive command
+    f: np.ndarray            # (N, m) true cable forces [N]
+    held_at: float | None = None   # s, when the force watch held the robot (control.safety.ForceWatch)
+    hold_reason: str = ""          # its reason, as on /diagnostics
+
+    def max_force(self) -> float:
+        """Largest true cable force of the run [N] (NaN when a force was not finite)."""
+        return float(np.max(self.f)) if np.all(np.isfinite(self.f)) else float("nan")
+
+    def diverged(self, robot) -> bool:
+        """A cable force beyond DIVERGENCE_FACTOR f_max, or not finite (the validation sweep's criterion)."""
+        return not self.max_force() <= DIVERGENCE_FACTOR * float(np.max(robot.cable.f_max))
 
 
 def loop_params(config: str, robot="ipanema3_mini") -> ControlLoopParams:
@@ -75,6 +87,7 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
     lc = stage.compensation
     log = {"payload": [], "m_c": [], "guarded": []}
     current = [payload0]
+    hold = {}                                  # the force watch's first hold: t, reason
 
     def before_step(k, loop, sim):
         mass = payload_at(k)
@@ -90,13 +103,15 @@ def _run(robot, setpoints, duration, config, x0, payload_at, lc_params=None, pay
     def step_hook(k, loop, sim):
         if k > 0:
             record()                      # the state the loop computed in period k - 1
+            if loop.failure is not None and not hold:
+                hold.update(t=float(sim.output.t), reason=loop.failure)
         before_step(k, loop, sim)
 
     r = run(robot, setpoints, duration, loop_params(config, robot), x0=x0, payload=payload0, before_step=step_hook,
             offset_stages={"load_compensation": stage}, config=SimConfig(plant=plant))
     record()
     return PayloadRun(config, r.t, np.array(log["payload"]), np.array(log["m_c"]), np.array(log["guarded"]),
-                      r.x_d, r.x, r.offsets["load_compensation"], r.theta_d)
+                      r.x_d, r.x, r.offsets["load_compensation"], r.theta_d, r.f, hold.get("t"), hold.get("reason", ""))
 
 
 def step_schedule(step_mass: float, steps: int, down: bool = True) -> np.ndarray:
@@ -265,6 +280,7 @@ def run_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc", "ospc", "fo
         s["sag_mm_per_kg"] = sag_per_kg(s)
         s["max_abs_z_error_mm"] = float(max(abs(r["z_error_mm"]) for r in s["steps"]))
         s["estimate_settle_percent"] = estimate_settle_percent(s, step_mass)
+        s.update(run_outcome(runs[config], robot))
         if "ik" in summary and config != "ik":
             s["sag_cut_percent"] = sag_cut_percent(summary["ik"], s)
         summary[config] = s
@@ -272,10 +288,28 @@ def run_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc", "ospc", "fo
                  f"estimate 1 s after a step within {s['estimate_settle_percent']:.1f} %"
                  + (f", sag cut {min(s['sag_cut_percent']):.1f} % (worst) / {s['sag_cut_percent'][steps - 1]:.1f} % "
                     f"at {steps * step_mass:g} kg" if "sag_cut_percent" in s else ""))
+        if not s["ok"]:
+            progress(f"  NOT OK: {s['outcome']}")
     plot_steps(runs, outdir / "load_compensation_steps.png",
                f"{steps} x {step_mass:g} kg at standstill, simulated {robot if isinstance(robot, str) else robot.name}, {plant} plant")
     (outdir / "load_compensation_steps.json").write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def run_outcome(run: PayloadRun, robot) -> dict:
+    """Whether a run is usable: ``ok`` False when it diverged (a cable beyond DIVERGENCE_FACTOR f_max)
+    or the force watch held the robot (its figures are then those of a held robot, not of the
+    controller); ``outcome`` says which, when and why; the largest cable force."""
+    robot = load_robot(robot) if isinstance(robot, (str, Path)) else robot
+    f_max = float(np.max(robot.cable.f_max))
+    parts = []
+    if run.diverged(robot):
+        parts.append(f"diverged: largest cable force {run.max_force():.4g} N beyond {DIVERGENCE_FACTOR:g} f_max "
+                     f"= {DIVERGENCE_FACTOR * f_max:.4g} N")
+    if run.held_at is not None:
+        parts.append(f"held by the force watch at t = {run.held_at:.3f} s: {run.hold_reason}")
+    return {"ok": not parts, "outcome": "; ".join(parts) or "bounded, not held",
+            "held_at_s": run.held_at, "max_force_N": run.max_force()}
 
 
 def program_summary(run: PayloadRun, payload: float, singularity_margin: float = 4.9) -> dict:
@@ -313,7 +347,9 @@ def run_program_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc"), pa
             progress(f"{program}, {payload:g} kg, {config} ...")
             run = payload_program(robot, config, payload, program, plant=plant)
             key = f"{config}_{payload:g}kg"
-            summary[key] = program_summary(run, payload)
+            summary[key] = {**program_summary(run, payload), **run_outcome(run, robot)}
+            if not summary[key]["ok"]:
+                progress(f"  NOT OK: {summary[key]['outcome']}")
             ax[0].plot(run.t, 1e3 * np.linalg.norm(run.x[:, :3] - run.x_d[:, :3], axis=1), lw=0.7, label=key)
             if CONFIGS[config][2] or CONFIGS[config][3]:
                 ax[1].plot(run.t, run.m_c, lw=0.7, label=f"estimate, {key}")

@@ -59,8 +59,17 @@ SAG_CUT = {"nominal": Band(90.0, None, "issue 25 / section 4.1.3: >= 90 % nomina
 DIVERGENCE_FACTOR = 1.5      # a cable force beyond this times f_max stops a run as diverged
 
 
-def band_for(metric: str, plant: str) -> Band | None:
-    """The band of a metric on a plant (None: reported, not judged)."""
+# IK-only control (section 2.3.2: the open-loop position control the thesis starts from) commands
+# cable lengths and nothing else; which forces it leaves in a redundant robot follows from the
+# geometry, and a cable may go slack at the border (the reason for the force control of chapter 3).
+# The program family runs it as the reference: its slack is reported, not judged; f_max still is.
+NOT_JUDGED = {"ik_only": {"force_below_f_min_N"}}
+
+
+def band_for(metric: str, plant: str, controller: str | None = None) -> Band | None:
+    """The band of a metric on a plant under a controller (None: reported, not judged)."""
+    if metric in NOT_JUDGED.get(controller, ()):
+        return None
     if metric == "sag_cut_percent":
         return SAG_CUT[plant]
     return BANDS.get(metric)

@@ -38,9 +38,9 @@ def _short(v) -> str:
 
 
 def badness(metric: str, value: float, plant: str) -> float:
-    """How far a value is on the bad side of its band (larger is worse; NaN is worst)."""
-    if not np.isfinite(value):
-        return np.inf
+    """How far a measured value is on the bad side of its band (larger is worse; an infinite
+    value, such as a force that never settled, is worst). NaN (not measured) has no badness: the
+    callers leave it out."""
     band = band_for(metric, plant)
     if band is None:
         return value
@@ -49,22 +49,31 @@ def badness(metric: str, value: float, plant: str) -> float:
     return value if band.lo is None else -value
 
 
+def _measured(value) -> bool:
+    """A metric value that was measured: a number, infinite included (NaN or None: not measured)."""
+    return value is not None and not np.isnan(float(value))
+
+
 def family_summary(results: list[CaseResult], family: str) -> dict:
     """Counts by status, pass rate, and per metric: mean over the finite values, and for a metric
     with a band its worst value and where, for one without its range."""
     rs = [r for r in results if r.spec.family == family]
-    counts = {s: sum(r.status == s for r in rs) for s in ("passed", "failed", "diverged", "refused", "error")}
+    counts = {s: sum(r.status == s for r in rs) for s in ("passed", "failed", "diverged", "held", "refused", "error")}
     out = {"cases": len(rs), **counts, "pass_rate": counts["passed"] / len(rs) if rs else float("nan"), "metrics": {}}
     names = sorted({m for r in rs for m in r.metrics})
     for name in names:
         have = [r for r in rs if name in r.metrics]
-        values = np.array([r.metrics[name] for r in have], dtype=float)
+        measured = [r for r in have if _measured(r.metrics[name])]
+        values = np.array([r.metrics[name] for r in measured], dtype=float)
         finite = values[np.isfinite(values)]
-        m = {"mean": float(finite.mean()) if len(finite) else float("nan"),
-             "out_of_band": sum(1 for r in have if not r.checks.get(name, True))}
-        if any(band_for(name, r.spec.plant) for r in have):
-            worst = max(have, key=lambda r: badness(name, r.metrics[name], r.spec.plant))
-            m.update(worst=float(worst.metrics[name]), where=where(worst))
+        m = {"mean": float(finite.mean()) if len(finite) else None,
+             "out_of_band": sum(1 for r in have if not r.checks.get(name, True)),
+             "not_measured": len(have) - len(measured)}
+        judged = [r for r in measured if band_for(name, r.spec.plant, r.spec.variant.get("controller"))]
+        if any(band_for(name, r.spec.plant, r.spec.variant.get("controller")) for r in have):
+            if judged:
+                worst = max(judged, key=lambda r: badness(name, float(r.metrics[name]), r.spec.plant))
+                m.update(worst=float(worst.metrics[name]), where=where(worst))
         elif len(finite):
             m.update(min=float(finite.min()), max=float(finite.max()))
         out["metrics"][name] = m
@@ -74,14 +83,17 @@ def family_summary(results: list[CaseResult], family: str) -> dict:
 def summary_line(family: str, s: dict) -> str:
     """One line: pass rate, the headline metric's mean and worst case with where, failures per metric."""
     line = f"{family}: {s['passed']}/{s['cases']} passed ({100.0 * s['pass_rate']:.0f} %)"
-    extra = [f"{s[k]} {k}" for k in ("diverged", "refused", "error") if s[k]]
+    extra = [f"{s[k]} {k}" for k in ("diverged", "held", "refused", "error") if s[k]]
     if extra:
         line += " [" + ", ".join(extra) + "]"
     m = s["metrics"].get(HEADLINE[family])
     if m and "worst" in m:
-        line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, worst {m['worst']:.3g} at {m['where']}"
+        mean = f"mean {m['mean']:.3g}, " if m["mean"] is not None else ""
+        line += f"; {HEADLINE[family]} {mean}worst {m['worst']:.3g} at {m['where']}"
     elif m and "max" in m:
         line += f"; {HEADLINE[family]} mean {m['mean']:.3g}, {m['min']:.3g} .. {m['max']:.3g}"
+    if m and m["not_measured"]:
+        line += f"; {HEADLINE[family]} not measured in {m['not_measured']} case{'s' if m['not_measured'] > 1 else ''}"
     fails = [f"{name} {m['out_of_band']}" for name, m in s["metrics"].items() if m["out_of_band"] and name != "diverged"]
     if fails:
         line += "; out of band: " + ", ".join(fails)
@@ -89,7 +101,8 @@ def summary_line(family: str, s: dict) -> str:
 
 
 def case_line(r: CaseResult) -> str:
-    metrics = ", ".join(f"{k} {v:.4g}{'' if r.checks.get(k, True) else ' (out)'}" for k, v in r.metrics.items())
+    metrics = ", ".join(f"{k} {f'{v:.4g}' if _measured(v) else 'not measured'}{'' if r.checks.get(k, True) else ' (out)'}"
+                        for k, v in r.metrics.items())
     return f"{r.spec.family:8s} {r.status:8s} {where(r)}: {metrics}{' - ' + r.note if r.note else ''}"
 
 
@@ -112,7 +125,7 @@ class CaseLog:
 
     def write(self, results) -> None:
         for r in results:
-            self.file.write(json.dumps(case_dict(r), default=_json_default) + "\n")
+            self.file.write(dumps(case_dict(r)) + "\n")
         self.file.flush()
 
     def __exit__(self, *exc):
@@ -130,7 +143,8 @@ def read_cases(path) -> list[CaseResult]:
         except json.JSONDecodeError:
             continue
         spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
-        results.append(CaseResult(spec, d["metrics"], d["checks"], d["status"], d["note"], d["wall_s"],
+        metrics = {k: float("nan") if v is None else float(v) for k, v in d["metrics"].items()}
+        results.append(CaseResult(spec, metrics, d["checks"], d["status"], d["note"], d["wall_s"],
                                   d.get("cpu_s", float("nan"))))
     return results
 
@@ -160,10 +174,30 @@ def write(results: list[CaseResult], meta: dict, outdir) -> tuple[dict, list[Pat
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     doc = to_json(results, meta)
-    (outdir / "validation.json").write_text(json.dumps(doc, indent=1, default=_json_default))
+    (outdir / "validation.json").write_text(dumps(doc, indent=1))
     (outdir / "validation.txt").write_text("\n".join(case_line(r) for r in results) + "\n")
     figures = [plot_family(results, family, outdir / f"validation_{family}.png") for family in doc["summary"]]
     return doc, figures
+
+
+def dumps(doc, **kwargs) -> str:
+    """JSON text of ``doc`` without NaN or Infinity (JSON has neither): NaN (not measured) as null,
+    an infinite value (a force that never settled) as the string "inf" or "-inf"."""
+    return json.dumps(_finite(doc), allow_nan=False, default=_json_default, **kwargs)
+
+
+def _finite(v):
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _finite(v.tolist())
+    if isinstance(v, (float, np.floating)):
+        if np.isnan(v):
+            return None
+        return float(v) if np.isfinite(v) else ("inf" if v > 0 else "-inf")
+    return v
 
 
 def _json_default(v):
@@ -195,7 +229,7 @@ def plot_family(results: list[CaseResult], family: str, path: Path) -> Path:
             by_pose.setdefault(key, []).append(r)
         pts, vals, bad, skipped = [], [], [], []
         for key, group in by_pose.items():
-            measured = [r for r in group if metric in r.metrics and r.status not in ("refused", "error")]
+            measured = [r for r in group if _measured(r.metrics.get(metric)) and r.status not in ("refused", "error")]
             if not measured:
                 skipped.append(key)
                 continue

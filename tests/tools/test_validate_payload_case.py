@@ -1,0 +1,57 @@
+"""The payload case of the validation sweep (cdpr_tools.validate.cases): its capacity and how it
+judges a run the force watch held (no simulation: the runs are stand-ins)."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cdpr_control.model.robot import load_robot
+from cdpr_control.model.workspace import feasible_poses
+from cdpr_control.motion.program_check import payload_capacity
+from cdpr_tools.validate import cases
+from cdpr_tools.validate.cases import CaseSpec, planned_capacity
+from cdpr_tools.validate.grid import planned_f_min
+
+
+def test_planned_capacity_is_the_last_payload_the_shipped_distribution_holds():
+    """At a border pose of the IPAnema 3 the distribution's f_min (150 N, not the cable's 100 N)
+    halves the capacity; the planned capacity is held with it, 1 % more is not."""
+    robot = load_robot("ipanema3")
+    x = np.r_[2.283, -3.842, 1.983, 0.0, 0.0, 0.0]
+    planned = planned_capacity(robot, x)
+    assert 0.0 < planned < 0.6 * payload_capacity(robot, x)
+    f_min = planned_f_min(robot)
+    for mass, held in ((planned, True), (1.01 * planned, False)):
+        assert feasible_poses(robot.with_payload(mass), x[None], f_min=f_min)[0] == held
+
+
+def _stand_in(robot, hold_at=None, diverged_at=None):
+    """(recorder, m_c, ok, hold) of a 5 s run at rest with a 1 mm sag after the step."""
+    t = np.arange(1, 5001) * 1e-3
+    x = np.zeros((len(t), 6))
+    x[t > cases.PAYLOAD_REST + cases.PAYLOAD_RAMP, 2] = -1e-3
+    rec = cases.Recorder(robot)
+    rec.rows.update(t=list(t), x=list(x), f=list(np.full((len(t), robot.m), 10.0)))
+    rec.diverged_at = diverged_at
+    hold = None if hold_at is None else (hold_at, "force watch: cable 6: 1.0 N below f_min 5.0 N")
+    return rec, np.full(len(t), 2.0), diverged_at is None, hold
+
+
+@pytest.mark.parametrize("hold_at, diverged_at, status", [(None, None, "failed"), (0.9, None, "held"),
+                                                         (None, 1.2, "diverged")])
+def test_a_held_or_diverged_run_fails_with_its_reason(monkeypatch, hold_at, diverged_at, status):
+    robot = load_robot("ipanema3_mini")
+    monkeypatch.setattr(cases, "_payload_run", lambda *a: _stand_in(robot, hold_at, diverged_at))
+    spec = CaseSpec("payload", "ipanema3_mini", 0, list(robot.home), False, "nominal", 0,
+                    {"fraction": 0.25, "controller": "ik_lc"})
+    result = cases._payload_result(spec, robot, 2.0, {}, -2.0, "")
+    assert result.status == status
+    if hold_at is not None:
+        assert "held by the force watch at 0.900 s (force watch: cable 6" in result.note
+        assert result.metrics["held_at_s"] == 0.9 and np.isnan(result.metrics["sag_cut_percent"])
+    elif diverged_at is not None:
+        assert "diverged at 1.200 s" in result.note
+    else:                                  # a usable run: 1 mm of a 2 mm sag left, the estimate exact
+        assert result.metrics["sag_cut_percent"] == pytest.approx(50.0)
+        assert result.metrics["estimate_error_percent"] == pytest.approx(0.0)
+        assert result.note == ""
