@@ -33,7 +33,7 @@ import numpy as np
 from cdpr_control.model import cable as np_cable
 from cdpr_control.model import dynamics as np_dynamics
 from cdpr_control.model import kinematics as np_kinematics
-from cdpr_control.kernels.control import CFCConstants
+from cdpr_control.kernels.control import CFC_CONSTANTS, cfc_constants
 from cdpr_control.kernels.control import cfc_period as _cfc_period
 from cdpr_control.kernels.control import pi_update as _pi_update
 from cdpr_control.kernels.control import widened_saturation_kernel
@@ -51,8 +51,8 @@ from cdpr_control.kernels.setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["CFCConstants", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
-           "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
+__all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
+           "cfc_constants", "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
            "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
            "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
            "vector", "warm_up"]
@@ -177,7 +177,7 @@ def compiled_widened_saturation(params, f, f_min, f_max):
 def compiled_cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
     """One compiled CFC period (see :mod:`.control`), the twin of
     control.cable_force_control.cfc_period -> new arrays (integrator, saturated, u, f_out, dq); the
-    PT1 state y (a float64 C-contiguous array) is updated in place; ``constants`` a CFCConstants."""
+    PT1 state y (a float64 C-contiguous array) is updated in place; ``constants`` a CFC_CONSTANTS record."""
     m = f.shape[0]
     saturated, out = np.empty(m, dtype=bool), np.empty((4, m))
     _cfc_period(vector(f_d), vector(f_ff), vector(f), vector(f_min), vector(f_max), vector(l_t), vector(dq_0), y,
@@ -219,7 +219,7 @@ def warm_up(robot=None) -> None:
         widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0, np.empty(8), np.empty(8))
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
-        compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, CFCConstants(*np.ones(11)))
+        compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, cfc_constants(**dict.fromkeys(CFC_CONSTANTS.names, 1.0)))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return

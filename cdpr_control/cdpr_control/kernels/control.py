@@ -2,30 +2,27 @@
 and one whole period of the cable force controller (3.19)-(3.23)."""
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from cdpr_control.kernels.jit import njit
 from cdpr_control.kernels.model import k_spec
 
 
-class CFCConstants(NamedTuple):
-    """The constants of one CFC period (:func:`cfc_period`): the PT1 feedback filter's alpha (3.20),
-    the period dt, the widened saturation (F_sat,n, F_sat,p, band, factor), and the stiffness model
-    of (3.23): ``linear`` 1.0 for k_spec nominal / l_t (2.15), 0.0 for the secant of
-    k_spec = k0 + k1 f + k2 f^2 (2.16)-(2.17)."""
-    alpha: float
-    dt: float
-    F_sat_n: float
-    F_sat_p: float
-    widen_band: float
-    widen_factor: float
-    linear: float
-    k_spec_nominal: float
-    k0: float
-    k1: float
-    k2: float
+# The constants of one CFC period (:func:`cfc_period`), by name: the PT1 feedback filter's alpha
+# (3.20), the period dt, the widened saturation (F_sat,n, F_sat,p, band, factor) and the stiffness
+# model of (3.23): ``linear`` 1.0 for k_spec nominal / l_t (2.15), 0.0 for the secant of
+# k_spec = k0 + k1 f + k2 f^2 (2.16)-(2.17). A record array of one element: numba reads its fields by
+# name at the cost of an array argument (a NamedTuple of eleven floats costs 2 us more a call).
+CFC_CONSTANTS = np.dtype([(name, np.float64) for name in (
+    "alpha", "dt", "F_sat_n", "F_sat_p", "widen_band", "widen_factor", "linear", "k_spec_nominal", "k0", "k1", "k2")])
+
+
+def cfc_constants(**values: float) -> np.ndarray:
+    """The (1,) record of :data:`CFC_CONSTANTS` with ``values`` (every field by name)."""
+    missing = set(CFC_CONSTANTS.names) - set(values)
+    if missing:
+        raise TypeError(f"cfc_constants needs {sorted(missing)}")
+    return np.array([tuple(float(values[name]) for name in CFC_CONSTANTS.names)], dtype=CFC_CONSTANTS)
 
 
 @njit(error_model="numpy")
@@ -64,15 +61,16 @@ def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor, s
 
 
 @njit(error_model="numpy")
-def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, c, saturated, out):
+def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants, saturated, out):
     """One period of the cable force controller (3.19)-(3.23) in one call, the twin of
     control.cable_force_control.cfc_period (the PI and the widened saturation above).
 
-    y: the PT1 state of (3.20), updated in place; c: the CFCConstants; out (4, m): the new
+    y: the PT1 state of (3.20), updated in place; constants: the CFC_CONSTANTS record; out (4, m): the new
     integrator, the PI output u, f_c,out = f_ff + u (3.22) and Δq_CFC (3.23) with K_l the linear
     k_spec / l_t (2.15) or the secant (2.16)-(2.17) at f_c,out.
     """
     m = f.shape[0]
+    c = constants[0]
     e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
     for i in range(m):
         y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
