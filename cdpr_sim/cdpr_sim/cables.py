@@ -28,8 +28,9 @@ solve with the platform's mass matrix, docs/sim.md "Integration").
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 
 from cdpr_control.model import cable
 from cdpr_control.kernels.model import cholesky_solve
@@ -167,7 +168,7 @@ class CableModel:
         return FT[:3], FT[3:]
 
 
-@numba.njit(cache=True)
+@njit
 def cable_wrench_kernel(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v, omega, theta, thetadot, ref, f, FT,
                   anchors, A, d, hint):
     """The loop of CableModel.wrench (one pass over the cables).
@@ -238,7 +239,7 @@ def cable_wrench_kernel(b, c, wrap, l_0, e_grid, f_grid, k_grid, tau, h, r, R, v
     return overload, moved
 
 
-@numba.njit(cache=True)
+@njit
 def implicit_wrench_kernel(A, f, d, thetadot_0, thetadot_1, h, mass, c_p, J_p, R, g, w_ext, FT):
     """Cable wrench over one physics step of length h, linearly implicit in the cable forces.
 

@@ -19,7 +19,7 @@ the change of theta per step to v_max dt (and, for the second-order model, the v
 
 All drives of a robot share one model; the state is vectorised over the m cables. The step,
 :func:`drive_step`, is written in the array subset numba compiles: a caller needing speed (the
-simulator, once per physics step) passes ``jit=numba.njit``; this module imports only numpy/scipy.
+simulator, once per physics step) passes ``jit=cdpr_control.kernels.jit.njit``; this module imports only numpy/scipy.
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ class DriveModel:
     Build with :meth:`pt1_deadtime`, :meth:`second_order` or :meth:`from_robot`. After a step,
     ``theta`` (m,) is the cable length at the end of the step and ``thetadot`` (m,) the mean cable
     velocity over the step, (theta[k+1] - theta[k]) / dt, as a drive differentiating its encoder
-    reports it. jit: compiler for :func:`drive_step` (e.g. numba.njit), None runs it as numpy.
+    reports it. jit: compiler for :func:`drive_step` (e.g. cdpr_control.kernels.jit.njit), None runs it as numpy.
     """
 
     def __init__(self, kind: str, A: np.ndarray, B: np.ndarray, T_d: float, dt: float, m: int,

@@ -17,17 +17,17 @@ theta_u + l_0, F + w, f (1 - cos beta_1)), the same operation on each element. n
 stays off, so no operation is reordered or contracted. tests/sim/test_sim_fused_period.py compares the
 two paths bit for bit.
 
-numba's disk cache of these two functions holds the compiled callees too and is renewed when this
-file changes, not when a callee's file does (as for cables.implicit_wrench_kernel's Cholesky solve): a
-changed callee needs this file touched or its __pycache__ cleared.
+Compiled with the project's :func:`cdpr_control.kernels.jit.njit`: its disk cache is renewed when any
+compiled source changes, a callee in another file included.
 """
 from __future__ import annotations
 
 import functools
 import math
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 
 from cdpr_sim.drive_models import drive_step
 from cdpr_control.kernels.friction import sensor_force_kernel
@@ -40,13 +40,13 @@ from cdpr_sim.sensors import quantise_kernel, encoder_count
 @functools.cache
 def compiled(fn):
     """numba-compiled (and disk-cached) version of a numpy kernel, one per function and process."""
-    return numba.njit(cache=True)(fn)
+    return njit(fn)
 
 
 _drive_step = compiled(drive_step)        # the drives' own compiled step (DriveModel(jit=compiled))
 
 
-@numba.njit(cache=True)
+@njit
 def winch_readings_kernel(theta, theta_prev, encoder_offset, resolution, theta_enc_prev, rate):
     """The winch side of Simulator._measure in one pass over the cables (once per control period;
     as numpy expressions on m values they cost several times more): the period's mean velocity
@@ -62,7 +62,7 @@ def winch_readings_kernel(theta, theta_prev, encoder_offset, resolution, theta_e
     return thetadot, theta_true, theta_enc, thetadot_enc
 
 
-@numba.njit(cache=True)
+@njit
 def kardan_into(R, x):
     """x[3:6] = platform.kardan_angles(R): [a, b, c] with R = Rx(a) Ry(b) Rz(c) (section 2.1.1), the
     same libm functions on the same numbers."""
@@ -71,7 +71,7 @@ def kardan_into(R, x):
     x[5] = math.atan2(-R[0, 1], R[0, 0])
 
 
-@numba.njit(cache=True)
+@njit
 def substep(theta_d, offset, u, Phi, G_new, G_old, x, buffer, head, delay, v_max, dt, thetadot, thetadot_0,
             f, A, d, h, mass, c_p, J_p, R, g, w_load, w, external, FT, theta):
     """One physics step's forces: the drive command u = theta_d - offset (encoder to drive
@@ -101,7 +101,7 @@ def substep(theta_d, offset, u, Phi, G_new, G_old, x, buffer, head, delay, v_max
     return head, dropped
 
 
-@numba.njit(cache=True)
+@njit
 def measure(pos, rot, lin, ang, theta, s, thetadot_drive, refresh_distance,
             b, c, wrap, l_0_plant, e_grid, f_grid, k_grid, tau, h, ref, f_buf, FT, anchors, A_buf, d_buf, hint,
             l_0, settle_ratio, f_settled, k0, settle_alpha, A_next, d_next,

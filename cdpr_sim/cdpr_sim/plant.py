@@ -28,8 +28,9 @@ import copy
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 import yaml
 
 from cdpr_control.model.robot import Robot
@@ -160,7 +161,7 @@ class Settlement:
         return self.s
 
 
-@numba.njit(cache=True)
+@njit
 def settle_kernel(s, f, l_t, f_settled, ratio, k0, alpha):
     """The loop of Settlement.update (once per control period: as numpy calls on m values it cost
     five times more), the same expression per cable as the array form

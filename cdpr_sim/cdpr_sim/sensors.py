@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 
 
 NOISE_BLOCK = 1000      # force sensor readings whose noise is drawn at once
@@ -71,7 +72,7 @@ class ForceSensor:
         return quantise_kernel(np.asarray(F_s, dtype=float), self.next_noise(), *self.quantiser())
 
 
-@numba.njit(cache=True)
+@njit
 def quantise_kernel(F, noise, k1, k0, code_min, code_max, r1, r0):
     """AD code of each force plus its noise (None: none), clipped to the converter's range, read
     back through the calibration."""
@@ -104,13 +105,13 @@ class Encoder:
         return reading
 
 
-@numba.njit(cache=True)
+@njit
 def encoder_count(theta: float, resolution: float) -> float:
     """A cable length theta [m] in whole counts of ``resolution`` [m per count] (0: ideal)."""
     return np.rint(theta / resolution) * resolution if resolution else theta
 
 
-@numba.njit(cache=True)
+@njit
 def _count_all(theta, resolution):
     for i in range(theta.shape[0]):
         theta[i] = encoder_count(theta[i], resolution)

@@ -157,9 +157,10 @@ class Simulator:
     IK{x0}, i.e. no tension) and encoder offset ``encoder_offset`` (default 0). ``output`` holds
     the SimOutput of time ``t``.
 
-    ``fused`` (default True): a period runs as the compiled calls of :mod:`cdpr_sim.period` when
-    the kernels are enabled (cdpr_control.kernels.ENABLED); False runs the readable path of method
-    calls and numpy expressions, the same numbers (tests/sim/test_sim_fused_period.py).
+    ``fused`` (default True): a period runs as the laws :data:`sim_period` and :data:`sim_measure`,
+    the compiled calls of :mod:`cdpr_sim.period` when the kernels are enabled, else the readable path
+    of method calls and numpy expressions, the same numbers (tests/sim/test_sim_fused_period.py);
+    False always runs the readable path.
     """
 
     fused: bool = True
@@ -325,13 +326,18 @@ class Simulator:
 
     def step(self, theta_d) -> SimOutput:
         """Advance one control period with the drive command theta_d (m,) (encoder coordinates)."""
-        if self.fused and kernels.ENABLED:
+        if self.fused:
             td = np.asarray(theta_d, dtype=float)
             if td.shape == (self.m,):            # else the readable path: broadcasts or refuses
-                return self._step_fused(td, theta_d)
+                return sim_period(self, td, theta_d)
+        return self._step_readable(theta_d)
+
+    def _step_readable(self, theta_d, given=None) -> SimOutput:
+        """:meth:`step` as method calls and numpy expressions (``given``: unused, the fused path's
+        original argument)."""
         u = np.asarray(theta_d, dtype=float) - self.encoder_offset
         if u.shape != (self.m,) or not all_finite(u):       # (a fifth of isfinite().all() on m values)
-            raise ValueError(f"theta_d must be {self.m} finite numbers, got {theta_d}")
+            raise ValueError(f"theta_d must be {self.m} finite numbers, got {theta_d if given is None else given}")
         cfg, body, cables, drives, pb, cid = self.config, self._body, self.cables, self.drives, self._pb, self._client
         dt = cfg.dt
         t = self.t
@@ -405,8 +411,12 @@ class Simulator:
     def _measure(self) -> SimOutput:
         """Outputs at the current time; also prepares the forces for the next physics step."""
         settlement = self.settlement
-        if self.fused and kernels.ENABLED and (settlement.ratio == 0.0 or settlement.f_settled is not None):
-            return self._measure_fused()
+        if self.fused and (settlement.ratio == 0.0 or settlement.f_settled is not None):
+            return sim_measure(self)
+        return self._measure_readable()
+
+    def _measure_readable(self) -> SimOutput:
+        """:meth:`_measure` as method calls and numpy expressions."""
         body, cables, drives, period = self._body, self.cables, self.drives, self.config.period
         r, R, v, omega = body.state()
         theta = drives.theta
@@ -427,10 +437,7 @@ class Simulator:
         self._theta_prev = theta
         self._theta_enc_prev = theta_enc
         if self.config.friction:
-            if kernels.ENABLED:
-                F_s_true = kernels.friction_sensor_force(self.friction, f, theta, thetadot, cables.beta)
-            else:
-                F_s_true = self.friction.sensor_force(f, theta, thetadot, cables.beta)
+            F_s_true = friction_sensor_force(self.friction, f, theta, thetadot, cables.beta)
         else:
             F_s_true = sensor_from_winch_force(f, self.robot.sensor.beta_1)
         self._w_contact = self._contact_wrench(r) if self._obstacles else _ZERO6
@@ -490,3 +497,13 @@ class Simulator:
             w[:3] += F
             w[3:] += cross(np.array(c[5]) - r, F)
         return w
+
+
+def _sensor_force(friction: PulleyFriction, f, theta, thetadot, beta) -> np.ndarray:
+    return friction.sensor_force(f, theta, thetadot, beta)
+
+
+# the simulator's laws (docs/kernels.md): its period and measurement, and the pulley friction seen by the sensors
+sim_period = kernels.law("sim_period", Simulator._step_readable, Simulator._step_fused)
+sim_measure = kernels.law("sim_measure", Simulator._measure_readable, Simulator._measure_fused)
+friction_sensor_force = kernels.law("friction_sensor_force", _sensor_force, kernels.friction_sensor_force)

@@ -28,26 +28,25 @@ def test_the_kernels_are_enabled_and_numpy_reference_switches_them_off():
     assert kernels.ENABLED
 
 
-def test_numpy_reference_runs_the_numpy_modules(robot, monkeypatch):
-    """Under numpy_reference() the dispatchers call the numpy modules, otherwise never."""
-    calls = []
-    for module, name in ((kinematics, "inverse_kinematics"), (dynamics, "platform_wrench"), (cable, "stiffness")):
-        original = getattr(module, name)
-        monkeypatch.setattr(module, name, lambda *a, _f=original, _n=name: calls.append(_n) or _f(*a))
-    x, f = np.array(robot.home), np.full(robot.m, 100.0)
+def test_a_law_runs_its_compiled_twin_unless_the_kernels_are_off(monkeypatch):
+    """The one place that picks compiled code: each law of kernels.LAWS calls its twin while
+    ENABLED and its reference under numpy_reference(), never the other."""
+    import cdpr_control.control.cable_force_control  # noqa: F401  (registers the CFC's laws)
+    assert {"inverse_kinematics", "cable_lengths", "measured_wrench", "platform_wrench", "cable_stiffness",
+            "pi_update", "widened_saturation", "cfc_period"} <= set(kernels.LAWS)
+    for name, law in kernels.LAWS.items():
+        monkeypatch.setattr(law, "reference", lambda *a, _n=name: ("reference", _n, a))
+        monkeypatch.setattr(law, "compiled", lambda *a, _n=name: ("compiled", _n, a))
+    for name, law in kernels.LAWS.items():
+        assert law(1, 2) == ("compiled", name, (1, 2))
+        with kernels.numpy_reference():
+            assert law(1, 2) == ("reference", name, (1, 2))
 
-    def call_all():
-        kernels.inverse_kinematics(robot, x)
-        kernels.cable_lengths(robot, x)
-        kernels.measured_wrench(robot, x, f)
-        kernels.platform_wrench(robot, x, np.zeros(6), np.zeros(6))
-        kernels.cable_stiffness(robot, f, np.ones(robot.m))
 
-    call_all()
-    assert calls == []
-    with kernels.numpy_reference():
-        call_all()
-    assert calls == ["inverse_kinematics"] * 3 + ["platform_wrench", "stiffness"]
+def test_the_model_laws_have_the_model_functions_as_references():
+    assert kernels.LAWS["inverse_kinematics"].reference is kinematics.inverse_kinematics
+    assert kernels.LAWS["platform_wrench"].reference is dynamics.platform_wrench
+    assert kernels.LAWS["cable_stiffness"].reference is cable.stiffness
 
 
 @pytest.mark.parametrize("pulleys", [True, False])
@@ -251,14 +250,14 @@ def test_pi_kernel_equals_the_reference_through_saturation():
 def test_widened_saturation_kernel_equals_the_reference(robot):
     p = CFCParams()
     f = np.linspace(robot.cable.f_min[0] - 10, robot.cable.f_max[0] + 10, robot.m)
-    for ref, fast in zip(widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max),
-                         kernels.widened_saturation(p, f, robot.cable.f_min, robot.cable.f_max)):
+    for ref, fast in zip(widened_saturation.reference(p, f, robot.cable.f_min, robot.cable.f_max),
+                         widened_saturation.compiled(p, f, robot.cable.f_min, robot.cable.f_max)):
         np.testing.assert_allclose(fast, ref, rtol=1e-14)
 
 
 @pytest.mark.parametrize("model", ["nonlinear", "linear"])
 def test_cfc_period_kernel_equals_the_reference(robot, model):
-    """CableForceControl's compiled period (kernels.cfc_period) against the numpy stages: the PT1,
+    """CableForceControl's compiled period (the law cfc_period) against the numpy stages: the PT1,
     widened saturation near both limits, PI through saturation and release, a feed-forward other
     than f_d, a held integrator now and then, both stiffness models; equal to rounding."""
     rng = np.random.default_rng(19)

@@ -23,7 +23,8 @@ from cdpr_control.model import cable
 from cdpr_control import kernels
 from cdpr_control.model.calibration import DEFAULT_WINDOW, StartupCalibration
 from cdpr_control.control.filters import LowPass
-from cdpr_control.control.pi_control import PIController
+from cdpr_control.control.pi_control import PIController, pi_update
+from cdpr_control.kernels import cfc_constants
 
 
 @dataclass
@@ -55,12 +56,41 @@ class CFCParams:
             raise ValueError(f"invalid CFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
 
 
-def widened_saturation(params: CFCParams, f, f_min, f_max) -> tuple[np.ndarray, np.ndarray]:
-    """Saturation magnitudes (F_sat,n, F_sat,p) raised linearly as f enters the band at a limit."""
-    near_min = np.clip((f_min + params.widen_band - f) / params.widen_band, 0.0, 1.0)
-    near_max = np.clip((f - (f_max - params.widen_band)) / params.widen_band, 0.0, 1.0)
-    gain = params.widen_factor - 1.0
-    return params.F_sat_n * (1.0 + gain * near_max), params.F_sat_p * (1.0 + gain * near_min)
+def _widened(f, f_min, f_max, F_sat_n, F_sat_p, band, factor) -> tuple[np.ndarray, np.ndarray]:
+    """Saturation magnitudes (F_sat,n, F_sat,p) raised linearly up to ``factor`` times as f enters
+    the band of width ``band`` at f_max and f_min (section 3.5.2)."""
+    near_min = np.clip((f_min + band - f) / band, 0.0, 1.0)
+    near_max = np.clip((f - (f_max - band)) / band, 0.0, 1.0)
+    gain = factor - 1.0
+    return F_sat_n * (1.0 + gain * near_max), F_sat_p * (1.0 + gain * near_min)
+
+
+def _widened_saturation(params: CFCParams, f, f_min, f_max) -> tuple[np.ndarray, np.ndarray]:
+    return _widened(f, f_min, f_max, params.F_sat_n, params.F_sat_p, params.widen_band, params.widen_factor)
+
+
+widened_saturation = kernels.law("widened_saturation", _widened_saturation, kernels.compiled_widened_saturation)
+
+
+def _cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
+    """One period of the cable force controller (3.19)-(3.23) on arrays -> new arrays (integrator,
+    saturated, u, f_c,out, Δq_CFC); the PT1 state y of (3.20) is updated in place. ``constants``: the
+    kernels.CFC_CONSTANTS record (PT1 alpha, dt, saturation, stiffness model); K_l is k_spec nominal /
+    l_t (2.15) or the secant k_spec(f_c,out) / l_t (2.16)-(2.17)."""
+    c = constants[0]
+    y += c["alpha"] * (f - y)                                           # (3.20), as LowPass.update
+    e = f_d - y                                                         # (3.2)
+    sat_n, sat_p = _widened(y, f_min, f_max, c["F_sat_n"], c["F_sat_p"], c["widen_band"], c["widen_factor"])
+    integrator, saturated, u = pi_update.reference(e, K_p, T_i, c["dt"], integrator, sat_n, sat_p)   # (3.19)
+    f_out = f_ff + u                                                    # (3.22)
+    if c["linear"]:
+        k = c["k_spec_nominal"] / l_t                                   # (2.15)
+    else:
+        k = cable.k_spec(np.maximum(f_out, 0.0), c["k0"], c["k1"], c["k2"]) / l_t   # (2.16)-(2.17)
+    return integrator, saturated, u, f_out, f_out / k - dq_0            # (3.23)
+
+
+cfc_period = kernels.law("cfc_period", _cfc_period, kernels.compiled_cfc_period)
 
 
 class CableForceController:
@@ -110,8 +140,7 @@ class CableForceController:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
-        saturation = kernels.widened_saturation if kernels.ENABLED else widened_saturation
-        sat_n, sat_p = saturation(self.params, f_fb, f_min, f_max)
+        sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
         u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
         self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
@@ -119,14 +148,21 @@ class CableForceController:
         return self.dq_cfc
 
 
-    def update_compiled(self, f_d, f, l_t, stiffness: tuple, f_min, f_max, f_ff=None) -> np.ndarray:
-        """:meth:`update` as one compiled call (kernels.cfc_period, the same arithmetic), once the
-        feedback filter has its first sample and while the PI integrates (not held); ``stiffness``
-        the model's constants (CableForceControl._stiffness_constants) instead of K_l."""
-        p, pi = self.params, self.pi
-        constants = np.array((self.feedback_filter.alpha, pi.dt, p.F_sat_n, p.F_sat_p, p.widen_band, p.widen_factor)
-                             + stiffness, dtype=float)
-        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = kernels.cfc_period(
+    def constants(self, cable_params) -> np.ndarray:
+        """The CFC_CONSTANTS record of these parameters with the stiffness model of ``cable_params``
+        (the robot's cable)."""
+        p = self.params
+        return cfc_constants(alpha=self.feedback_filter.alpha, dt=self.pi.dt, F_sat_n=p.F_sat_n, F_sat_p=p.F_sat_p,
+                             widen_band=p.widen_band, widen_factor=p.widen_factor,
+                             linear=float(p.stiffness_model == "linear"), k_spec_nominal=cable_params.k_spec_nominal,
+                             k0=cable_params.k0, k1=cable_params.k1, k2=cable_params.k2)
+
+    def update_period(self, f_d, f, l_t, constants, f_min, f_max, f_ff=None) -> np.ndarray:
+        """:meth:`update` as one call of the law :func:`cfc_period` (the same arithmetic; compiled
+        where the kernels are), once the feedback filter has its first sample and while the PI
+        integrates (not held); ``constants`` (:meth:`constants`) instead of K_l."""
+        pi = self.pi
+        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = cfc_period(
             f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
             pi.integrator, pi.K_p, pi.T_i, constants)
         return self.dq_cfc
@@ -148,6 +184,7 @@ class CableForceControl:
                  calibration_window: int = DEFAULT_WINDOW):
         self.robot = robot
         self.controller = CableForceController(robot.m, params or CFCParams(), dt)
+        self._constants = self.controller.constants(robot.cable)     # of the period: set with the parameters
         self.enabled = enabled
         self.calibration = StartupCalibration(calibration_window)
 
@@ -158,6 +195,7 @@ class CableForceControl:
     def set_params(self, params: CFCParams, enabled: bool | None = None) -> None:
         model_changed = params.stiffness_model != self.params.stiffness_model
         self.controller.set_params(params)
+        self._constants = self.controller.constants(self.robot.cable)
         if model_changed and self.calibration.f_0 is not None:
             self.controller.dq_0 = self._calibrated_dq_0()
         if enabled is not None and enabled != self.enabled:
@@ -189,13 +227,6 @@ class CableForceControl:
                 c.reset(self._calibrated_dq_0(), f=f)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
-        if kernels.ENABLED and c.feedback_filter.y is not None and not c.pi.hold:
-            return c.update_compiled(f_d, f, l_t, self._stiffness_constants(), f_min, f_max, f_ff)
+        if c.feedback_filter.y is not None and not c.pi.hold:
+            return c.update_period(f_d, f, l_t, self._constants, f_min, f_max, f_ff)
         return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff)
-
-    def _stiffness_constants(self) -> tuple[float, float, float, float, float]:
-        """The stiffness model of :meth:`_stiffness` for the compiled period: (linear 1/0, k_spec
-        nominal, k0, k1, k2)."""
-        c = self.robot.cable
-        return (float(self.params.stiffness_model == "linear"), float(c.k_spec_nominal), float(c.k0), float(c.k1),
-                float(c.k2))

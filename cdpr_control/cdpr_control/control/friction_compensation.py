@@ -65,9 +65,14 @@ class FrictionCompensation:
             fr, p = self.robot.friction, self.params
             self.model = PulleyFriction(p.mu, p.sigma, p.F_pv, fr.n_pulleys, fr.beta_inner,
                                         self.robot.sensor.beta_1, theta)
-        if kernels.ENABLED:
-            F_D = kernels.friction_platform_force(self.model, f_w, theta, thetadot, beta) - f_w   # (3.43)
-        else:
-            F_D = self.model.platform_force(F_s, theta, thetadot, beta) - f_w     # (3.43)
+        F_D = platform_force(self.model, f_w, theta, thetadot, beta) - f_w     # (3.43)
         self.delayed.append(F_D)
         return f_w + self.delayed[0]                                           # (3.44), shifted
+
+
+def _platform_force(model: PulleyFriction, f_w, theta, thetadot, beta) -> np.ndarray:
+    """f = f_w + F_D (3.44) of the winch forces f_w through ``model``; advances its Dahl state."""
+    return model.platform_force_of_winch(f_w, theta, thetadot, beta)
+
+
+platform_force = kernels.law("friction_platform_force", _platform_force, kernels.friction_platform_force)

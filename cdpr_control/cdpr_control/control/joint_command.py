@@ -34,8 +34,6 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_control import kernels
-from cdpr_control.kernels.model import joint_command_period
-from cdpr_control.kernels.robot_data import robot_data, vector
 from cdpr_control.control.safety import all_finite
 from cdpr_control.model.cable import total_free_length
 from cdpr_control.control.filters import LowPass
@@ -57,14 +55,7 @@ class JointCommand:
         self.held = False
         self.dq_hold = np.zeros(robot.m)       # the force-watch hold's tension correction [m]
         self._hold_filter = LowPass(T_HOLD_FILTER, dt)
-        kernels.warm_up(robot)               # the compiled IK loaded now, not in the first period
-        if kernels.ENABLED:                  # and the compiled period (kernels.model.joint_command_period)
-            x, f = np.zeros(6), np.zeros(robot.m)
-            joint_command_period(x, x, *self._robot_arrays(), f, f, 1e-3, 1e-3, np.empty(robot.m), np.empty(robot.m))
-
-    def _robot_arrays(self) -> tuple:
-        d = robot_data(self.robot)
-        return d.a, d.b, d.R_A, d.r_p, d.pulleys
+        kernels.warm_up(robot)               # the compiled IK and period loaded now, not in the first period
 
     def reset(self, theta) -> None:
         """Start from the measured cable lengths θ, so that enabling the command does not jump."""
@@ -101,10 +92,13 @@ class JointCommand:
         if self._hold_filter.y is not None:    # (released: the next hold starts afresh)
             self.dq_hold = np.zeros(self.robot.m)
             self._hold_filter.reset()
-        if not hold and kernels.ENABLED and len(offsets) == 1 and dq_cfc is not None:
-            theta_d = self._period(x_d, offsets[0], dq_cfc)
-            if theta_d is not None:
-                return theta_d
+        if not hold and len(offsets) == 1 and dq_cfc is not None:
+            period = joint_command_period(self.robot, x_d, offsets[0], dq_cfc, self.theta_d, float(self.v_max * self.dt),
+                                          float(self.dt))
+            if period is not None:
+                self.held = False
+                self.theta_d, self.velocity = period
+                return self.theta_d.copy()
         delta = None if hold else self._step(x_d, offsets, dq_cfc)
         self.held = delta is None
         if self.held:
@@ -140,33 +134,10 @@ class JointCommand:
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()
 
-    def _period(self, x_d, offset, dq_cfc) -> np.ndarray | None:
-        """:meth:`update` of one offset in one compiled call (kernels.model.joint_command_period, the same numbers); None
-        where it does not apply (shapes to broadcast, or a target that is not finite: :meth:`update`
-        then takes its general path)."""
-        m = self.robot.m
-        x_d, offset, dq_cfc, theta_d = vector(x_d), vector(offset), vector(dq_cfc), vector(self.theta_d)
-        if x_d.shape != (6,) or offset.shape != (6,) or dq_cfc.shape != (m,) or theta_d.shape != (m,):
-            return None
-        theta_next, velocity = np.empty(m), np.empty(m)
-        if not joint_command_period(x_d, offset, *self._robot_arrays(), dq_cfc, theta_d, float(self.v_max * self.dt),
-                                    float(self.dt), theta_next, velocity):
-            return None
-        self.held = False
-        self.velocity, self.theta_d = velocity, theta_next
-        return theta_next.copy()
-
     def _step(self, x_d, offsets, dq_cfc) -> np.ndarray | None:
         """The change of θ_d towards the target, at most v_max dt per cable; None if the target is not finite."""
-        step = self.v_max * self.dt
-        if kernels.ENABLED:           # the same in one compiled call
-            return kernels.joint_command_step(self.robot, self._offset_pose(x_d, offsets),
-                                              self.no_dq if dq_cfc is None else dq_cfc, self.theta_d, step)
-        target = self.target(x_d, offsets, dq_cfc)
-        if not all_finite(target.tolist()):
-            return None
-        # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
-        return np.minimum(np.maximum(target - self.theta_d, -step), step)
+        return joint_command_step(self.robot, self._offset_pose(x_d, offsets), self.no_dq if dq_cfc is None else dq_cfc,
+                                  self.theta_d, self.v_max * self.dt)
 
     def brake(self) -> np.ndarray:
         """θ̇_d of a braking period: the last one scaled so its largest entry drops by a_brake dt."""
@@ -174,3 +145,24 @@ class JointCommand:
         if speed == 0.0:
             return self.velocity
         return self.velocity * (max(speed - self.a_brake * self.dt, 0.0) / speed)
+
+
+def _joint_command_step(robot, x, dq_cfc, theta_d, step: float) -> np.ndarray | None:
+    """The change of θ_d towards the target IK(x) - Δq_CFC (5.10), at most ±step per cable; None if
+    the target is not finite."""
+    target = kernels.cable_lengths.reference(robot, x) - dq_cfc
+    if not all_finite(target.tolist()):
+        return None
+    # np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic at 1 kHz
+    return np.minimum(np.maximum(target - theta_d, -step), step)
+
+
+def _joint_command_period(robot, x_d, offset, dq_cfc, theta_d, step: float, dt: float):
+    """(θ_d, θ̇_d) of the next period with one offset: θ_d + the step towards IK(x_d + offset) -
+    Δq_CFC; None if the target is not finite."""
+    delta = _joint_command_step(robot, JointCommand._offset_pose(x_d, [offset]), dq_cfc, theta_d, step)
+    return None if delta is None else (theta_d + delta, delta / dt)
+
+
+joint_command_step = kernels.law("joint_command_step", _joint_command_step, kernels.joint_command_step)
+joint_command_period = kernels.law("joint_command_period", _joint_command_period, kernels.compiled_joint_command_period)

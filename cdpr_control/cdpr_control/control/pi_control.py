@@ -64,23 +64,26 @@ class PIController:
             self.saturated = (u > hi) | (u < lo)
             self.output = np.clip(u, lo, hi)
             return self.output
-        if kernels.ENABLED:
-            self.integrator, self.saturated, self.output = kernels.pi_update(
-                np.asarray(e, dtype=float), self.K_p, self.T_i, self.dt, self.integrator,
-                self.u_neg if u_neg is None else u_neg, self.u_pos if u_pos is None else u_pos)
-            return self.output
-        lo = -(self.u_neg if u_neg is None else u_neg)
-        hi = self.u_pos if u_pos is None else u_pos
-        p = self.K_p * e
-        candidate = self.integrator + self.K_p * self.dt / self.T_i * e
-        u_free = p + candidate
-        # integrate only when that does not push an already saturated output further out
-        blocked = ((u_free > hi) & (e > 0.0)) | ((u_free < lo) & (e < 0.0))
-        integrator = np.where(blocked, self.integrator, candidate)
-        # the integral part alone may never exceed the output range
-        integrator = np.clip(integrator, lo, hi)
-        u = p + integrator
-        self.saturated = (u > hi) | (u < lo)
-        self.integrator = integrator
-        self.output = np.clip(u, lo, hi)
+        self.integrator, self.saturated, self.output = pi_update(
+            np.asarray(e, dtype=float), self.K_p, self.T_i, self.dt, self.integrator,
+            self.u_neg if u_neg is None else u_neg, self.u_pos if u_pos is None else u_pos)
         return self.output
+
+
+def _pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
+    """One PI period (3.16)/(3.19) -> new arrays (integrator, saturated, output):
+    ``u = clip(K_p e + I, -u_neg, u_pos)``; I integrates ``K_p dt / T_i e`` unless that pushes a
+    saturated output further out, and is clamped to the output range (anti-windup)."""
+    lo, hi = -u_neg, u_pos
+    p = K_p * e
+    candidate = integrator + K_p * dt / T_i * e
+    u_free = p + candidate
+    # integrate only when that does not push an already saturated output further out
+    blocked = ((u_free > hi) & (e > 0.0)) | ((u_free < lo) & (e < 0.0))
+    # the integral part alone may never exceed the output range
+    integrator = np.clip(np.where(blocked, integrator, candidate), lo, hi)
+    u = p + integrator
+    return integrator, (u > hi) | (u < lo), np.clip(u, lo, hi)
+
+
+pi_update = kernels.law("pi_update", _pi_update, kernels.compiled_pi_update)

@@ -71,10 +71,13 @@ class WrenchSetpoint:
 
     def update_filtered(self, w, w_dyn, w_dist_max, low_pass, w_known=None) -> np.ndarray:
         """:meth:`update` with the disturbance filtered by ``low_pass`` (a LowPass) and saturated to
-        ±w_dist_max (6,): one compiled call (kernels.setpoint.smith_step, ~1 us against ~6 us of numpy
-        calls) with the same numbers, where the kernels are enabled and the filter has started."""
-        if not kernels.ENABLED or low_pass.y is None:     # (its first sample initialises the filter)
+        ±w_dist_max (6,): the law :func:`smith_period` (compiled: kernels.setpoint.smith_step, ~1 us
+        against ~6 us of numpy calls, the same numbers) once the filter has started."""
+        if low_pass.y is None:                          # (its first sample initialises the filter)
             return self.update(w, w_dyn, w_dist_max, low_pass.update, w_known)
+        return smith_period(self, w, w_dyn, w_dist_max, low_pass, w_known)
+
+    def _compiled_period(self, w, w_dyn, w_dist_max, low_pass, w_known) -> np.ndarray:
         if self._zeros is None:
             self._zeros = np.zeros(self.n)
         w_d = np.empty(self.n)
@@ -82,3 +85,11 @@ class WrenchSetpoint:
                    vector(w_dist_max), self._zeros if w_known is None else vector(w_known), w_d)
         self._index = (self._index + 1) % (self.delay + 1)
         return w_d
+
+
+def _smith_period(predictor: WrenchSetpoint, w, w_dyn, w_dist_max, low_pass, w_known=None) -> np.ndarray:
+    """One period of the Smith predictor (3.24)-(3.26) with the disturbance low-passed and saturated."""
+    return predictor.update(w, w_dyn, w_dist_max, low_pass.update, w_known)
+
+
+smith_period = kernels.law("smith_period", _smith_period, WrenchSetpoint._compiled_period)

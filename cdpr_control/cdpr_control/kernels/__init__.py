@@ -33,6 +33,7 @@ import numpy as np
 from cdpr_control.model import cable as np_cable
 from cdpr_control.model import dynamics as np_dynamics
 from cdpr_control.model import kinematics as np_kinematics
+from cdpr_control.kernels.control import CFC_CONSTANTS, cfc_constants
 from cdpr_control.kernels.control import cfc_period as _cfc_period
 from cdpr_control.kernels.control import pi_update as _pi_update
 from cdpr_control.kernels.control import widened_saturation_kernel
@@ -42,7 +43,7 @@ from cdpr_control.kernels.model import (_AT, _BETA, _C, _GAMMA, _KAPPA, _L_F, _Q
     elastic_frozen, ik_packed)
 from cdpr_control.kernels.model import secant_stiffness
 from cdpr_control.kernels.model import inverse_kinematics as _inverse_kinematics
-from cdpr_control.kernels.model import joint_command_step
+from cdpr_control.kernels.model import joint_command_period, joint_command_step
 from cdpr_control.kernels.model import measured_wrench as _measured_wrench
 from cdpr_control.kernels.model import platform_wrench as _platform_wrench
 from cdpr_control.kernels.robot_data import RobotData, robot_data, vector
@@ -50,11 +51,38 @@ from cdpr_control.kernels.setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["ENABLED", "RobotData", "cable_lengths", "cable_stiffness", "cfc_period",
-           "elastic_cable_state", "elastic_frozen", "friction_platform_force", "friction_sensor_force",
-           "inverse_kinematics", "inverse_kinematics_fields", "joint_command_step", "measured_wrench",
-           "numpy_reference", "pi_update", "platform_wrench", "robot_data", "vector", "warm_up",
-           "widened_saturation"]
+__all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
+           "cfc_constants", "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
+           "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
+           "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
+           "vector", "warm_up"]
+
+
+class Law:
+    """One computation of the thesis in two flavours: the readable numpy ``reference`` (in model/ or
+    control/) and its ``compiled`` twin (numba, in this package), with the same arguments and
+    results. Calling the law runs the twin while :data:`ENABLED`, else the reference: the one place
+    where the project chooses between them (``CDPR_KERNELS=0``, :func:`numpy_reference`)."""
+
+    __slots__ = ("name", "reference", "compiled")
+
+    def __init__(self, name: str, reference, compiled):
+        self.name, self.reference, self.compiled = name, reference, compiled
+
+    def __call__(self, *args):
+        return (self.compiled if ENABLED else self.reference)(*args)
+
+    def __repr__(self) -> str:
+        return f"Law({self.name!r})"
+
+
+LAWS: dict[str, Law] = {}   # name -> law: every computation that has a compiled twin (docs/kernels.md)
+
+
+def law(name: str, reference, compiled) -> Law:
+    """Register the law ``name`` (once; a module re-imported registers the same functions again)."""
+    LAWS[name] = Law(name, reference, compiled)
+    return LAWS[name]
 
 
 @contextlib.contextmanager
@@ -68,11 +96,19 @@ def numpy_reference():
         ENABLED = before
 
 
-def inverse_kinematics(robot, x) -> np_kinematics.InverseKinematics:
-    """kinematics.inverse_kinematics of one pose x (6,) with the robot's pulley model."""
-    if ENABLED:
-        return _inverse_kinematics(robot, x)
-    return np_kinematics.inverse_kinematics(robot, x)
+def _cable_stiffness(robot, f, l_t) -> np.ndarray:
+    d = robot_data(robot)
+    k = np.empty(np.shape(f))
+    secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2, k)
+    return k
+
+
+# the model's laws (their references in model/); the control stages register theirs beside their references
+inverse_kinematics = law("inverse_kinematics", np_kinematics.inverse_kinematics, _inverse_kinematics)   # (2.3)-(2.10)
+cable_lengths = law("cable_lengths", np_kinematics.cable_lengths, _cable_lengths)                        # (2.7)
+measured_wrench = law("measured_wrench", np_kinematics.measured_wrench, _measured_wrench)                # (2.11)
+platform_wrench = law("platform_wrench", np_dynamics.platform_wrench, _platform_wrench)                  # (2.33)
+cable_stiffness = law("cable_stiffness", np_cable.stiffness, _cable_stiffness)                            # (2.15)-(2.16)
 
 
 # rows of model.ik_packed's array per field of inverse_kinematics_fields (cT: the c_i as columns)
@@ -117,40 +153,9 @@ def _packed(robot, x) -> np.ndarray | None:
     return P
 
 
-def cable_lengths(robot, x) -> np.ndarray:
-    """q (m,) of the inverse kinematics of one pose x (6,), (2.7)."""
-    if ENABLED:
-        return _cable_lengths(robot, x)
-    return np_kinematics.inverse_kinematics(robot, x).q
-
-
-def measured_wrench(robot, x, f) -> np.ndarray:
-    """w = -A^T(x) f (2.11): the wrench that the cable forces f (m,) balance at pose x (6,)."""
-    if ENABLED:
-        return _measured_wrench(robot, x, f)
-    return -np_kinematics.inverse_kinematics(robot, x).AT @ f
-
-
-def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
-    """dynamics.platform_wrench of one pose with twist xdot and acceleration xddot (6,)."""
-    if ENABLED:
-        return _platform_wrench(robot, x, xdot, xddot)
-    return np_dynamics.platform_wrench(robot, x, xdot, xddot)
-
-
-def cable_stiffness(robot, f, l_t) -> np.ndarray:
-    """cable.stiffness: the secant stiffness k_spec(f) / l_t (2.15) of forces f and lengths l_t (m,)."""
-    if ENABLED:
-        d = robot_data(robot)
-        k = np.empty(np.shape(f))
-        secant_stiffness(vector(f), vector(l_t), d.k0, d.k1, d.k2, k)
-        return k
-    return np_cable.stiffness(robot, f, l_t)
-
-
-def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
-    """Compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output); the
-    caller checks ENABLED (PIController.update). Scalar limits u_neg, u_pos apply to every channel."""
+def compiled_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
+    """The compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output):
+    the twin of control.pi_control.pi_update. Scalar limits u_neg, u_pos apply to every channel."""
     n = e.shape[0]
     if not (type(u_neg) is np.ndarray and u_neg.ndim and type(u_pos) is np.ndarray and u_pos.ndim):
         u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
@@ -159,23 +164,40 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     return out
 
 
-def widened_saturation(params, f, f_min, f_max):
-    """cable_force_control.widened_saturation compiled (the caller checks ENABLED)."""
+def compiled_widened_saturation(params, f, f_min, f_max):
+    """The twin of control.cable_force_control.widened_saturation."""
     m = len(f)
+    f_min, f_max = (np.full(m, v, dtype=float) if np.ndim(v) == 0 else v for v in (f_min, f_max))   # as numpy broadcasts
     sat = np.empty(m), np.empty(m)
     widened_saturation_kernel(vector(f), vector(f_min), vector(f_max), float(params.F_sat_n),
                               float(params.F_sat_p), float(params.widen_band), float(params.widen_factor), *sat)
     return sat
 
 
-def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
-    """One compiled CFC period (see :mod:`.control`; the caller checks ENABLED) -> new arrays
-    (integrator, saturated, u, f_out, dq); the PT1 state y (a float64 C-contiguous array) is updated in place."""
+def compiled_cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants):
+    """One compiled CFC period (see :mod:`.control`), the twin of
+    control.cable_force_control.cfc_period -> new arrays (integrator, saturated, u, f_out, dq); the
+    PT1 state y (a float64 C-contiguous array) is updated in place; ``constants`` a CFC_CONSTANTS record."""
     m = f.shape[0]
     saturated, out = np.empty(m, dtype=bool), np.empty((4, m))
     _cfc_period(vector(f_d), vector(f_ff), vector(f), vector(f_min), vector(f_max), vector(l_t), vector(dq_0), y,
                 vector(integrator), K_p, T_i, constants, saturated, out)
     return out[0], saturated, out[1], out[2], out[3]
+
+
+def compiled_joint_command_period(robot, x_d, offset, dq_cfc, theta_d, step: float, dt: float):
+    """The twin of control.joint_command.joint_command_period: (θ_d, θ̇_d) of the next period, None
+    where the target is not finite or the shapes are not one pose and m cables."""
+    d = robot_data(robot)
+    m = d.a.shape[0]
+    x_d, offset, dq_cfc, theta_d = vector(x_d), vector(offset), vector(dq_cfc), vector(theta_d)
+    if x_d.shape != (6,) or offset.shape != (6,) or dq_cfc.shape != (m,) or theta_d.shape != (m,):
+        return None
+    theta_next, velocity = np.empty(m), np.empty(m)
+    if not joint_command_period(x_d, offset, d.a, d.b, d.R_A, d.r_p, d.pulleys, dq_cfc, theta_d, float(step),
+                                float(dt), theta_next, velocity):
+        return None
+    return theta_next, velocity
 
 
 _warm = {"robot_free": False, "robot": False}
@@ -193,11 +215,11 @@ def warm_up(robot=None) -> None:
         return
     f, ones = np.full(8, 100.0), np.ones(6)
     if not _warm["robot_free"]:
-        pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
+        compiled_pi_update(np.zeros(6), ones, ones, 1e-3, np.zeros(6), ones, ones)
         widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0, np.empty(8), np.empty(8))
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
-        cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, np.ones(11))
+        compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, cfc_constants(**dict.fromkeys(CFC_CONSTANTS.names, 1.0)))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return
@@ -208,6 +230,7 @@ def warm_up(robot=None) -> None:
     ik = _inverse_kinematics(robot, x)
     _cable_lengths(robot, x)
     joint_command_step(robot, x, f, f, 1e-3)
+    compiled_joint_command_period(robot, x, zero, f, f, 1e-3, 1e-3)
     _measured_wrench(robot, x, f)
     _platform_wrench(robot, x, zero, zero)
     elastic_frozen(x, vector(ik.q), vector(ik.AT), vector(ik.c.T), vector(ik.beta), d.b, d.r_p, vector(ik.q), f,

@@ -2,11 +2,30 @@
 and one whole period of the cable force controller (3.19)-(3.23)."""
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from cdpr_control.kernels.jit import njit
+from cdpr_control.kernels.model import k_spec
 
-@numba.njit(cache=True, error_model="numpy")
+
+# The constants of one CFC period (:func:`cfc_period`), by name: the PT1 feedback filter's alpha
+# (3.20), the period dt, the widened saturation (F_sat,n, F_sat,p, band, factor) and the stiffness
+# model of (3.23): ``linear`` 1.0 for k_spec nominal / l_t (2.15), 0.0 for the secant of
+# k_spec = k0 + k1 f + k2 f^2 (2.16)-(2.17). A record array of one element: numba reads its fields by
+# name at the cost of an array argument (a NamedTuple of eleven floats costs 2 us more a call).
+CFC_CONSTANTS = np.dtype([(name, np.float64) for name in (
+    "alpha", "dt", "F_sat_n", "F_sat_p", "widen_band", "widen_factor", "linear", "k_spec_nominal", "k0", "k1", "k2")])
+
+
+def cfc_constants(**values: float) -> np.ndarray:
+    """The (1,) record of :data:`CFC_CONSTANTS` with ``values`` (every field by name)."""
+    missing = set(CFC_CONSTANTS.names) - set(values)
+    if missing:
+        raise TypeError(f"cfc_constants needs {sorted(missing)}")
+    return np.array([tuple(float(values[name]) for name in CFC_CONSTANTS.names)], dtype=CFC_CONSTANTS)
+
+
+@njit(error_model="numpy")
 def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, integ, saturated, output):
     """One PI period as PIController.update into the (new) arrays integ, saturated, output.
 
@@ -27,7 +46,7 @@ def pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, integ, saturated, outpu
         output[i] = lo if u < lo else (hi if u > hi else u)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor, sat_n, sat_p):
     """sat_n, sat_p (m,) of cable_force_control.widened_saturation: F_sat,n and F_sat,p raised
     linearly up to ``factor`` times as f enters the band of width ``band`` at f_max and f_min."""
@@ -41,30 +60,28 @@ def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor, s
         sat_p[i] = F_sat_p * (1.0 + gain * near_min)
 
 
-@numba.njit(cache=True, error_model="numpy")
-def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, c, saturated, out):
-    """One period of the cable force controller (3.19)-(3.23) in one call, as
-    CableForceController.update with CableForceControl's stiffness model (the PI and the widened
-    saturation above; here, not in a module of its own, so that an edit of them recompiles it).
+@njit(error_model="numpy")
+def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants, saturated, out):
+    """One period of the cable force controller (3.19)-(3.23) in one call, the twin of
+    control.cable_force_control.cfc_period (the PI and the widened saturation above).
 
-    y: the PT1 state of (3.20), updated in place; c = [alpha of the PT1, dt, F_sat,n, F_sat,p, widen
-    band, widen factor, linear model (1/0), k_spec nominal, k0, k1, k2]; out (4, m): the new
+    y: the PT1 state of (3.20), updated in place; constants: the CFC_CONSTANTS record; out (4, m): the new
     integrator, the PI output u, f_c,out = f_ff + u (3.22) and Δq_CFC (3.23) with K_l the linear
     k_spec / l_t (2.15) or the secant (2.16)-(2.17) at f_c,out.
     """
     m = f.shape[0]
+    c = constants[0]
     e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
     for i in range(m):
-        y[i] += c[0] * (f[i] - y[i])                                   # (3.20)
+        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
         e[i] = f_d[i] - y[i]                                           # (3.2)
-    widened_saturation_kernel(y, f_min, f_max, c[2], c[3], c[4], c[5], sat_n, sat_p)
-    pi_update(e, K_p, T_i, c[1], integrator, sat_n, sat_p, out[0], saturated, out[1])   # (3.19)
+    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    pi_update(e, K_p, T_i, c.dt, integrator, sat_n, sat_p, out[0], saturated, out[1])   # (3.19)
     for i in range(m):
         f_out = f_ff[i] + out[1, i]                                    # (3.22)
-        if c[6] != 0.0:
-            k = c[7] / l_t[i]                                          # (2.15)
+        if c.linear != 0.0:
+            k = c.k_spec_nominal / l_t[i]                              # (2.15)
         else:
-            fp = max(f_out, 0.0)
-            k = (c[8] + fp * (c[9] + c[10] * fp)) / l_t[i]             # (2.16)-(2.17)
+            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
         out[2, i] = f_out
         out[3, i] = f_out / k - dq_0[i]                                # (3.23)

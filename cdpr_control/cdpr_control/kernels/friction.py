@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import functools
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 
 from cdpr_control.model import friction as np_friction
 from cdpr_control.kernels.robot_data import vector
 
-_tables = numba.njit(cache=True)(np_friction.last_pulley_tables)
+_tables = njit(np_friction.last_pulley_tables)
 
 # rows of the Dahl state (friction.ROW_*) as literals: numba freezes a global into the cached code,
 # which it renews when this file changes, not when friction.py does
@@ -36,7 +37,7 @@ if (_DIRECTION, _THETA_0, _F_0, _THETA, _F_D) != (np_friction.ROW_DIRECTION, np_
     raise ImportError("kernels.friction: the Dahl state rows differ from cdpr_control.model.friction.ROW_*")
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _direction(state, i, thetadot_i, v_eps, alpha_table, gamma_table):
     """Cable i's direction of motion s and its pulley coefficients alpha, gamma (3.41); a direction
     change stores theta_0 and F_0 of the last sample (3.43). Advances ``state``."""
@@ -53,7 +54,7 @@ def _direction(state, i, thetadot_i, v_eps, alpha_table, gamma_table):
     return s, alpha_table[1, i], gamma_table[1, i]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def platform_force_kernel(f_w, theta, thetadot, alpha_table, gamma_table, sigma, v_eps, state, f):
     """friction.platform_force_step (3.41)-(3.44) per cable, into f (m,); advances ``state``.
 
@@ -106,7 +107,7 @@ def friction_platform_force(model, f_w, theta, thetadot, beta_last) -> np.ndarra
 
 # -- the simulator's side: the platform's forces as the winch force sensors see them --------------------
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def sensor_force_kernel(f, theta, thetadot, alpha_table, gamma_table, sigma, v_eps, state, tol, max_iterations,
                         sensor_gain, F_s):
     """friction.sensor_force_step followed by friction.sensor_from_winch_force, per cable.

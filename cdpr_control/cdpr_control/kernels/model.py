@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from cdpr_control.kernels.jit import njit
 
 from cdpr_control.model.kinematics import InverseKinematics
 from cdpr_control.kernels.robot_data import robot_data, vector
@@ -29,7 +30,7 @@ from cdpr_control.kernels.robot_data import robot_data, vector
 CONVERGED, MAX_ITERATIONS, STALLED, NON_FINITE = 0, 1, 2, 3
 _LAMBDA_START, _LAMBDA_MIN, _LAMBDA_MAX, _LAMBDA_CONVERGED = 1e-6, 1e-12, 1e12, 1e-2
 
-@numba.njit(cache=True)
+@njit
 def rotation(phi_x, phi_y, phi_z, R):
     """Fill R (3, 3) = Rx Ry Rz of the Kardan angles (kinematics.rotation_matrix)."""
     ca, cb, cc = math.cos(phi_x), math.cos(phi_y), math.cos(phi_z)
@@ -40,7 +41,7 @@ def rotation(phi_x, phi_y, phi_z, R):
     R[2, 0], R[2, 1], R[2, 2] = sa * sc - ca_sb * cc, sa * cc + ca_sb * sc, ca * cb
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def ik(x, a, b, R_A, r_p, pulleys):
     """(q, l, u, AT, c, beta, gamma, l_f, Rb, R, n, kappa) of pose x (6,), as InverseKinematics.
 
@@ -98,7 +99,7 @@ def ik(x, a, b, R_A, r_p, pulleys):
 _Q, _BETA, _GAMMA, _L_F, _KAPPA, _AT, _L, _C, _RB, _N, _ROWS = 0, 1, 2, 3, 4, 5, 11, 14, 17, 20, 23
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def ik_packed(x, a, b, R_A, r_p, pulleys, out):
     """:func:`ik` into one array out (23 + 3, m): rows q, beta, gamma, l_f, kappa, A^T (6), l^T, c^T,
     Rb^T, n^T (3 each), then R in the first three columns of the last three rows (needs m >= 3)."""
@@ -110,13 +111,13 @@ def ik_packed(x, a, b, R_A, r_p, pulleys, out):
     out[_ROWS:, :3] = R
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def cable_lengths_kernel(x, a, b, R_A, r_p, pulleys, q):
     """q (m,) of :func:`ik` into q."""
     q[:] = ik(x, a, b, R_A, r_p, pulleys)[0]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def joint_command_kernel(x, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, delta):
     """The rate-limited step of JointCommand.update into delta (m,): the target θ = q(x) - Δq_CFC
     ((2.7), (5.10)) less θ_d, limited to ±step; False (delta not set) when the target is not finite."""
@@ -129,7 +130,7 @@ def joint_command_kernel(x, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, delt
     return True
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def measured_wrench_kernel(x, f, a, b, R_A, r_p, pulleys, w):
     """w = -A^T(x) f (2.11) into w (6,)."""
     AT = ik(x, a, b, R_A, r_p, pulleys)[3]
@@ -183,14 +184,14 @@ def measured_wrench(robot, x, f) -> np.ndarray:
 
 # --- platform wrench (2.33) ----------------------------------------------------------------------
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def platform_wrench_kernel(x, xdot, xddot, mass, cog, inertia, gravity, w):
     """w = w_gravity - w_dyn (6,): [m g; c x m g] - (M(x) xddot + [m w x (w x c); w x J_o w]),
     c = R c_p, J_o = R J_c R^T - m [c][c] (2.33), twist xdot = [r_dot; omega]; into w."""
@@ -246,30 +247,34 @@ def platform_wrench(robot, x, xdot, xddot) -> np.ndarray:
 
 # --- elastic forward kinematics (3.7)-(3.9) -----------------------------------------------------
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
+def k_spec(f, k0, k1, k2):
+    """k_spec = k0 + k1 f + k2 f^2 (2.16) of one force f >= 0 (model.cable.k_spec compiled)."""
+    return k0 + f * (k1 + k2 * f)
+
+
+@njit(error_model="numpy")
 def elastic_cable_state(theta, f, l_0, k0, k1, k2):
     """(q_hat, k_l) (m,): q_hat = theta + dq with dq = f (theta + l_0) / (k_spec - f) (3.7) and
     the secant stiffness k_l = k_spec(f) / (q_hat + l_0) (2.14)-(2.16) (cdpr_control.model.cable)."""
     m = theta.shape[0]
     q_hat, k_l = np.empty(m), np.empty(m)
     for i in range(m):
-        fp = max(f[i], 0.0)
-        k_spec = k0 + fp * (k1 + k2 * fp)
-        q_hat[i] = theta[i] + f[i] * (theta[i] + l_0[i]) / (k_spec - f[i])
-        k_l[i] = k_spec / (q_hat[i] + l_0[i])
+        k = k_spec(max(f[i], 0.0), k0, k1, k2)
+        q_hat[i] = theta[i] + f[i] * (theta[i] + l_0[i]) / (k - f[i])
+        k_l[i] = k / (q_hat[i] + l_0[i])
     return q_hat, k_l
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def secant_stiffness(f, l_t, k0, k1, k2, k):
     """k = k_spec(f) / l_t (2.15)-(2.16) (m,), k_spec = k0 + f (k1 + k2 f) with f <= 0 giving k0
     (cable.stiffness)."""
     for i in range(f.shape[0]):
-        fp = max(f[i], 0.0)
-        k[i] = (k0 + fp * (k1 + k2 * fp)) / l_t[i]
+        k[i] = k_spec(max(f[i], 0.0), k0, k1, k2) / l_t[i]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _frozen_residual(x, cT, b, q_free, k_l, res, JT, R, S, Rb):
     """Psi = k_l (|c_i - r - R b_i| - q_free) into res (m,) and (dPsi/dx)^T into JT (6, m); returns
     |Psi|^2. dq_i/dr = -u_i, dq_i/dphi_k = -u_i . ([h_k] R b_i), h_k column k of H(phi)."""
@@ -300,7 +305,7 @@ def _frozen_residual(x, cT, b, q_free, k_l, res, JT, R, S, Rb):
     return cost
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def cholesky_solve(A, g, dx, L):
     """dx = A^-1 g for symmetric A (6, 6); False where A is not positive definite (dposv's info)."""
     n = A.shape[0]
@@ -329,7 +334,7 @@ def cholesky_solve(A, g, dx, L):
     return True
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _normal_equations(JT, res, lam, A, g):
     """A = J^T J (1 + lam on the diagonal, Marquardt), g = J^T Psi."""
     for r in range(6):
@@ -345,7 +350,7 @@ def _normal_equations(JT, res, lam, A, g):
         A[r, r] *= 1.0 + lam
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations, x_out):
     """Levenberg-Marquardt on Psi = K_l (IK_frozen(x) - q_hat) (3.8)-(3.9) from x_d, with q_hat
     and K_l from the winch lengths theta and forces f (m,) (:func:`elastic_cable_state`).
@@ -361,7 +366,7 @@ def elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, 
     return code, iterations, norm
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations):
     m = cT.shape[1]
     q_hat, k_l = elastic_cable_state(theta, f, l_0, k0, k1, k2)
@@ -423,7 +428,7 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
 # joint_command_kernel, θ̇_d = Δθ / dt, θ_d + Δθ), so the same numbers, bit for bit
 # (tests/kernels/test_force_distribution_joint_command_fast_paths.py). Here, beside joint_command_kernel, because numba's disk cache
 # keeps the callees of a kernel and renews it only when the kernel's own file changes.
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def joint_command_period(x_d, offset, a, b, R_A, r_p, pulleys, dq_cfc, theta_d, step, dt, theta_next, velocity):
     """θ_d of the next period into theta_next (m,) and θ̇_d into velocity (m,): the target
     q(x_d + offset) - Δq_CFC ((2.7), (5.10)) approached by at most ±step; False (outputs not set)

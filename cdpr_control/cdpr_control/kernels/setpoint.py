@@ -6,10 +6,10 @@ operations in the same order, so the same numbers (tests/kernels/test_kernels.py
 """
 from __future__ import annotations
 
-import numba
+from cdpr_control.kernels.jit import njit
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def smith_step(buffer, index, w, w_dyn, y, alpha, w_dist_max, known, w_d):
     """Write w_dyn into the delay line ``buffer`` at ``index``; the disturbance w - w_dyn(t - T_d,w)
     (3.24) (the row after ``index``) through the PT1 state y (y += alpha (u - y)), saturated to

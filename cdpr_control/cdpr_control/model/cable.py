@@ -16,11 +16,16 @@ def total_free_length(robot, q) -> np.ndarray:
     return np.asarray(q, dtype=float) + robot.l_0
 
 
+def k_spec(f, k0, k1, k2):
+    """k_spec = k0 + k1 f + k2 f^2 (2.16) [N] of forces f >= 0: the one numpy form of the law
+    (its compiled twin: kernels.model.k_spec)."""
+    return k0 + f * (k1 + k2 * f)
+
+
 def specific_stiffness(robot, f) -> np.ndarray:
-    """k_spec = k0 + k1 f + k2 f^2 (2.16) [N]; f <= 0 (slack) gives k0."""
+    """k_spec (2.16) [N] of the robot's cable; f <= 0 (slack) gives k0."""
     c = robot.cable
-    f = np.maximum(np.asarray(f, dtype=float), 0.0)
-    return c.k0 + f * (c.k1 + c.k2 * f)
+    return k_spec(np.maximum(np.asarray(f, dtype=float), 0.0), c.k0, c.k1, c.k2)
 
 
 def stiffness(robot, f, l_t) -> np.ndarray:
@@ -37,7 +42,7 @@ def tangent_stiffness(robot, f, l_t) -> np.ndarray:
     c = robot.cable
     f = np.asarray(f, dtype=float)
     fp = np.maximum(f, 0.0)
-    k = c.k0 + fp * (c.k1 + c.k2 * fp)
+    k = k_spec(fp, c.k0, c.k1, c.k2)
     return np.where(f > 0.0, k * k / (l_t * (c.k0 - c.k2 * fp * fp)), 0.0)
 
 

@@ -167,8 +167,13 @@ class ForwardKinematics:
         theta = np.asarray(theta, dtype=float)
         if dq0 is not None:
             theta = theta - dq0
-        if kernels.ENABLED and pulleys == "frozen":
-            return self._elastic_frozen_compiled(theta, f, x_d, ik_d)
+        if pulleys == "frozen":
+            return elastic_frozen(self, theta, f, x_d, ik_d)
+        return self._elastic_numpy(theta, f, x_d, ik_d, pulleys)
+
+    def _elastic_numpy(self, theta, f, x_d, ik_d, pulleys: str) -> FKResult:
+        """:meth:`elastic` on numpy: the pulley IK in each iteration ('full') or frozen at x_d."""
+        robot = self.robot
         dq = cable.elongation_from_force_and_winch_length(robot, f, theta)
         q_hat = theta + dq
         k_l = cable.stiffness(robot, f, cable.total_free_length(robot, q_hat))
@@ -276,3 +281,15 @@ class ForwardKinematics:
                 if lam > _LAMBDA_MAX:
                     return FKResult(x, False, STALLED, it, math.sqrt(cost))
         return FKResult(x, False, MAX_ITERATIONS, self.max_iterations, math.sqrt(cost))
+
+
+def _elastic_frozen_numpy(fk: ForwardKinematics, theta, f, x_d, ik_d) -> FKResult:
+    return fk._elastic_numpy(theta, f, x_d, ik_d, "frozen")
+
+
+def _elastic_frozen_compiled(fk: ForwardKinematics, theta, f, x_d, ik_d) -> FKResult:
+    return fk._elastic_frozen_compiled(theta, f, x_d, ik_d)
+
+
+# the elastic FK with frozen pulleys (3.7)-(3.9), section 3.2
+elastic_frozen = kernels.law("elastic_frozen", _elastic_frozen_numpy, _elastic_frozen_compiled)

@@ -26,7 +26,7 @@ its exact inverse. Everything is vectorised over the m cables; pure numpy.
 
 The two per-sample steps, :func:`platform_force_step` and :func:`sensor_force_step`, are written in
 the array subset that numba compiles and take the Dahl state as an explicit array, so a caller that
-needs speed passes ``jit=numba.njit`` to :class:`PulleyFriction` and runs this same code compiled;
+needs speed passes ``jit=cdpr_control.kernels.jit.njit`` to :class:`PulleyFriction` and runs this same code compiled;
 this module itself imports nothing beyond numpy. The simulator runs :meth:`PulleyFriction.sensor_force`
 as :func:`cdpr_control.kernels.friction_sensor_force` (the same operations as a loop over the
 cables) while the kernels are enabled.
@@ -245,7 +245,7 @@ class PulleyFriction:
     mu, sigma [N/m], F_pv [N s/m] (m,): friction parameters (table 3.4); n_pulleys (m,);
     beta_inner, beta_1 [rad]: wrap angles of the inner pulleys and of the sensor pulley;
     theta (m,): cable lengths to start from; v_eps [m/s]: standstill band of the Dahl model;
-    jit: compiler for the per-sample steps (e.g. numba.njit); None runs them as numpy.
+    jit: compiler for the per-sample steps (e.g. cdpr_control.kernels.jit.njit); None runs them as numpy.
     """
 
     def __init__(self, mu, sigma, F_pv, n_pulleys, beta_inner: float, beta_1: float, theta,
@@ -272,10 +272,13 @@ class PulleyFriction:
         the commanded theta_d, thetadot_d, section 3.7.3); beta_last (m,): wrap angle of the
         swivelling pulley from the inverse kinematics (2.6).
         """
+        return self.platform_force_of_winch(winch_force_from_sensor(F_s, self.beta_1), theta, thetadot, beta_last)
+
+    def platform_force_of_winch(self, f_w, theta, thetadot, beta_last) -> np.ndarray:
+        """:meth:`platform_force` from the winch forces f_w (3.40) (the sensor forces converted)."""
         alpha, gamma = self.series.tables(beta_last)
         d = self.dahl
-        return self._platform_step(winch_force_from_sensor(F_s, self.beta_1), _floats(theta), _floats(thetadot),
-                                   alpha, gamma, d.sigma, d.v_eps, d.state)
+        return self._platform_step(f_w, _floats(theta), _floats(thetadot), alpha, gamma, d.sigma, d.v_eps, d.state)
 
     def sensor_force(self, f, theta, thetadot, beta_last, tol: float = 1e-12,
                      max_iterations: int = 50) -> np.ndarray:

@@ -250,6 +250,16 @@ def inverse_kinematics(robot, x, pulleys: bool | None = None) -> InverseKinemati
     )
 
 
+def cable_lengths(robot, x) -> np.ndarray:
+    """q (m,) of one pose x (6,), (2.7)."""
+    return inverse_kinematics(robot, x).q
+
+
+def measured_wrench(robot, x, f) -> np.ndarray:
+    """w = -A^T(x) f (2.11): the wrench that the cable forces f (m,) balance at pose x (6,)."""
+    return -inverse_kinematics(robot, x).AT @ f
+
+
 def _T(a):
     return np.swapaxes(a, -1, -2)
 

@@ -96,10 +96,11 @@ class FrictionCompensationNode(CdprNode):
     def _wrap_angles(self, pose) -> np.ndarray:
         """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
         never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
-        key = pose_key(pose)
-        if key is None or (key, kernels.ENABLED) != self._beta_key:
+        pose_bytes = pose_key(pose)
+        key = (pose_bytes, kernels.ENABLED)      # (the flavour computed it: a switch recomputes)
+        if pose_bytes is None or key != self._beta_key:
             self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
-            self._beta_key = (key, kernels.ENABLED)
+            self._beta_key = key
         return self._beta
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
