@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from cdpr_tools.identify.experiments import (TOPIC_COMMAND, TOPIC_FORCES, TOPIC_POSE, TOPIC_SETPOINT,
+from cdpr_tools.identify.experiments import (TOPIC_COMMAND, TOPIC_FORCES, TOPIC_MODE, TOPIC_POSE, TOPIC_SETPOINT,
     TOPIC_STATE)
 
 _POSE_FIELDS = tuple(f"pose.position.{a}" for a in "xyz") + tuple(f"pose.orientation.{a}" for a in "xyzw")
@@ -60,3 +61,21 @@ def poses(bag, t) -> np.ndarray:
 def commands(bag) -> tuple[np.ndarray, np.ndarray]:
     """(t (K,), theta_d (K, m)) of winch/command."""
     return bag.series(TOPIC_COMMAND, "position", stamp="header")
+
+
+def controller(bag) -> str:
+    """The joint command's mode(s) in the bag (``/joint_command/mode``: force_control, ik_only), in
+    the order recorded; "controller not recorded" without that topic."""
+    if TOPIC_MODE not in bag.topics:
+        return "controller not recorded"
+    modes = []
+    for message in bag.messages([TOPIC_MODE]):
+        if message.msg.data not in modes:
+            modes.append(message.msg.data)
+    return " then ".join(modes) or "controller not recorded"
+
+
+def run_title(bag, robot) -> str:
+    """What a figure of this bag names: robot, controller and bag, e.g.
+    ``IPAnema 3 Mini, force_control, bag friction``."""
+    return f"{robot.name}, {controller(bag)}, bag {Path(bag.path).name}"
