@@ -57,11 +57,21 @@ def _harmonic(t, y, omega) -> complex:
 
 
 def constant_speed_window(t, x_d, tolerance: float = 0.005):
-    """Mask of the samples whose set-point speed is within ``tolerance`` of its maximum, cut to whole turns;
-    with the circle's frequency [Hz] and the set-point radius [m]."""
+    """Mask of the samples whose set-point speed is within ``tolerance`` of the circle's, cut to whole turns;
+    with the circle's frequency [Hz] and the set-point radius [m].
+
+    The circle's speed is the most frequent one (a histogram of log v in bins of ``tolerance``), and
+    the window the longest stretch at it: a program reaches the circle by a faster rapid move (G0)
+    and leaves it again, so the fastest samples are not the circle's."""
     v = np.linalg.norm(np.gradient(x_d[:, :2], t, axis=0), axis=1)
-    mask = v > (1.0 - tolerance) * v.max()
-    idx = np.flatnonzero(mask)
+    moving = v > 1e-3 * max(float(v.max()), 1e-12)
+    if not moving.any():
+        raise ValueError("the set-points do not move: no circle in the run")
+    log_v = np.log(v[moving])
+    counts, edges = np.histogram(log_v, bins=max(int(np.ptp(log_v) / tolerance), 1))
+    k = int(np.argmax(counts))
+    v_c = float(np.exp(np.median(log_v[(log_v >= edges[k]) & (log_v <= edges[k + 1])])))
+    idx = _longest_run(np.abs(v / v_c - 1.0) < tolerance)
     xy = x_d[idx, :2]
     centre = 0.5 * (xy.max(axis=0) + xy.min(axis=0))
     radius = float(np.mean(np.linalg.norm(xy - centre, axis=1)))
@@ -70,6 +80,14 @@ def constant_speed_window(t, x_d, tolerance: float = 0.005):
     if turns < 1:
         raise ValueError("the run has less than one turn at constant speed")
     return (t >= t[idx[0]]) & (t <= t[idx[0]] + turns / frequency), frequency, radius
+
+
+def _longest_run(mask) -> np.ndarray:
+    """Indexes of the longest stretch of consecutive True samples of ``mask`` (not all False)."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    k = int(np.argmax(ends - starts))
+    return np.arange(starts[k], ends[k])
 
 
 def identify(bag, robot, friction_params: dict | None = None, use_reference: bool = False) -> MassFit:
