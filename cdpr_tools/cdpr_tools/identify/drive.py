@@ -47,7 +47,7 @@ class DriveFit:
 def load_data(bag, min_motion: float = 0.1) -> DriveData:
     """The sweep in ``bag``: the winches whose command range exceeds min_motion of the largest one."""
     t_c, theta_d = bag_data.commands(bag)
-    state = bag_data.winch_state(bag)
+    state = bag_data.winch_state(bag, aligned=False)
     dt = float(np.median(np.diff(t_c)))
     # a recording of the graph starts and stops anywhere: keep the commands from the first state
     # on whose effect (the state one period later) is recorded
