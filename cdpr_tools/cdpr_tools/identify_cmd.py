@@ -2,7 +2,7 @@
 
     cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
     cdpr identify drive BAG [--model pt1_deadtime|second_order] [--robot NAME] [--plot fit.png]
-    cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference] [-o robot.yaml]
     cdpr identify settlement BAG [--robot robot.yaml] [--friction params.yaml] [-o lc_params.yaml]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
@@ -46,6 +46,8 @@ def add_parser(sub) -> None:
     m = what.add_parser("mass", help="platform mass and centre of gravity from the circle run (4.2)-(4.4)")
     m.add_argument("bag", help="bag with winch/state, setpoint and ground_truth/pose")
     _force_arguments(m)
+    m.add_argument("--plot", metavar="PNG", nargs="?", const="mass_fit.png",
+                   help="plot of the force harmonics (default file mass_fit.png)")
     m.set_defaults(run=run_mass)
 
     k = what.add_parser("stiffness", help="cable stiffness k0, k1, k2 (2.16) from tension steps at rest")
@@ -153,11 +155,17 @@ def run_mass(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import mass
 
-    fit = mass.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args), args.reference)
+    from cdpr_tools.identify import bag_data
+
+    robot, bag = load_robot(args.robot), BagReader(args.bag)
+    fit = mass.identify(bag, robot, _friction_params(args), args.reference)
     print(f"circle {fit.frequency:.3f} Hz, r_c {fit.r_c:.4f} m, window {fit.window[0]:.2f}-{fit.window[1]:.2f} s")
     print(f"m_p from the force harmonics (4.3): {fit.m_circle:.4f} kg")
     print(f"m_p from w_z (4.4):                 {fit.m_static:.4f} kg")
     print("c_mp (platform frame) from the torques (4.3) [mm]: " + " ".join(f"{1e3 * c:.2f}" for c in fit.c_mp))
+    if args.plot:
+        mass.plot(fit, args.plot, bag_data.run_title(bag, robot))
+        print(f"wrote {args.plot}")
     return 0
 
 

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from cdpr_control.analysis import stability  # noqa: E402
 from cdpr_control.model.robot import load_robot  # noqa: E402
 from cdpr_tools import run_report  # noqa: E402
-from cdpr_tools.identify import drive, eigenfrequency, friction  # noqa: E402
+from cdpr_tools.identify import drive, eigenfrequency, friction, mass  # noqa: E402
 
 TITLE = "IPAnema 3 Mini, force_control, bag run1"
 SCREEN = (1280, 900)  # px a figure must fit into
@@ -135,3 +135,13 @@ def test_controllers_png_has_legends_and_names_the_run(saved, tmp_path):
     controllers = saved[-1][0]
     cfc, ospc = controllers.axes
     assert len(legend_labels(controllers, cfc)) == m and legend_labels(controllers, ospc) == ["x", "y", "z"]
+
+
+def test_mass_fit(saved, tmp_path):
+    t = np.arange(200) * 1e-3
+    w = np.column_stack([np.cos(np.pi * t), np.sin(np.pi * t)])
+    fit = mass.MassFit(1.0, 0.98, 0.5, 0.1, (0.0, 0.2), np.zeros(3), t, w, w)
+    mass.plot(fit, tmp_path / "mass.png", TITLE)
+    (fig, dpi), = saved
+    check_readable(fig, dpi)
+    assert TITLE in heading(fig) and "m_p 1.0000 kg" in heading(fig)
