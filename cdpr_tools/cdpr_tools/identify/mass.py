@@ -64,7 +64,7 @@ def _harmonic_fit(t, y, omega) -> tuple[complex, np.ndarray]:
     return complex(coefficients[0], -coefficients[1]), M @ coefficients
 
 
-def constant_speed_window(t, x_d, tolerance: float = 0.005):
+def constant_speed_window(t, x_d, tolerance: float = 0.01):
     """Mask of the samples whose set-point speed is within ``tolerance`` of the circle's, cut to whole turns;
     with the circle's frequency [Hz] and the set-point radius [m].
 
