@@ -161,8 +161,8 @@ def write_parameter_file(fits: list[FrictionFit], path) -> None:
 
 def plot(data: FrictionData, fits: list[FrictionFit], path, title: str = "") -> None:
     """PNG (1200 x 800 px, cables in two columns): per cable the reference force F_np, the sensor line
-    without friction f_w (3.40) and the fitted model (3.44) over time. The reference is drawn wide and
-    below, the model narrow and dashed on top, so both stay visible where they agree.
+    without friction f_w (3.40) and the fitted model (3.44) over time. The reference is drawn wide, light
+    and below, the model narrow and black on top, so both stay visible where they agree.
     ``title``: robot, controller and bag (:func:`cdpr_tools.identify.bag_data.run_title`)."""
     import matplotlib
 
@@ -174,9 +174,9 @@ def plot(data: FrictionData, fits: list[FrictionFit], path, title: str = "") -> 
                              squeeze=False)
     for ax, f in zip(axes.T.ravel(), fits):
         i = f.cable
-        ax.plot(data.t, f.f_w, lw=0.6, color="0.65", label="f_w (3.40) + epsilon: sensor, no friction")
-        ax.plot(data.t, data.f_ref[:, i], lw=2.2, color="tab:blue", alpha=0.6, label="reference F_np at the platform")
-        ax.plot(data.t, f.model, lw=0.8, ls="--", color="tab:red", label="fitted model (3.44) + epsilon")
+        ax.plot(data.t, f.f_w, lw=0.5, color="tab:orange", alpha=0.8, label="f_w (3.40) + epsilon: sensor, no friction")
+        ax.plot(data.t, data.f_ref[:, i], lw=2.6, color="tab:blue", alpha=0.45, label="reference F_np at the platform")
+        ax.plot(data.t, f.model, lw=0.5, color="black", label="fitted model (3.44) + epsilon")
         ax.set_ylabel(f"cable {i + 1} force [N]", fontsize=8)
         ax.set_title(f"cable {i + 1}: mu {f.mu:.4f}, sigma {f.sigma:.0f} N/m, F_pv {f.F_pv:.2f} N s/m, "
                      f"rms {f.rms_without:.2f} -> {f.rms_with:.2f} N", fontsize=8)
