@@ -170,3 +170,15 @@ def plot_run(run: RunData, out_dir: Path, prefix: str = "", title: str = "") -> 
 
 def _heading(what: str, title: str) -> str:
     return f"{what}\n{title}" if title else what
+
+
+def read_bag(bag) -> RunData:
+    """The run recorded in a bag (directory or .mcap), aligned as :func:`run_data` does."""
+    from cdpr_tools.bag import BagReader
+
+    reader = BagReader(bag)
+    wanted = {f"/{topic}" for topic in TOPICS.values()}
+    messages: dict[str, list] = {}
+    for m in reader.messages([t for t in reader.topics if t in wanted]):
+        messages.setdefault(m.topic.lstrip("/"), []).append(m.msg)
+    return run_data(messages)

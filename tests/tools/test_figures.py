@@ -145,3 +145,16 @@ def test_mass_fit(saved, tmp_path):
     (fig, dpi), = saved
     check_readable(fig, dpi)
     assert TITLE in heading(fig) and "m_p 1.0000 kg" in heading(fig)
+
+
+def test_cdpr_plot_names_robot_controller_and_bag(saved, tmp_path):
+    """``cdpr plot BAG --robot``: the run's figures from a bag, titled with what the bag says."""
+    from cdpr_tools import cli
+    from cdpr_tools.identify import experiments
+
+    bag = experiments.record_friction_run(tmp_path / "run1", amplitudes=(0.001,), pause=0.05, fast_velocities=())
+    assert cli.main(["plot", str(bag), "-o", str(tmp_path / "png"), "--robot", "ipanema3_mini"]) == 0
+    assert sorted(p.name for p in (tmp_path / "png").glob("*.png")) == ["run1_cable_forces.png", "run1_pose_error.png"]
+    for fig, dpi in saved:
+        check_readable(fig, dpi)
+        assert "IPAnema 3 Mini, ik_only, bag run1" in heading(fig)
