@@ -1,10 +1,11 @@
 """Identification experiments recorded with the simulator into bags, as a real robot records them.
 
-Topics and types are the graph's (docs/sim.md): ``winch/state`` (sensor_msgs/JointState: position
-theta, velocity thetadot, effort F_s), ``winch/command`` (JointState: position theta_d),
-``ground_truth/cable_forces`` (cdpr_msgs/CableForces: the reference force at the platform that
-stands in for the extra sensor of section 3.7.2), ``ground_truth/pose`` (PoseStamped) and
-``setpoint`` (cdpr_msgs/OperationalSetpoint: x_d). Header stamps and log times are sim time.
+Topics and types are the graph's (docs/sim.md), fully qualified as a recorder names them:
+``/winch/state`` (sensor_msgs/JointState: position theta, velocity thetadot, effort F_s),
+``/winch/command`` (JointState: position theta_d), ``/ground_truth/cable_forces``
+(cdpr_msgs/CableForces: the reference force at the platform that stands in for the extra sensor of
+section 3.7.2), ``/ground_truth/pose`` (PoseStamped), ``/setpoint`` (cdpr_msgs/OperationalSetpoint:
+x_d) and ``/joint_command/mode`` (std_msgs/String: ik_only). Header stamps and log times are sim time.
 
 The command of period k is stamped t_k and held over [t_k, t_k+1]; the state it causes is stamped
 t_k+1, as in the lockstep graph (controllers answer the state of t_k with a command stamped t_k).
