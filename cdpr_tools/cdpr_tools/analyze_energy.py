@@ -106,9 +106,13 @@ def main(argv=None) -> int:
     if args.bag:
         from cdpr_tools.bag import BagReader
 
+        from cdpr_tools.identify.bag_data import run_title
+
         robot = load_robot(args.robot or "ipanema3_mini")
-        flow, _, _ = bag_power(BagReader(args.bag), robot, args.sensor)
+        bag = BagReader(args.bag)
+        flow, _, _ = bag_power(bag, robot, args.sensor)
         results["run"], flows["run"] = _report(args.bag, flow), flow
+        title = f"Energy (4.9)-(4.14): {run_title(bag, robot)}"
     else:
         robot = load_robot(args.robot or "ipanema3")
         start = np.array(robot.home, dtype=float)
@@ -130,11 +134,12 @@ def main(argv=None) -> int:
             thesis = THESIS_REFERENCE_TRIP
             print(f"thesis, reference trip at minimal tension (section 4.4.3): {thesis['energy_Wh']} Wh, "
                   f"peak about {thesis['peak_power_W'] / 1e3:g} kW")
+        title = f"Energy (4.9)-(4.14): {robot.name}, planned trajectory {args.trajectory}, payload {args.payload:g} kg"
         medium = results["medium"]["E_el_Wh"]
         print("relative to medium tension (Fig. 4.33): " + ", ".join(
             f"{k} {100 * (r['E_el_Wh'] / medium - 1):+.1f} %" for k, r in results.items()))
     if args.plot:
-        plot(flows, args.plot, f"{robot.name}: {args.bag or args.trajectory}")
+        plot(flows, args.plot, title)
         print(f"wrote {args.plot}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))

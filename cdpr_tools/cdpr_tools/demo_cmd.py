@@ -116,7 +116,8 @@ def run(args) -> int:
     summary.update({"program": name, "robot": args.robot, "controller": args.controller, "mode": args.mode,
                     "program_duration_s": result.duration, "wall_time_s": wall,
                     "real_time_factor": data.t[-1] / wall, "bag": str(bag)})
-    plots = plot_run(data, bag.parent, prefix=f"{bag.name}_")
+    plots = plot_run(data, bag.parent, prefix=f"{bag.name}_",
+                     title=f"{robot.name}, {args.controller}, {args.plant} plant, bag {bag.name}")
     (bag.parent / f"{bag.name}_summary.json").write_text(json.dumps(summary, indent=2))
     print(f"[demo] pose error: RMS {summary['position_error_rms_mm']:.3f} mm, max {summary['position_error_max_mm']:.3f} mm; "
           f"orientation RMS {summary['orientation_error_rms_deg']:.4f} deg, max {summary['orientation_error_max_deg']:.4f} deg")

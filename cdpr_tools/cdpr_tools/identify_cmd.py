@@ -2,7 +2,7 @@
 
     cdpr identify friction BAG [-o params.yaml] [--plot fit.png] [--robot NAME] [--cables 1,2]
     cdpr identify drive BAG [--model pt1_deadtime|second_order] [--robot NAME] [--plot fit.png]
-    cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference]
+    cdpr identify mass BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference] [-o robot.yaml]
     cdpr identify settlement BAG [--robot robot.yaml] [--friction params.yaml] [-o lc_params.yaml]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
@@ -48,6 +48,8 @@ def add_parser(sub) -> None:
     m = what.add_parser("mass", help="platform mass and centre of gravity from the circle run (4.2)-(4.4)")
     m.add_argument("bag", help="bag with winch/state, setpoint and ground_truth/pose")
     _force_arguments(m)
+    m.add_argument("--plot", metavar="PNG", nargs="?", const="mass_fit.png",
+                   help="plot of the force harmonics (default file mass_fit.png)")
     m.set_defaults(run=run_mass)
 
     k = what.add_parser("stiffness", help="cable stiffness k0, k1, k2 (2.16) from tension steps at rest")
@@ -113,10 +115,13 @@ def run_friction(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import friction
 
+    from cdpr_tools.identify import bag_data
+
     robot = load_robot(args.robot)
     cables = None if not args.cables else [int(c) - 1 for c in args.cables.split(",")]
     print(f"fitting (3.45) per cable on {args.bag} ...", flush=True)
-    data, fits = friction.identify(BagReader(args.bag), robot, cables, tuple(args.start), jit=_jit(),
+    bag = BagReader(args.bag)
+    data, fits = friction.identify(bag, robot, cables, tuple(args.start), jit=_jit(),
                                    progress=lambda line: print(line, flush=True))
     if args.output:
         if len(fits) != robot.m:
@@ -124,13 +129,9 @@ def run_friction(args) -> int:
         friction.write_parameter_file(fits, args.output)
         print(f"wrote {args.output}")
     if args.plot:
-        friction.plot(data, fits, args.plot)
+        friction.plot(data, fits, args.plot, bag_data.run_title(bag, robot))
         print(f"wrote {args.plot}")
     return 0
-
-
-# units of the drive models' parameters, (3.10) and (5.11); zeta is a ratio
-DRIVE_UNITS = {"T_1": " s", "T_d": " s", "T_w": " s", "zeta": ""}
 
 
 def run_drive(args) -> int:
@@ -139,12 +140,14 @@ def run_drive(args) -> int:
 
     from cdpr_control.model.robot import load_robot
 
-    model = args.model or load_robot(args.robot).drive.model
-    data, fit = drive.identify(BagReader(args.bag), model)
-    print(f"{fit.model} from cables {[c + 1 for c in data.cables]}: "
-          + ", ".join(f"{k} = {v:.6g}{DRIVE_UNITS[k]}" for k, v in fit.params.items()) + f"  (rms {fit.rms:.3g} m)")
+    from cdpr_tools.identify import bag_data
+
+    robot = load_robot(args.robot)
+    bag = BagReader(args.bag)
+    data, fit = drive.identify(bag, args.model or robot.drive.model)
+    print(f"{fit.model} from cables {[c + 1 for c in data.cables]}: {drive.describe(fit)}  (rms {fit.rms:.3g} m)")
     if args.plot:
-        drive.plot(data, fit, args.plot)
+        drive.plot(data, fit, args.plot, bag_data.run_title(bag, robot))
         print(f"wrote {args.plot}")
     return 0
 
@@ -154,11 +157,17 @@ def run_mass(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import mass
 
-    fit = mass.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args), args.reference)
+    from cdpr_tools.identify import bag_data
+
+    robot, bag = load_robot(args.robot), BagReader(args.bag)
+    fit = mass.identify(bag, robot, _friction_params(args), args.reference)
     print(f"circle {fit.frequency:.3f} Hz, r_c {fit.r_c:.4f} m, window {fit.window[0]:.2f}-{fit.window[1]:.2f} s")
     print(f"m_p from the force harmonics (4.3): {fit.m_circle:.4f} kg")
     print(f"m_p from w_z (4.4):                 {fit.m_static:.4f} kg")
     print("c_mp (platform frame) from the torques (4.3) [mm]: " + " ".join(f"{1e3 * c:.2f}" for c in fit.c_mp))
+    if args.plot:
+        mass.plot(fit, args.plot, bag_data.run_title(bag, robot))
+        print(f"wrote {args.plot}")
     return 0
 
 
@@ -167,15 +176,17 @@ def run_eigenfrequency(args) -> int:
     from cdpr_tools.bag import BagReader
     from cdpr_tools.identify import eigenfrequency
 
-    fit = eigenfrequency.identify(BagReader(args.bag), load_robot(args.robot), _friction_params(args),
-                                  args.reference)
+    from cdpr_tools.identify import bag_data
+
+    robot, bag = load_robot(args.robot), BagReader(args.bag)
+    fit = eigenfrequency.identify(bag, robot, _friction_params(args), args.reference)
     print(f"z decay {fit.window[0]:.3f}-{fit.window[1]:.3f} s, amplitude {1e3 * fit.amplitude:.3f} mm, "
           f"rms {1e6 * fit.rms:.2f} um")
     print(f"measured: f_d {fit.f_d:.3f} Hz, zeta {fit.zeta:.3f}, undamped f_n {fit.f_n:.3f} Hz")
     print(f"model (4.8): {fit.f_model:.3f} Hz  (f_n {100 * (fit.f_n / fit.f_model - 1):+.2f} %); coupled modes "
           + " ".join(f"{f:.2f}" for f in fit.f_modes) + " Hz")
     if args.plot:
-        eigenfrequency.plot(fit, args.plot)
+        eigenfrequency.plot(fit, args.plot, bag_data.run_title(bag, robot))
         print(f"wrote {args.plot}")
     return 0
 

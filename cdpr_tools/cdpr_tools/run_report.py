@@ -98,8 +98,9 @@ def summarize(run: RunData) -> dict:
     }
 
 
-def plot_run(run: RunData, out_dir: Path, prefix: str = "") -> list[Path]:
-    """PNG plots of pose error, cable forces and (when recorded) controller outputs."""
+def plot_run(run: RunData, out_dir: Path, prefix: str = "", title: str = "") -> list[Path]:
+    """PNG plots of pose error, cable forces and (when recorded) controller outputs, 990 px wide.
+    ``title`` names the run (robot, controller, plant, bag) under each figure's heading."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -120,7 +121,7 @@ def plot_run(run: RunData, out_dir: Path, prefix: str = "") -> list[Path]:
     ax2.set_ylabel("orientation error [deg]")
     ax2.set_xlabel("t [s]")
     ax2.legend(loc="upper right")
-    fig.suptitle("pose error against ground truth")
+    fig.suptitle(_heading("Pose error against the ground truth", title), fontsize=10)
     fig.tight_layout()
     paths.append(out_dir / f"{prefix}pose_error.png")
     fig.savefig(paths[-1], dpi=110)
@@ -135,7 +136,9 @@ def plot_run(run: RunData, out_dir: Path, prefix: str = "") -> list[Path]:
     ax.axhline(run.f_max.max(), color="k", linestyle=":")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("cable force at the platform [N]")
-    ax.set_title("true cable forces" + (" (dashed: f_d)" if run.f_d is not None else ""))
+    if run.f_d is not None:
+        ax.plot([], [], "--", color="0.3", linewidth=0.8, label="f_d (desired, dashed)")
+    ax.set_title(_heading("True cable forces at the platform", title), fontsize=10)
     ax.legend(loc="upper right", ncol=3, fontsize=8)
     fig.tight_layout()
     paths.append(out_dir / f"{prefix}cable_forces.png")
@@ -145,18 +148,28 @@ def plot_run(run: RunData, out_dir: Path, prefix: str = "") -> list[Path]:
     if run.dq_cfc is not None or run.x_ospc is not None:
         fig, axes = plt.subplots(2, 1, sharex=True, figsize=(9, 6))
         if run.dq_cfc is not None:
-            axes[0].plot(run.t, 1e3 * run.dq_cfc)
+            for i in range(run.dq_cfc.shape[1]):
+                axes[0].plot(run.t, 1e3 * run.dq_cfc[:, i], lw=0.9, label=f"cable {i + 1}")
             axes[0].set_ylabel("Δq_CFC [mm]")
+            axes[0].set_title("cable force control output Δq_CFC (3.22)", fontsize=9)
+            axes[0].legend(loc="upper right", ncol=4, fontsize=7)
         if run.x_ospc is not None:
-            axes[1].plot(run.t, 1e3 * run.x_ospc[:, :3])
+            for j, name in enumerate("xyz"):
+                axes[1].plot(run.t, 1e3 * run.x_ospc[:, j], lw=0.9, label=name)
             axes[1].set_ylabel("x_OSPC position [mm]")
+            axes[1].set_title("operational-space position control output x_OSPC (3.16)", fontsize=9)
+            axes[1].legend(loc="upper right", ncol=3, fontsize=7)
         axes[1].set_xlabel("t [s]")
-        fig.suptitle("controller outputs")
+        fig.suptitle(_heading("Controller outputs", title), fontsize=10)
         fig.tight_layout()
         paths.append(out_dir / f"{prefix}controllers.png")
         fig.savefig(paths[-1], dpi=110)
         plt.close(fig)
     return paths
+
+
+def _heading(what: str, title: str) -> str:
+    return f"{what}\n{title}" if title else what
 
 
 def read_bag(bag) -> RunData:

@@ -183,3 +183,21 @@ def test_resting_mask():
     theta_d = np.array([[0.0]] * 3 + [[1.0]] * 7)
     mask = stiffness.resting_mask(t_c + 0.1, t_c, theta_d, settle=0.25)
     assert mask.tolist() == [False] * 5 + [True] * 5        # 0.25 s after the change at 0.3 s
+
+
+def test_resting_mask_with_a_force_control_in_the_loop():
+    """A command that creeps (a CFC at rest: well below 1 mm/s) is still at rate 1 mm/s, not at rate 0;
+    a tension step (3-8 mm/s on the Mini) moves at either."""
+    t_c = np.arange(1000) * 1e-3
+    theta_d = 5e-7 * np.arange(1000)[:, None]                  # 0.5 mm/s
+    theta_d[600:] += 4e-6 * np.arange(1, 401)[:, None]         # from 0.6 s: 4.5 mm/s
+    t = t_c + 1e-3
+    assert not stiffness.resting_mask(t, t_c, theta_d, settle=0.2).any()
+    mask = stiffness.resting_mask(t, t_c, theta_d, settle=0.2, rate=1e-3)
+    assert mask.tolist() == [False] * 199 + [True] * 400 + [False] * 401
+
+
+def test_after_preload_leaves_out_the_rests_up_to_the_highest_forces():
+    mask = np.array([True] * 3 + [False] * 2 + [True] * 3 + [False] + [True] * 2)
+    force_sum = np.array([10.0] * 5 + [40.0] * 3 + [30.0] * 3)      # power-on level, pre-load, a step down
+    assert stiffness.after_preload(mask, force_sum).tolist() == [False] * 9 + [True] * 2

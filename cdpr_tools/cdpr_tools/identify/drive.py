@@ -47,8 +47,15 @@ class DriveFit:
 def load_data(bag, min_motion: float = 0.1) -> DriveData:
     """The sweep in ``bag``: the winches whose command range exceeds min_motion of the largest one."""
     t_c, theta_d = bag_data.commands(bag)
-    state = bag_data.winch_state(bag)
+    state = bag_data.winch_state(bag, aligned=False)
     dt = float(np.median(np.diff(t_c)))
+    # a recording of the graph starts and stops anywhere: keep the commands from the first state
+    # on whose effect (the state one period later) is recorded
+    ns_state, ns_c = np.rint(state.t * 1e9), np.rint(t_c * 1e9)
+    keep = (ns_c >= ns_state[0]) & (ns_c + np.rint(dt * 1e9) <= ns_state[-1])
+    if keep.sum() < 2:
+        raise ValueError(f"no {bag_data.TOPIC_COMMAND} with the {bag_data.TOPIC_STATE} it causes in the bag")
+    t_c, theta_d = t_c[keep], theta_d[keep]
     span = np.ptp(theta_d, axis=0)
     cables = [int(i) for i in np.flatnonzero(span > min_motion * span.max())]
     # theta_k+1: the state stamped one period after each command, and theta_0 at the first command
@@ -95,24 +102,37 @@ def identify(bag, kind: str = PT1_DEADTIME, start: dict | None = None) -> tuple[
     return data, DriveFit(kind, params, rms, int(res.nfev), theta_model)
 
 
-def plot(data: DriveData, fit: DriveFit, path) -> None:
-    """PNG: command, measured and modelled theta of the first excited winch, and the model error."""
+# units of the drive models' parameters, (3.10) and (5.11); zeta is a ratio
+UNITS = {"T_1": " s", "T_d": " s", "T_w": " s", "zeta": ""}
+
+
+def describe(fit: DriveFit) -> str:
+    """``T_w = 0.0148 s, zeta = 0.536, T_d = 0.000712 s``: the parameters with their units."""
+    return ", ".join(f"{k} = {v:.6g}{UNITS[k]}" for k, v in fit.params.items())
+
+
+def plot(data: DriveData, fit: DriveFit, path, title: str = "") -> None:
+    """PNG (1000 x 560 px): command, measured and modelled theta of the first excited winch, and the
+    model error. ``title``: robot, controller and bag (:func:`cdpr_tools.identify.bag_data.run_title`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t0 = data.theta[0, 0]
-    fig, (a, b) = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
-    a.plot(data.t[:-1], 1e3 * (data.theta_d[:, 0] - t0), lw=0.7, label="theta_d")
-    a.plot(data.t, 1e3 * (data.theta[:, 0] - t0), lw=0.7, label="theta (encoder)")
-    a.plot(data.t, 1e3 * (fit.theta_model[:, 0] - t0), lw=0.7, ls="--", label="model")
-    a.set_ylabel(f"cable {data.cables[0] + 1} [mm]")
-    a.set_title(f"{fit.model}: " + ", ".join(f"{k} {v:.5g}" for k, v in fit.params.items()), fontsize=9)
-    a.legend(fontsize=7)
-    b.plot(data.t, 1e6 * (data.theta[:, 0] - fit.theta_model[:, 0]), lw=0.7)
+    cable = data.cables[0] + 1
+    fig, (a, b) = plt.subplots(2, 1, figsize=(10, 5.6), sharex=True, height_ratios=(2, 1))
+    a.plot(data.t[:-1], 1e3 * (data.theta_d[:, 0] - t0), lw=1.8, color="0.7", label="command theta_d")
+    a.plot(data.t, 1e3 * (data.theta[:, 0] - t0), lw=1.2, color="tab:blue", label="encoder theta")
+    a.plot(data.t, 1e3 * (fit.theta_model[:, 0] - t0), lw=0.8, ls="--", color="tab:red",
+           label=f"model {fit.model}: {describe(fit)}")
+    a.set_ylabel(f"winch {cable}: theta - theta(0) [mm]")
+    a.legend(fontsize=8, loc="upper right")
+    b.plot(data.t, 1e6 * (data.theta[:, 0] - fit.theta_model[:, 0]), lw=0.7, color="tab:red")
     b.set_ylabel("theta - model [um]")
     b.set_xlabel("t [s]")
+    fig.suptitle(f"Drive fit ({'3.10' if fit.model == PT1_DEADTIME else '5.11'}), winch {cable} of "
+                 f"{[c + 1 for c in data.cables]}: {title}" if title else "Drive fit", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

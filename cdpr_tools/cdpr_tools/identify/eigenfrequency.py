@@ -105,20 +105,22 @@ def identify(bag, robot, friction_params: dict | None = None, use_reference: boo
                     rms=float(np.sqrt(np.mean((z_fit - z) ** 2))), t=t + data.t[first], z=z, z_fit=z_fit)
 
 
-def plot(fit: EigenFit, path) -> None:
-    """The measured z decay and the fitted damped oscillation."""
+def plot(fit: EigenFit, path, title: str = "") -> None:
+    """The measured z decay and the fitted damped oscillation (800 x 400 px); ``title``: robot,
+    controller and bag (:func:`cdpr_tools.identify.bag_data.run_title`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(fit.t, 1e3 * fit.z, ".", ms=3, label="z measured")
+    ax.plot(fit.t, 1e3 * fit.z, ".", ms=3, label="z measured (tracker)")
     ax.plot(fit.t, 1e3 * fit.z_fit, "-", label=f"fit: f_d {fit.f_d:.2f} Hz, zeta {fit.zeta:.3f}")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("z [mm]")
-    ax.set_title(f"f_n {fit.f_n:.2f} Hz measured, {fit.f_model:.2f} Hz model (4.8)")
-    ax.legend()
+    ax.set_title(f"Eigenfrequency in z: f_n {fit.f_n:.2f} Hz measured, {fit.f_model:.2f} Hz model (4.8)"
+                 + (f"\n{title}" if title else ""), fontsize=10)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -1,10 +1,11 @@
 """Identification experiments recorded with the simulator into bags, as a real robot records them.
 
-Topics and types are the graph's (docs/sim.md): ``winch/state`` (sensor_msgs/JointState: position
-theta, velocity thetadot, effort F_s), ``winch/command`` (JointState: position theta_d),
-``ground_truth/cable_forces`` (cdpr_msgs/CableForces: the reference force at the platform that
-stands in for the extra sensor of section 3.7.2), ``ground_truth/pose`` (PoseStamped) and
-``setpoint`` (cdpr_msgs/OperationalSetpoint: x_d). Header stamps and log times are sim time.
+Topics and types are the graph's (docs/sim.md), fully qualified as a recorder names them:
+``/winch/state`` (sensor_msgs/JointState: position theta, velocity thetadot, effort F_s),
+``/winch/command`` (JointState: position theta_d), ``/ground_truth/cable_forces``
+(cdpr_msgs/CableForces: the reference force at the platform that stands in for the extra sensor of
+section 3.7.2), ``/ground_truth/pose`` (PoseStamped), ``/setpoint`` (cdpr_msgs/OperationalSetpoint:
+x_d) and ``/joint_command/mode`` (std_msgs/String: ik_only). Header stamps and log times are sim time.
 
 The command of period k is stamped t_k and held over [t_k, t_k+1]; the state it causes is stamped
 t_k+1, as in the lockstep graph (controllers answer the state of t_k with a command stamped t_k).
@@ -35,6 +36,7 @@ TOPIC_COMMAND = "/winch/command"
 TOPIC_FORCES = "/ground_truth/cable_forces"
 TOPIC_POSE = "/ground_truth/pose"
 TOPIC_SETPOINT = "/setpoint"
+TOPIC_MODE = "/joint_command/mode"     # std_msgs/String, latched: the controller that ran (figure titles)
 
 
 def smooth_moves(waypoints, velocity, pause: float, dt: float) -> np.ndarray:
@@ -94,13 +96,37 @@ def sweep(duration: float, f_start: float, f_end: float, dt: float) -> np.ndarra
 
 
 class _Recorder:
-    """Writes SimOutputs and commands on the graph's topics (messages imported on use: ROS types)."""
+    """Writes SimOutputs and commands on the graph's topics (messages imported on use: ROS types).
 
-    def __init__(self, bag, robot):
-        from cdpr_control.ros.qos import CONTROL
+    The messages go the way the bag recorder of ``cdpr launch --record`` and ``cdpr bag record``
+    sends them (:class:`cdpr_tools.bag.recorder.BagRecorder`): encoded by the generated CDR encoder
+    of their type (:func:`cdpr_tools.bag.encode.serialize`), declared with the QoS the graph's
+    publishers offer (``CONTROL``) and the type's hash, and written by the same writer child process
+    (:class:`cdpr_tools.bag.writer_process.BagWriterProcess`, zstd chunks). What differs: the log
+    time is the header stamp (the recorder's is its clock at reception, in a lockstep graph the same
+    simulated time), and no DDS is involved: the simulator runs in this process.
+    """
 
-        self.bag, self.robot, self.qos = bag, robot, CONTROL
+    def __init__(self, writer, robot):
+        from cdpr_control.ros.mode import IK_ONLY
+        from cdpr_control.ros.qos import CONTROL, STATUS
+        from std_msgs.msg import String
+
+        self.writer, self.robot, self.qos = writer, robot, CONTROL
         self.names = [f"cable_{i + 1}" for i in range(robot.m)]
+        self._topics: dict[str, tuple[int, str]] = {}     # topic -> (writer index, type name)
+        # the experiments command theta_d = IK{x_d} (or a hold): the graph's IK-only mode
+        self._write(TOPIC_MODE, String(data=IK_ONLY), 0, STATUS)
+
+    def _write(self, topic: str, msg, ns: int, qos=None) -> None:
+        from cdpr_tools.bag.encode import serialize
+        from cdpr_tools.message_convert import type_name_of
+
+        if topic not in self._topics:
+            type_name = type_name_of(msg)
+            self._topics[topic] = (self.writer.add_topic(topic, type_name, qos or self.qos), type_name)
+        index, type_name = self._topics[topic]
+        self.writer.put((index, ns, serialize(msg, type_name), True))
 
     def _header(self, t: float):
         from cdpr_control.ros.message_builders import builder
@@ -120,14 +146,12 @@ class _Recorder:
 
         h, ns = self._header(out.t)
         c = self.robot.cable
-        self.bag.write(TOPIC_STATE, None, builder(JointState)(header=h, name=self.names, position=out.theta.tolist(),
-                                                             velocity=out.thetadot.tolist(), effort=out.F_s.tolist()),
-                       ns, qos=self.qos)
-        self.bag.write(TOPIC_FORCES, None, builder(CableForces)(header=h, f=out.f.tolist(),
-                                                               f_min=np.broadcast_to(c.f_min, out.f.shape).tolist(),
-                                                               f_max=np.broadcast_to(c.f_max, out.f.shape).tolist()),
-                       ns, qos=self.qos)
-        self.bag.write(TOPIC_POSE, None, builder(PoseStamped)(header=h, pose=pose_to_msg(out.x)), ns, qos=self.qos)
+        self._write(TOPIC_STATE, builder(JointState)(header=h, name=self.names, position=out.theta.tolist(),
+                                                    velocity=out.thetadot.tolist(), effort=out.F_s.tolist()), ns)
+        self._write(TOPIC_FORCES, builder(CableForces)(header=h, f=out.f.tolist(),
+                                                      f_min=np.broadcast_to(c.f_min, out.f.shape).tolist(),
+                                                      f_max=np.broadcast_to(c.f_max, out.f.shape).tolist()), ns)
+        self._write(TOPIC_POSE, builder(PoseStamped)(header=h, pose=pose_to_msg(out.x)), ns)
 
     def command(self, t: float, theta_d, x_d=None) -> None:
         from cdpr_control.ros.conversions import pose_to_msg
@@ -136,12 +160,10 @@ class _Recorder:
         from sensor_msgs.msg import JointState
 
         h, ns = self._header(t)
-        self.bag.write(TOPIC_COMMAND, None, builder(JointState)(header=h, name=self.names,
-                                                               position=list(map(float, theta_d))),
-                       ns, qos=self.qos)
+        self._write(TOPIC_COMMAND, builder(JointState)(header=h, name=self.names, position=list(map(float, theta_d))),
+                    ns)
         if x_d is not None:
-            self.bag.write(TOPIC_SETPOINT, None, builder(OperationalSetpoint)(header=h, pose=pose_to_msg(x_d)), ns,
-                           qos=self.qos)
+            self._write(TOPIC_SETPOINT, builder(OperationalSetpoint)(header=h, pose=pose_to_msg(x_d)), ns)
 
 
 def circle_trajectory(home, r_c: float = 0.1, frequency: float = 1.0, revolutions: float = 3.0,
@@ -186,18 +208,24 @@ def record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=N
     payload: (mass, centre of gravity) on the platform; before_step(sim, k): called before step k;
     substeps: physics steps per 1 ms period.
     """
-    from cdpr_tools.bag import BagWriter
+    from cdpr_tools.bag.writer_process import BagWriterProcess
     from cdpr_tools.progress import track
 
-    with _simulator(robot, seed, noise_std, level, payload, substeps, plant) as sim, BagWriter(bag_path) as bag:
-        rec = _Recorder(bag, robot)
-        rec.state(sim.output)
-        for k, theta_d in track(enumerate(commands), len(commands), f"simulating {Path(bag.path).name}"):
-            if before_step is not None:
-                before_step(sim, k)
-            rec.command(sim.t, theta_d, None if x_d is None else x_d[k])
-            rec.state(sim.step(theta_d))
-        return Path(bag.path)
+    with _simulator(robot, seed, noise_std, level, payload, substeps, plant) as sim:
+        writer = BagWriterProcess(bag_path)
+        try:
+            rec = _Recorder(writer, robot)
+            rec.state(sim.output)
+            for k, theta_d in track(enumerate(commands), len(commands), f"simulating {writer.path.name}"):
+                if before_step is not None:
+                    before_step(sim, k)
+                rec.command(sim.t, theta_d, None if x_d is None else x_d[k])
+                rec.state(sim.step(theta_d))
+        finally:
+            writer.close()
+        if writer.failed:
+            raise OSError(f"recording {writer.path}: {writer.failed}")
+        return writer.path
 
 
 def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,

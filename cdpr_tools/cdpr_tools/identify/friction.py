@@ -159,24 +159,35 @@ def write_parameter_file(fits: list[FrictionFit], path) -> None:
         yaml.safe_dump(parameter_file(fits), out, default_flow_style=None, sort_keys=False)
 
 
-def plot(data: FrictionData, fits: list[FrictionFit], path) -> None:
-    """PNG: per cable the reference force, f_w (no friction) and the fitted model over time."""
+def plot(data: FrictionData, fits: list[FrictionFit], path, title: str = "") -> None:
+    """PNG (1200 x 800 px, cables in two columns): per cable the reference force F_np, the sensor line
+    without friction f_w (3.40) and the fitted model (3.44) over time. The reference is drawn wide, light
+    and below, the model narrow and black on top, so both stay visible where they agree.
+    ``title``: robot, controller and bag (:func:`cdpr_tools.identify.bag_data.run_title`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(fits), 1, figsize=(10, 2.2 * len(fits)), sharex=True, squeeze=False)
-    for ax, f in zip(axes[:, 0], fits):
+    rows = (len(fits) + 1) // 2
+    fig, axes = plt.subplots(rows, 2 if len(fits) > 1 else 1, figsize=(12, 1.9 * rows + 0.8), sharex=True,
+                             squeeze=False)
+    for ax, f in zip(axes.T.ravel(), fits):
         i = f.cable
-        ax.plot(data.t, f.f_w, lw=0.6, color="0.6", label="f_w (3.40) + epsilon, no friction")
-        ax.plot(data.t, data.f_ref[:, i], lw=0.8, label="reference F_np")
-        ax.plot(data.t, f.model, lw=0.8, ls="--", label="model (3.44) + epsilon")
-        ax.set_ylabel(f"cable {i + 1} [N]")
-        ax.set_title(f"mu {f.mu:.4f}, sigma {f.sigma:.0f} N/m, F_pv {f.F_pv:.2f} N s/m, rms {f.rms_with:.3f} N",
-                     fontsize=8)
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
+        ax.plot(data.t, f.f_w, lw=0.5, color="tab:orange", alpha=0.8, label="f_w (3.40) + epsilon: sensor, no friction")
+        ax.plot(data.t, data.f_ref[:, i], lw=2.6, color="tab:blue", alpha=0.45, label="reference F_np at the platform")
+        ax.plot(data.t, f.model, lw=0.5, color="black", label="fitted model (3.44) + epsilon")
+        ax.set_ylabel(f"cable {i + 1} force [N]", fontsize=8)
+        ax.set_title(f"cable {i + 1}: mu {f.mu:.4f}, sigma {f.sigma:.0f} N/m, F_pv {f.F_pv:.2f} N s/m, "
+                     f"rms {f.rms_without:.2f} -> {f.rms_with:.2f} N", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in axes.T.ravel()[len(fits):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]", fontsize=8)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=3, fontsize=8, bbox_to_anchor=(0.5, 0.965))
+    fig.suptitle(f"Pulley friction fit (3.45): {title}" if title else "Pulley friction fit (3.45)", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -4,7 +4,10 @@ At rest the elongation of cable i is dq = IK{x} - theta (2.24) up to the encoder
 offset delta_i (section 2.3.2: the encoders read IK{home} under the start-up tension), and (2.17)
 gives dq = f l_t / (k0 + k1 f + k2 f^2) with l_t = q + l_0 (2.14). Least squares over k0, k1, k2
 (one cable type for the robot), delta_i and a relative correction g_i of l_t per cable on the
-samples where the command has stood still for ``settle`` s (the platform has come to rest).
+samples where the command has stood still for ``settle`` s (the platform has come to rest); with the
+cable force control in the loop (a program run on the graph) the command is never exactly still, so
+"still" is moving slower than ``rate`` (1 mm/s: the CFC's noise-driven motion at rest is about 0.6
+mm/s on the Mini, its tension steps 3-8 mm/s).
 f: the sensor forces through the loop's friction compensation (3.44), or the reference forces.
 
 What a real robot (and the simulator's mismatched plant) adds to the perfect model, and how the
@@ -18,8 +21,9 @@ fit copes:
 * slack cables: (2.17) holds for taut cables only (a slack cable reads f ~ 0 at any negative
   elongation), so only samples with f >= ``f_taut`` enter;
 * cable settlement under load (section 4.1.3) adds lasting length while a cable carries more than
-  before: the run steps the tension down from a pre-load (the first hold), whose samples are left
-  out (``preload``), so the data see no settlement.
+  before: the run steps the tension down from a pre-load, whose samples (and all before them: the
+  rest stretch at the highest forces and those before it) are left out (``preload``), so the data see
+  no settlement.
 """
 from __future__ import annotations
 
@@ -46,28 +50,46 @@ class StiffnessFit:
     n_samples: int               # resting samples (each with the taut cables of that sample)
 
 
-def resting_mask(t, t_c, theta_d, settle: float) -> np.ndarray:
-    """Samples at stamps t whose command has not changed for at least ``settle`` s."""
-    moved = np.concatenate([[True], np.any(np.diff(theta_d, axis=0) != 0.0, axis=1)])
+def resting_mask(t, t_c, theta_d, settle: float, rate: float = 0.0) -> np.ndarray:
+    """Samples at stamps t whose command has moved no faster than ``rate`` [m/s] (per winch, from one
+    period to the next) for at least ``settle`` s. rate 0: the command has not changed at all, as in
+    the experiments' holds; a command with a force control in the loop is never exactly still."""
+    dt = np.diff(t_c)
+    moved = np.concatenate([[True], np.any(np.abs(np.diff(theta_d, axis=0)) > rate * dt[:, None], axis=1)])
     last_change = np.maximum.accumulate(np.where(moved, t_c, -np.inf))
     idx = np.clip(np.searchsorted(t_c, t, side="right") - 1, 0, None)
     return t - last_change[idx] >= settle
 
 
+def after_preload(mask, force_sum) -> np.ndarray:
+    """``mask`` without its rest stretches up to and including the one at the highest mean total force
+    (the pre-load, during which the cables settle, section 4.1.3)."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    if len(starts) == 0:
+        return mask
+    preload = int(np.argmax([force_sum[a:b].mean() for a, b in zip(starts, ends)]))
+    kept = mask.copy()
+    kept[:ends[preload]] = False
+    return kept
+
+
 def identify(bag, robot, friction_params: dict | None = None, use_reference: bool = False,
              settle: float = 0.2, start=(20000.0, 0.0, 0.0), f_taut: float = 1.0,
-             preload: bool = True) -> StiffnessFit:
-    """Fit (2.16) to the resting samples of ``bag``; preload: leave out the first hold."""
+             preload: bool = True, rate: float = 1e-3) -> StiffnessFit:
+    """Fit (2.16) to the resting samples of ``bag`` (the command moving slower than ``rate`` m/s for
+    ``settle`` s); preload: leave out the rest stretches up to the one at the highest forces."""
     from cdpr_tools.identify.friction import load_data
     from cdpr_tools.identify.mass import compensated_forces
 
     data = load_data(bag, robot)
     t_c, theta_d = bag_data.commands(bag)
-    mask = resting_mask(data.t, t_c, theta_d, settle)
+    mask = resting_mask(data.t, t_c, theta_d, settle, rate)
     if preload:                                       # the cables settle during the pre-load (4.1.3)
-        mask &= data.t > t_c[np.argmax(np.any(theta_d != theta_d[0], axis=1))]
+        mask = after_preload(mask, data.F_s.sum(axis=1))
     if mask.sum() < 10:
-        raise ValueError("no samples at rest: hold the command still for longer than settle")
+        raise ValueError("no samples at rest after the pre-load: hold the command still for longer than "
+                         f"{settle} s after the highest tension")
     dt = float(np.median(np.diff(data.t)))
     f = (data.f_ref if use_reference else compensated_forces(robot, data, dt, friction_params))[mask]
     x = bag_data.poses(bag, data.t)[mask]
