@@ -16,7 +16,11 @@ from cdpr_test_nodes.graph import wait_for  # noqa: E402
 def graph():
     # a quarter of real time: the graph needs about 1 ms of CPU a period here (docs/performance.md), and
     # a free-running loop that falls behind its set-points is itself a fault (stale input, a hold)
-    g = FaultGraph("composed", lockstep_timeout=1.0, state_timeout=5.0, sync_mode="latest", realtime_factor=0.25)
+    # input_deadline 500 periods (0.5 s simulated, 2 s of wall time): a loaded machine (make
+    # test-stress) pauses the graph for a few hundred ms now and then, which a 50-period deadline
+    # took for the fault; the silent node stays silent, so it is found all the same
+    g = FaultGraph("composed", lockstep_timeout=1.0, state_timeout=5.0, sync_mode="latest", realtime_factor=0.25,
+                   input_deadline=500)
     yield g
     g.close()
 
