@@ -142,6 +142,31 @@ def test_the_approach_slows_where_the_impact_alone_would_press_beyond_F_d():
         replace(params, k_env=-1.0).validate()
 
 
+def test_b_ends_within_its_bound_when_the_force_never_reads_F_d():
+    """A sensor that reads at most 90 % of the contact force (a gain error, a plateau): B's profile
+    never reaches standstill, since (F_d - F) / K_p stays ahead; B ends after B_MARGIN times its
+    profile at stiffness K_p (0.46 s here) instead of creeping on to x_max (about 10 s)."""
+    from cdpr_control.control.hybrid_force_control import B_MARGIN
+
+    dt, p = 1e-3, replace(MINI_HPFC, T_on=0.0, k_env=0.0, T_F=0.0)
+    g, m = MINI.gravity, MINI.platform.mass
+    hpfc = HybridForceControl(MINI, dt, p, enabled=True)
+    states, t_b = [], None
+    for k in range(12000):
+        depth = max(0.0, hpfc.x_t - 0.001)                       # a floor 1 mm ahead, 3e4 N/m
+        reading = min(3e4 * depth, 0.9 * 10.0)                  # the sensor's plateau at 9 N
+        s = hpfc.update([0.0, 0.0, -10.0], np.r_[m * g + [0.0, 0.0, reading], 0, 0, 0])
+        if s.state == "B" and t_b is None:
+            t_b, limit = k * dt, hpfc.brake_limit
+        states.append(s.state)
+        if s.state == "D":
+            break
+    assert "B" in states and states[-1] == "D"
+    t_in_b = states.count("B") * dt
+    assert limit == pytest.approx(B_MARGIN * ((10.0 - p.F_th) / p.K_p / p.v_max + p.v_max / p.a_max), rel=0.05)
+    assert t_in_b <= limit + dt and t_in_b < 1.0 and abs(s.x_t) < p.x_max
+
+
 def test_tare_at_the_approach_removes_a_sensor_offset():
     """The contact force is zeroed when an approach starts in free space: a wrench offset of 0.3 N
     (sensor offsets, weight model) is no contact force; above F_th / 2 it is taken for contact."""
