@@ -75,6 +75,98 @@ def test_distribution_wrench_carries_the_expected_not_the_measured_contact_force
     assert np.all(expected_contact_wrench(idle) == 0.0)     # I: the measured wrench unchanged
 
 
+def test_the_expected_contact_force_enters_the_distribution_through_its_filter_from_zero():
+    """Hybrid force control acting from the first period (enabled at start-up): the force set-point's
+    wrench filter starts without the expected contact force and takes it in through its PT1, so
+    the set-point the CFC holds from A on plans no contact yet (started at the full contact force,
+    the resumed CFC pressed the IPAnema 3 to 108 % overshoot with its cables at 0 N)."""
+    from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
+
+    robot, dt = IPANEMA3, 1e-3
+    zero = np.zeros(6)
+    w = np.r_[robot.platform.mass * robot.gravity, 0, 0, 0]       # free space, at rest
+    contact = ("A", np.array([0.0, 0.0, -500.0]), np.zeros(3))
+    params = ForceSetpointParams(T_wrench_filter=0.3)
+    free, pressing = ForceSetpoint(robot, dt, params), ForceSetpoint(robot, dt, params)
+    f_free = [free.update(robot.home, zero, zero, w).f.copy() for _ in range(3)]
+    f_press = [pressing.update(robot.home, zero, zero, w, contact=contact).f.copy() for _ in range(3)]
+    np.testing.assert_allclose(f_press[0], f_free[0])              # the first period: no contact in it
+    alpha = 1.0 - np.exp(-dt / 0.3)                                # then the PT1's first steps
+    w_d = pressing.w_d - free.w_d
+    np.testing.assert_allclose(w_d[:3], [0.0, 0.0, 500.0 * (1.0 - (1.0 - alpha) ** 2)], rtol=1e-9, atol=1e-9)
+    assert not np.allclose(f_press[2], f_free[2])
+
+
+def test_the_approach_waits_for_the_joint_commands_switch_on_ramp():
+    """The joint command ramps an offset input in over its transfer_time once it is reported active
+    (OffsetInputs); x_t waits at 0 in A for T_on, so the commanded offset alpha x_t never moves
+    faster than v_max. Without the wait (T_on = 0) alpha' x_t adds to the approach speed."""
+    from cdpr_control.control.offset_inputs import OffsetInputs, OffsetSample
+
+    dt, ramp = 1e-3, 0.2
+    g, m = MINI.gravity, MINI.platform.mass
+    w = np.r_[m * g, 0, 0, 0]                                       # free space: A all along
+
+    def commanded_speed(T_on):
+        hpfc = HybridForceControl(MINI, dt, replace(MINI_HPFC, T_on=T_on, v_max=0.05, a_max=10.0, k_env=0.0,
+                                                    x_max=0.1), enabled=True)
+        offsets = OffsetInputs(["hybrid_force_controller"], dt, ramp)
+        z, x_t = [], []
+        for k in range(600):
+            s = hpfc.update([0.0, 0.0, -10.0], w)
+            x_t.append(s.x_t)
+            z.append(offsets.update(k * dt, {"hybrid_force_controller": OffsetSample(k * dt, s.active, s.x)})[0][2])
+        return np.max(np.abs(np.diff(z))) / dt, np.array(x_t)
+
+    v_waiting, x_t = commanded_speed(ramp)
+    assert np.all(x_t[:int(round(ramp / dt)) - 1] == 0.0) and x_t[-1] > 0.0
+    assert v_waiting <= 0.05 * (1.0 + 1e-9)
+    v_not_waiting, _ = commanded_speed(0.0)
+    assert v_not_waiting > 1.5 * 0.05
+
+
+def test_the_approach_slows_where_the_impact_alone_would_press_beyond_F_d():
+    """v = min(v_max, F_d / sqrt(k_env m)): the platform's mass hitting the stiffest expected surface
+    at v presses v sqrt(k_env m) (undamped mass on a spring) before any control acts."""
+    m = IPANEMA3.platform.mass
+    params = replace(IPANEMA3_HPFC, k_env=2e6, T_on=0.0)
+    hpfc = HybridForceControl(IPANEMA3, 1e-3, params, enabled=True)
+    assert hpfc.approach_speed(150.0) == pytest.approx(150.0 / np.sqrt(2e6 * m))     # 21 mm/s
+    assert hpfc.approach_speed(150.0) * np.sqrt(2e6 * m) <= 150.0 * (1 + 1e-12)
+    assert hpfc.approach_speed(500.0) == params.v_max                                  # 71 mm/s > v_max
+    assert HybridForceControl(IPANEMA3, 1e-3, replace(params, k_env=0.0)).approach_speed(150.0) == params.v_max
+    w = np.r_[m * IPANEMA3.gravity, 0, 0, 0]
+    v = [hpfc.update([0.0, 0.0, -150.0], w).v_t for _ in range(200)]              # free space: A
+    assert max(v) == pytest.approx(150.0 / np.sqrt(2e6 * m))
+    with pytest.raises(ValueError, match="k_env"):
+        replace(params, k_env=-1.0).validate()
+
+
+def test_b_ends_within_its_bound_when_the_force_never_reads_F_d():
+    """A sensor that reads at most 90 % of the contact force (a gain error, a plateau): B's profile
+    never reaches standstill, since (F_d - F) / K_p stays ahead; B ends after B_MARGIN times its
+    profile at stiffness K_p (0.46 s here) instead of creeping on to x_max (about 10 s)."""
+    from cdpr_control.control.hybrid_force_control import B_MARGIN
+
+    dt, p = 1e-3, replace(MINI_HPFC, T_on=0.0, k_env=0.0, T_F=0.0)
+    g, m = MINI.gravity, MINI.platform.mass
+    hpfc = HybridForceControl(MINI, dt, p, enabled=True)
+    states, t_b = [], None
+    for k in range(12000):
+        depth = max(0.0, hpfc.x_t - 0.001)                       # a floor 1 mm ahead, 3e4 N/m
+        reading = min(3e4 * depth, 0.9 * 10.0)                  # the sensor's plateau at 9 N
+        s = hpfc.update([0.0, 0.0, -10.0], np.r_[m * g + [0.0, 0.0, reading], 0, 0, 0])
+        if s.state == "B" and t_b is None:
+            t_b, limit = k * dt, hpfc.brake_limit
+        states.append(s.state)
+        if s.state == "D":
+            break
+    assert "B" in states and states[-1] == "D"
+    t_in_b = states.count("B") * dt
+    assert limit == pytest.approx(B_MARGIN * ((10.0 - p.F_th) / p.K_p / p.v_max + p.v_max / p.a_max), rel=0.05)
+    assert t_in_b <= limit + dt and t_in_b < 1.0 and abs(s.x_t) < p.x_max
+
+
 def test_tare_at_the_approach_removes_a_sensor_offset():
     """The contact force is zeroed when an approach starts in free space: a wrench offset of 0.3 N
     (sensor offsets, weight model) is no contact force; above F_th / 2 it is taken for contact."""

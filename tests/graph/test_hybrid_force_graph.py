@@ -64,7 +64,10 @@ def floor_figures(bag) -> SimpleNamespace:
         F_last=F[hold[-1] - 999:hold[-1] + 1],                      # the last second of the hold
         f_min_from_d=f[k_d + 300:k_r + int(np.argmax(states[k_r:] == "I")) + 1].min(axis=0),
         f_min_in_b=f[states == "B"].min(),
-        command_step=np.abs(np.diff(theta_d, axis=0)).max(),
+        # from A on: the graph's own start-up (state I, before M103) steps the command by up to
+        # 0.4 mm in its first 10 ms, which the bag holds or not depending on when the recorder
+        # subscribed (stamps from 2 ms or from 23 ms on)
+        command_step=np.abs(np.diff(theta_d[k_a:], axis=0)).max(),
         release_offset=float(np.linalg.norm(x[-1] - ROBOT.home[:3])), final_contact=F[-1])
 
 

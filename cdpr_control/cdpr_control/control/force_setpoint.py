@@ -250,7 +250,9 @@ class ForceSetpoint:
         if self.f_ref_override is None:
             self._ramp_level()
         w_dyn, AT = self._model(x_d, xdot_d, xddot_d)
-        if contact is not None:
+        if contact is not None and self.wrench_filter.y is not None:
+            # (not into the filter's first sample, which would start it at the full contact force:
+            # the expected contact force enters through the filter, from zero)
             dw = self._contact_wrench(contact)
             if dw is not None:
                 w = w + dw

@@ -56,6 +56,10 @@ HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's fee
 # The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
 # (ContactCableForceControl, in ControlLoop and in the node cable_force_controller).
 CFC_PAUSED = (APPROACH, BRAKE, LOST)
+# B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
+# (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
+V_END = 0.02
+B_MARGIN = 3.0
 
 
 @dataclass
@@ -74,11 +78,17 @@ class HPFCParams:
     T_F: float = 0.05            # s, PT1 on the contact force (ASSUMPTION: sensor noise, D part)
     payload: float = 0.0         # kg, known payload whose weight is no contact force
     tare: bool = True            # zero the contact force at the start of an approach (reading < F_th / 2)
+    k_env: float = 0.0           # N/m, the stiffest surface expected; the approach is slowed so that the
+                                 # impact of the platform's mass on it stays below F_d (0: v_max always)
+    T_on: float = 0.0            # s, the joint command's switch-on ramp of this output (its transfer_time):
+                                 # x_t leaves 0 in A no earlier than T_on after the output is reported
+                                 # active (not in the thesis, docs/hybrid_force_control.md)
 
     def validate(self) -> None:
         checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
                   "F_th": self.F_th > 0.0, "v_max": self.v_max > 0.0, "a_max": self.a_max > 0.0,
-                  "x_max": self.x_max > 0.0, "T_F": self.T_F >= 0.0, "payload": self.payload >= 0.0}
+                  "x_max": self.x_max > 0.0, "T_F": self.T_F >= 0.0, "payload": self.payload >= 0.0,
+                  "T_on": self.T_on >= 0.0, "k_env": self.k_env >= 0.0}
         bad = [k for k, ok in checks.items() if not (ok and np.isfinite(getattr(self, k)))]
         if bad:
             raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
@@ -216,6 +226,8 @@ class HybridForceControl:
         self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
+        self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
+        self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
         self.force_filter = LowPass(0.0, dt)
         self.set_params(params or HPFCParams())
 
@@ -240,6 +252,24 @@ class HybridForceControl:
         if self.state == CONTACT:
             self.v_t = 0.0
         self.state = state
+
+    def _brake_limit(self, F_d: float, F: float) -> float:
+        """The longest B [s] from a contact detected at F [N]: B_MARGIN times the time of B's
+        profile were the effective stiffness K_p (the stroke (F_d - F) / K_p at the speed of the
+        detection, then braking at a_max)."""
+        p = self.params
+        v = max(self.v_t, V_END * p.v_max)
+        return B_MARGIN * (max(0.0, F_d - F) / p.K_p / v + v / p.a_max)
+
+    def approach_speed(self, F_d: float) -> float:
+        """The speed of A and C [m/s]: v_max, or less where the platform's mass m (with a known
+        payload) hitting a surface of stiffness k_env at v would press v sqrt(k_env m) > F_d at the
+        impact alone, before any control acts (undamped mass on a spring; not in the thesis, which
+        approaches at v_max,HPFC and names the overshoot its price)."""
+        p = self.params
+        if p.k_env <= 0.0:
+            return p.v_max
+        return min(p.v_max, max(F_d, p.F_th) / math.sqrt(p.k_env * self.mass))
 
     def _move(self, v_target: float) -> None:
         """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
@@ -282,6 +312,13 @@ class HybridForceControl:
             self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
         F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
+        # the unfiltered contact force of this period: the PT1 (T_F, for the PID) lags a rising
+        # contact force by T_F, which at 50 mm/s onto a stiff surface is tens of N of overshoot;
+        # contact detection while x_t moves uses whichever of the two is higher
+        F_now = F if w_floats is None or not all_finite(w_floats) else sum(
+            z * (-(a - b) - c) for z, a, b, c in zip(self.z_t.tolist(), w_floats[:3], self._weight,
+                                                   self.F_tare.tolist()))
+        F_rise = max(F, F_now)
         e_F = F_d - F
         dF = 0.0 if self.F_prev is None else (F - self.F_prev) / dt
         self.F_prev = F
@@ -295,17 +332,25 @@ class HybridForceControl:
         if self.state == CONTACT and F < p.F_th:                 # Fig. 5.4: contact lost
             self._enter(LOST)
         if self.state in (APPROACH, LOST):
-            if F >= p.F_th:
+            if (F_rise if self.v_t > 0.0 else F) >= p.F_th:    # (F_rise once x_t moves: start-up transients)
                 self._enter(BRAKE)
                 self.contact = (self.x_t, F)             # where the contact was detected
-            else:
-                self._move(p.v_max)
+                self.brake_periods, self.brake_limit = 0, self._brake_limit(F_d, F)
+            elif self.active_periods * dt >= p.T_on - 1e-12:
+                self._move(self.approach_speed(F_d))
+            # else x_t waits at 0 while the joint command ramps the output in (T_on): a moving x_t
+            # times a rising ramp would approach, and press after B, faster than v_max
         if self.state == BRAKE:
             # to standstill where the force is expected to reach F_d: (F_d - F) / K_p ahead, K_p
             # being the effective stiffness (table 5.1), braking at a_max at the latest
             ahead = max(0.0, F_d - F) / p.K_p
             self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
-            if self.v_t == 0.0:                                  # standstill: closed-loop force control
+            self.brake_periods += 1
+            # standstill, or creeping (v_t < V_END v_max: what is left to go, v^2 / 2 a_max, is below
+            # a micrometre), or B has lasted its bound: closed-loop force control. A force that
+            # never reads F_d (biased sensors, a softer robot than K_p) no longer keeps B creeping.
+            if self.v_t < V_END * p.v_max or self.brake_periods * dt >= self.brake_limit:
+                self.v_t = 0.0
                 self._enter(CONTACT)
                 x_c, F_c = self.contact                          # the stiffness met from contact to here
                 if self.x_t - x_c > 0.0 and F - F_c > 0.0:
@@ -323,10 +368,12 @@ class HybridForceControl:
             if self.saturated:
                 self.x_t = _clip(self.x_t, p.x_max)
                 self.v_t = 0.0
+        active = self.enabled or self.state != IDLE
+        self.active_periods = self.active_periods + 1 if active else 0
         x_t, (z_x, z_y, z_z) = self.x_t, self.z_t.tolist()
         x = np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0])    # R_t [0 0 x_t]
         # (F_vec: the array built above for this state alone)
-        return HPFCState(self.state, self.enabled or self.state != IDLE, self.z_t.copy(), F_d0.copy(),
+        return HPFCState(self.state, active, self.z_t.copy(), F_d0.copy(),
                          F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
 
     def absorb(self, dx: float) -> None:

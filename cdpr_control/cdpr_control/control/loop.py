@@ -23,7 +23,7 @@ payload), added to w_dyn of (3.26).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -128,8 +128,9 @@ class ControlLoop:
         self.refusal: str | None = None          # why a live switch-off of the OSPC is not honoured
         self._checked = (force_control, p.ospc_enabled, p.cfc_enabled)
         # section 5.1.2: the stages the nodes hybrid_force_controller and cable_force_controller run
-        self.hpfc = None if p.hpfc is None else HybridForceStage(robot, dt, p.hpfc, p.force.T_wrench_filter,
-                                                                 enabled=p.hpfc_enabled)
+        # (its approach waits for the offset's switch-on ramp, transfer_time: HPFCParams.T_on)
+        self.hpfc = None if p.hpfc is None else HybridForceStage(robot, dt, replace(p.hpfc, T_on=p.transfer_time),
+                                                                 p.force.T_wrench_filter, enabled=p.hpfc_enabled)
         self.contact = None if p.hpfc is None else ContactCableForceControl(robot, self.cfc, p.hpfc.T_MA, dt)
         self._cfc_applied = False                # Δq_CFC applied in the last period (the node's hand-over)
         self.dq_cfc = np.zeros(robot.m)
