@@ -201,7 +201,8 @@ class Launcher:
             if self.description.record is not None:
                 self._start_recorder(self.description.record)
                 if self.mode == "composed":
-                    self._threads[-1].start()  # the recorder spins, the graph waits for it
+                    if self._threads[-1].name == "cdpr-launch-recorder":
+                        self._threads[-1].start()  # the recorder spins, the graph waits for it
                     self._hold_until_recorded()
             for thread in self._threads:
                 if thread.ident is None:
@@ -275,7 +276,8 @@ class Launcher:
                                               name="cdpr-launch-recorder", daemon=True))
 
     def _hold_until_recorded(self, timeout: float = RECORDER_TIMEOUT) -> None:
-        """Composed graph, not yet spun: wait until the recorder records every topic it publishes.
+        """Composed graph, not yet spun: wait until the recorder records every topic it publishes
+        (a recorder in the graph's own executor discovers them from here, before that spins).
 
         DDS discovery takes up to seconds; a lockstep graph would meanwhile run its first periods
         unrecorded. Nothing of the graph runs before its executor spins, so holding it costs nothing.
@@ -283,7 +285,12 @@ class Launcher:
         topics = {p.topic_name for node in self.nodes for p in node.publishers}
         topics = {t for t in topics if self.recorder.selection.wanted(t) and not _hidden_topic(t)}
         deadline = time.monotonic() + timeout
+        in_graph = not any(t.name == "cdpr-launch-recorder" for t in self._threads)
         while not topics <= set(self.recorder.recorded_topics):
+            if in_graph:            # a node of the graph's executor, which does not spin yet: discover here
+                self.recorder.selection.discover()
+                if topics <= set(self.recorder.recorded_topics):
+                    break
             if time.monotonic() > deadline:
                 missing = sorted(topics - set(self.recorder.recorded_topics))
                 raise TimeoutError(f"the recorder did not subscribe to {', '.join(missing)} within {timeout:g} s")

@@ -259,7 +259,11 @@ class ForceSetpoint:
         if self.w_d is None:
             self.smith.reset(w_dyn)          # the delay line starts at the model wrench of t = 0
         if self.params.wrench_source == "measured" and all_finite(w):
-            w_ff = self._feed_forward(x_d, w_dyn, w_model)
+            # in contact the measured wrench holds the contact reaction, which an identification reads
+            # as payload: the feed-forward and its filters stay as they were before the contact
+            in_contact = contact is not None and contact[0] != "I"
+            w_ff = (self.w_ff if self.payload_filter.y is not None else None) if in_contact \
+                else self._feed_forward(x_d, w_dyn, w_model)
             if w_ff is None:
                 self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
                                                       self.wrench_filter)           # filtered, saturated
