@@ -207,10 +207,10 @@ class ForceSetpoint:
         ``T_wrench_filter`` and w_ff to zero."""
         T = self.params.T_wrench_filter
         if w_model is None:
-            self.payload_filter.reset(None)
-            self.w_ff = np.zeros(6)
-            self._eigen_in = 0
-            if self.wrench_filter.T != T:
+            if self.payload_filter.y is not None:      # the payload went: back to the filter of no payload
+                self.payload_filter.reset(None)
+                self.w_ff = np.zeros(6)
+                self._eigen_in = 0
                 self.wrench_filter.set_time_constant(T)
             return None
         if self._eigen_in <= 0 and self.f_d is not None:
