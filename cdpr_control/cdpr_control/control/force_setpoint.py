@@ -21,7 +21,7 @@ therefore at least OMEGA_T / ω_n, the disturbance filter's never below ``T_wren
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,12 +33,17 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, expected
 from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
 from cdpr_control.control.safety import all_finite
 from cdpr_control.force_distribution import (BACKENDS, METHODS, BorderPolicy, DistributionResult,
-    ForceDistributor)
+    ForceDistributor, Status)
 from cdpr_control.control.wrench_setpoint import WrenchSetpoint
 
 
 OMEGA_T = 9.0          # -, ω_n T of the measured-wrench loop: 90 kg at [-1.8, 1.2, 1.0] m on the IPAnema 3
                        # (f_n 2.38 Hz) grew with T 0.3 s (ω_n T 4.5) and held with 0.6 s (9.0)
+# s: the hand's reserve above f_min decays with this after the hand lets go (the platform's cable
+# modes ring out within about 0.1 s, the measured-wrench filter T_wrench_filter has learnt the
+# release after a few of its 0.3 s); below RESERVE_FLOOR [N] it is dropped
+RESERVE_RELEASE_TIME = 0.5
+RESERVE_FLOOR = 1e-3
 EIGEN_PERIODS = 50     # periods between two evaluations of ω_n while a payload is known
 
 
@@ -121,6 +126,8 @@ class ForceSetpoint:
         self.level: float | None = None          # tension level in effect (ramping to the target)
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
+        self.w_user: np.ndarray | None = None    # hand guiding: the user's wrench w_Adm (set_user_wrench)
+        self.reserve = 0.0                       # N, the hand's reserve above f_min (_hand_reserve)
         self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
         self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
         self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
@@ -225,6 +232,44 @@ class ForceSetpoint:
         self.w_ff = self.payload_filter.update(w_model).copy()
         return self.w_ff
 
+    def set_user_wrench(self, w_user) -> None:
+        """Hand guiding (section 5.2): the user's wrench w_Adm (6,) [N, N m] of the admittance
+        controller (5.9) in this period, None while nobody guides (:meth:`_hand_reserve`)."""
+        self.w_user = None if w_user is None else np.asarray(w_user, dtype=float)
+
+    def _hand_reserve(self, AT) -> None:
+        """The hand's reserve r [N] of this period while a user guides (:meth:`_with_reserve`).
+
+        A departure from the thesis, which plans the minimal tension whatever the user does: the
+        cable forces that balance the hand's wrench h, Δf = -(A^T)^+ h, leave at once when the
+        hand lets go, faster than the measured-wrench filter and the CFC follow, and the cable that
+        carried them rings below f_min at the platform's cable mode (docs/admittance.md: 2.5 N for
+        f_min 5 N on the Mini after a 13 N push). r is the largest |Δf_i|: it rises with the
+        user's wrench at the tension level's rate (``tension_rate``, the internal forces move
+        smoothly) and decays with RESERVE_RELEASE_TIME after the hand has let go, so the reserve is
+        there while the cables ring out. Without a user (``set_user_wrench(None)``) r decays to 0."""
+        target = 0.0 if self.w_user is None else \
+            float(np.abs(np.linalg.lstsq(AT, self.w_user, rcond=None)[0]).max())
+        if target >= self.reserve:
+            d = self.distributor
+            rate = self.params.tension_rate * float(np.max(d.f_max - d.f_min))
+            self.reserve = target if rate == 0.0 else min(target, self.reserve + rate * self.dt)
+        else:
+            self.reserve += (target - self.reserve) * min(1.0, self.dt / RESERVE_RELEASE_TIME)
+            if self.reserve < RESERVE_FLOOR:
+                self.reserve = 0.0
+
+    def _with_reserve(self, AT, result: DistributionResult) -> DistributionResult:
+        """The distribution again with every cable at least f_min + r (the hand's reserve) where the
+        QP finds one at this pose; else, and without a reserve, ``result`` (its limits as planned)."""
+        d = self.distributor
+        if self.reserve == 0.0 or d.method != "qp" or result.status != Status.FEASIBLE:
+            return result
+        raised = d.qp.solve(AT, self.w_d, f_min=np.minimum(d.f_min + self.reserve, d.f_max))
+        if raised.status != Status.FEASIBLE:
+            return result
+        return replace(raised, f_min=result.f_min, violation=result.violation)
+
     def _contact_wrench(self, contact) -> np.ndarray | None:
         """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
         wrench (:func:`expected_contact_wrench_of`) of contact = (state letter, F_d,0 (3,), F_vec (3,))
@@ -273,5 +318,8 @@ class ForceSetpoint:
         else:
             self.w_d = w_dyn if w_model is None else w_dyn + w_model          # (3.1)
         result = self.distributor.solve(AT, self.w_d, self.dt)               # (3.27)-(3.28)
+        if self.w_user is not None or self.reserve > 0.0:
+            self._hand_reserve(AT)
+            result = self._with_reserve(AT, result)
         self.f_d = result.f
         return result

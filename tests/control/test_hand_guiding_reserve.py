@@ -1,0 +1,93 @@
+"""The hand's reserve of the force set-point while a user guides (section 5.2, docs/admittance.md):
+every cable is planned at least f_min + r, r the largest cable force the user's wrench takes, so
+that the cables keep f_min when the hand lets go; without a user the distribution is the thesis'."""
+import numpy as np
+import pytest
+
+from cdpr_control.control.force_setpoint import RESERVE_RELEASE_TIME, ForceSetpoint
+from cdpr_control.control.params import control_loop_params
+from cdpr_control.model.dynamics import platform_wrench
+from cdpr_control.model.kinematics import inverse_kinematics
+from cdpr_control.model.robot import load_robot
+from cdpr_sim.hand import Segment
+from cdpr_sim.hand_guiding import guiding_run
+from cdpr_sim.simulator import SimConfig
+
+DT = 1e-3
+MINI = load_robot("ipanema3_mini")
+HAND = np.r_[12.5, 0.0, 0.0, 0.0, 0.0, 0.0]     # N: a 13 N push along x less the 0.5 N dead band
+
+
+def _at_rest(fs, robot, periods, w_user=None):
+    """``periods`` periods holding home, the measured wrench the model's, the user's wrench given."""
+    x, zero = np.asarray(robot.home, dtype=float), np.zeros(6)
+    w = platform_wrench(robot, x, zero, zero)
+    fs.set_user_wrench(w_user)
+    return [fs.update(x, zero, zero, w) for _ in range(periods)]
+
+
+def _expected_reserve(robot, w_user):
+    AT = inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).AT
+    return float(np.abs(np.linalg.lstsq(AT, w_user, rcond=None)[0]).max())
+
+
+def test_without_a_user_the_distribution_is_the_minimal_tension():
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    res = _at_rest(fs, MINI, 50)[-1]
+    assert fs.reserve == 0.0
+    assert res.f.min() == pytest.approx(7.5, abs=1e-6)          # the file's planned f_min
+
+
+def test_the_user_wrench_raises_every_cable_by_its_reserve_at_the_tension_rate():
+    params = control_loop_params(MINI).force
+    fs = ForceSetpoint(MINI, DT, params)
+    _at_rest(fs, MINI, 50)
+    r = _expected_reserve(MINI, HAND)
+    assert r > 2.0                                               # N: what a 13 N push puts on a cable
+    rate = params.tension_rate * float(np.max(fs.distributor.f_max - fs.distributor.f_min))
+    first = _at_rest(fs, MINI, 1, HAND)[-1]
+    assert fs.reserve == pytest.approx(rate * DT)                # rises smoothly, not as a step
+    assert first.f.min() == pytest.approx(7.5 + rate * DT, abs=1e-6)
+    res = _at_rest(fs, MINI, int(np.ceil(r / (rate * DT))) + 5, HAND)[-1]
+    assert fs.reserve == pytest.approx(r)
+    assert res.f.min() == pytest.approx(7.5 + r, abs=1e-6)
+    np.testing.assert_array_equal(res.f_min, fs.distributor.f_min)   # reported with the planned limits
+    AT = inverse_kinematics(MINI, np.asarray(MINI.home, dtype=float)).AT
+    np.testing.assert_allclose(AT @ res.f, -fs.w_d, atol=1e-6)   # still balances the wrench set-point
+
+
+def test_the_reserve_stays_while_the_cables_ring_out_and_then_goes():
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    _at_rest(fs, MINI, 2000, HAND)
+    r = fs.reserve
+    _at_rest(fs, MINI, int(round(0.1 / DT)))                     # the hand let go 0.1 s ago
+    assert fs.reserve == pytest.approx(r * (1.0 - DT / RESERVE_RELEASE_TIME) ** 100)
+    assert fs.reserve > 0.8 * r
+    res = _at_rest(fs, MINI, int(round(8.0 / DT)))[-1]
+    assert fs.reserve == 0.0
+    assert res.f.min() == pytest.approx(7.5, abs=1e-6)
+
+
+def test_a_reserve_the_pose_cannot_carry_leaves_the_planned_distribution():
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    plain = _at_rest(fs, MINI, 5)[-1]
+    huge = np.r_[400.0, 0.0, 0.0, 0.0, 0.0, 0.0]               # r beyond f_max - f_min
+    fs.params.tension_rate = 0.0                                 # (at once)
+    res = _at_rest(fs, MINI, 5, huge)[-1]
+    assert fs.reserve > 40.0
+    np.testing.assert_allclose(res.f, plain.f, atol=1e-6)
+
+
+def test_the_mini_keeps_f_min_when_a_13_N_push_is_let_go_at_once():
+    """The validation sweep's harshest push (rising over 0.1 s, held 1 s, let go at once) at the
+    Mini pose where, without the reserve, a cable rang down to 2.5 N 18 ms after the release
+    (f_min 5 N; default mismatched plant, seed 3)."""
+    enable, push, release = 0.5, 1.0, 2.0
+    wrench = (13.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    g = guiding_run([Segment(push, wrench, "ramp", 0.1), Segment(push + 0.1, wrench, "step"),
+                     Segment(release, release=True)], release + 0.4, robot_name="ipanema3_mini",
+                    x_hold=[0.206, 0.107, -0.172, 0.0, 0.0, 0.0], config=SimConfig(plant_seed=3), enable_at=enable)
+    r = g.run
+    moved = r.x_d[r.t > release][-1, 0] - r.x_d[0, 0]
+    assert moved > 1e-3                                          # it was guided along the push
+    assert r.f[r.t > enable].min() >= MINI.cable.f_min.min()
