@@ -1,10 +1,12 @@
 """The hand's reserve of the force set-point while a user guides (section 5.2, docs/admittance.md):
-every cable is planned at least f_min + r, r the largest cable force the user's wrench takes, so
-that the cables keep f_min when the hand lets go; without a user the distribution is the thesis'."""
+every cable is planned within [f_min + r, f_max - r], r the largest cable force the user's wrench
+takes, so that the cables keep their limits when the hand lets go; without a user the distribution
+is the thesis'."""
 import numpy as np
 import pytest
 
-from cdpr_control.control.force_setpoint import RESERVE_RELEASE_TIME, ForceSetpoint
+from cdpr_control.control.force_setpoint import RESERVE_RELEASE_TIME, RESERVE_SHARE, ForceSetpoint, largest_margin
+from cdpr_control.force_distribution import Status
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.dynamics import platform_wrench
 from cdpr_control.model.kinematics import inverse_kinematics
@@ -51,6 +53,7 @@ def test_the_user_wrench_raises_every_cable_by_its_reserve_at_the_tension_rate()
     res = _at_rest(fs, MINI, int(np.ceil(r / (rate * DT))) + 5, HAND)[-1]
     assert fs.reserve == pytest.approx(r)
     assert res.f.min() == pytest.approx(7.5 + r, abs=1e-6)
+    assert res.f.max() <= 40.0 - r + 1e-6                        # and from f_max: a release loads others
     np.testing.assert_array_equal(res.f_min, fs.distributor.f_min)   # reported with the planned limits
     AT = inverse_kinematics(MINI, np.asarray(MINI.home, dtype=float)).AT
     np.testing.assert_allclose(AT @ res.f, -fs.w_d, atol=1e-6)   # still balances the wrench set-point
@@ -68,14 +71,29 @@ def test_the_reserve_stays_while_the_cables_ring_out_and_then_goes():
     assert res.f.min() == pytest.approx(7.5, abs=1e-6)
 
 
-def test_a_reserve_the_pose_cannot_carry_leaves_the_planned_distribution():
+def test_largest_margin_is_the_margin_the_pose_leaves_from_both_limits():
+    x, zero = np.asarray(MINI.home, dtype=float), np.zeros(6)
+    AT, w = inverse_kinematics(MINI, x).AT, platform_wrench(MINI, x, zero, zero)
+    f_min, f_max = np.full(8, 7.5), np.full(8, 40.0)
+    t = largest_margin(AT, w, f_min, f_max)
+    assert 0.0 < t < 16.25
+    qp = ForceSetpoint(MINI, DT, control_loop_params(MINI).force).distributor.qp
+    assert qp.solve(AT, w, f_min=f_min + 0.999 * t, f_max=f_max - 0.999 * t).status == Status.FEASIBLE
+    assert qp.solve(AT, w, f_min=f_min + 1.01 * t, f_max=f_max - 1.01 * t).status == Status.INFEASIBLE
+    assert largest_margin(AT, w + np.r_[0.0, 0.0, -400.0, 0.0, 0.0, 0.0], f_min, f_max) == -np.inf
+
+
+def test_a_reserve_beyond_the_pose_s_margin_is_limited_to_it():
+    """Near the border, or for a strong hand, r is limited to RESERVE_SHARE of the largest margin:
+    the set-point stays feasible and continuous instead of falling back to the plain one."""
     fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
-    plain = _at_rest(fs, MINI, 5)[-1]
-    huge = np.r_[400.0, 0.0, 0.0, 0.0, 0.0, 0.0]               # r beyond f_max - f_min
     fs.params.tension_rate = 0.0                                 # (at once)
-    res = _at_rest(fs, MINI, 5, huge)[-1]
-    assert fs.reserve > 40.0
-    np.testing.assert_allclose(res.f, plain.f, atol=1e-6)
+    res = _at_rest(fs, MINI, 5, np.r_[400.0, 0.0, 0.0, 0.0, 0.0, 0.0])[-1]
+    AT = inverse_kinematics(MINI, np.asarray(MINI.home, dtype=float)).AT
+    t = largest_margin(AT, fs.w_d, fs.distributor.f_min, fs.distributor.f_max)
+    assert fs.reserve > t
+    assert res.f.min() == pytest.approx(7.5 + RESERVE_SHARE * t, abs=1e-6)
+    assert res.f.max() <= 40.0 - RESERVE_SHARE * t + 1e-6
 
 
 def test_the_mini_keeps_f_min_when_a_13_N_push_is_let_go_at_once():

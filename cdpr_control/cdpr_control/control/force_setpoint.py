@@ -44,6 +44,8 @@ OMEGA_T = 9.0          # -, ω_n T of the measured-wrench loop: 90 kg at [-1.8, 
 # release after a few of its 0.3 s); below RESERVE_FLOOR [N] it is dropped
 RESERVE_RELEASE_TIME = 0.5
 RESERVE_FLOOR = 1e-3
+RESERVE_SHARE = 0.7    # -, of the largest margin a pose leaves (:func:`largest_margin`): the rest is the QP's freedom
+_INF = 1e30            # DAQP's "no bound"
 EIGEN_PERIODS = 50     # periods between two evaluations of ω_n while a payload is known
 
 
@@ -66,6 +68,25 @@ def vertical_eigenfrequency(robot, x, f, mass: float) -> float:
     k_l = cable.tangent_stiffness(robot, f, cable.total_free_length(robot, ik.q))
     K_zz = float((geometric_stiffness(ik, f) + cable_stiffness(ik, k_l))[2, 2])
     return float(np.sqrt(K_zz / mass)) if K_zz > 0.0 and mass > 0.0 else float("nan")
+
+
+def largest_margin(AT, w, f_min, f_max) -> float:
+    """The largest t [N] for which f_min + t <= f <= f_max - t, A^T f = -w has a solution (an LP,
+    DAQP), at most (f_max - f_min) / 2; -inf where the wrench w is not feasible at all."""
+    import daqp
+
+    n, m = AT.shape
+    A = np.zeros((n + 2 * m, m + 1))
+    A[:n, :m] = AT
+    A[n:n + m, :m] = A[n + m:, :m] = np.eye(m)
+    A[n:n + m, m] = -1.0                                  # f - t >= f_min
+    A[n + m:, m] = 1.0                                    # f + t <= f_max
+    top = float(np.min(f_max - f_min)) / 2.0
+    bu = np.r_[np.full(m, _INF), top, -w, np.full(m, _INF), f_max]
+    bl = np.r_[np.full(m, -_INF), 0.0, -w, f_min, np.full(m, -_INF)]
+    sense = np.r_[np.zeros(m + 1, dtype=np.int32), np.full(n, 5, dtype=np.int32), np.zeros(2 * m, dtype=np.int32)]
+    x, _, exitflag, _ = daqp.solve(None, np.r_[np.zeros(m), -1.0], A, bu, bl, sense)
+    return float(x[m]) if exitflag == 1 and np.isfinite(x[m]) else -np.inf
 
 
 def loop_filter_times(T: float, omega_n: float) -> tuple[float, float]:
@@ -260,15 +281,20 @@ class ForceSetpoint:
                 self.reserve = 0.0
 
     def _with_reserve(self, AT, result: DistributionResult) -> DistributionResult:
-        """The distribution again with every cable at least f_min + r (the hand's reserve) where the
-        QP finds one at this pose; else, and without a reserve, ``result`` (its limits as planned)."""
+        """The distribution again with every cable within [f_min + r, f_max - r]: the hand's reserve r
+        kept from both limits (a release swings the cables it unloads down and those it loads up),
+        at most the largest margin this pose and wrench leave (:func:`largest_margin`), so that the
+        set-point stays continuous near the border; ``result`` where no margin is left."""
         d = self.distributor
         if self.reserve == 0.0 or d.method != "qp" or result.status != Status.FEASIBLE:
             return result
-        raised = d.qp.solve(AT, self.w_d, f_min=np.minimum(d.f_min + self.reserve, d.f_max))
+        r = min(self.reserve, RESERVE_SHARE * largest_margin(AT, self.w_d, d.f_min, d.f_max))
+        if not r > 0.0:
+            return result
+        raised = d.qp.solve(AT, self.w_d, f_min=d.f_min + r, f_max=d.f_max - r)
         if raised.status != Status.FEASIBLE:
             return result
-        return replace(raised, f_min=result.f_min, violation=result.violation)
+        return replace(raised, f_min=result.f_min, f_max=result.f_max, violation=result.violation)
 
     def _contact_wrench(self, contact) -> np.ndarray | None:
         """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
