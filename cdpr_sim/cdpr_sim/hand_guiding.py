@@ -47,7 +47,7 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
 
     Each period the user's wrench w_Adm of the last one enters the force set-point
     (:meth:`cdpr_control.control.force_setpoint.ForceSetpoint.set_user_wrench`: the hand's reserve
-    on the reference force, so the cables keep f_min when the hand lets go)."""
+    from both force limits, so the cables keep them when the hand lets go; docs/admittance.md)."""
     robot = load_robot(robot_name)
     shipped = shipped_configuration(robot)
     x_hold = np.array(robot.home if x_hold is None else x_hold, dtype=float)

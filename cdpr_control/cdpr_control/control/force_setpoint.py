@@ -39,7 +39,7 @@ from cdpr_control.control.wrench_setpoint import WrenchSetpoint
 
 OMEGA_T = 9.0          # -, ω_n T of the measured-wrench loop: 90 kg at [-1.8, 1.2, 1.0] m on the IPAnema 3
                        # (f_n 2.38 Hz) grew with T 0.3 s (ω_n T 4.5) and held with 0.6 s (9.0)
-# s: the hand's reserve above f_min decays with this after the hand lets go (the platform's cable
+# s: the hand's reserve from the force limits decays with this after the hand lets go (the platform's cable
 # modes ring out within about 0.1 s, the measured-wrench filter T_wrench_filter has learnt the
 # release after a few of its 0.3 s); below RESERVE_FLOOR [N] it is dropped
 RESERVE_RELEASE_TIME = 0.5
@@ -148,7 +148,7 @@ class ForceSetpoint:
         self.f_ref_override: np.ndarray | None = None
         self.w_d: np.ndarray | None = None
         self.w_user: np.ndarray | None = None    # hand guiding: the user's wrench w_Adm (set_user_wrench)
-        self.reserve = 0.0                       # N, the hand's reserve above f_min (_hand_reserve)
+        self.reserve = 0.0                       # N, the hand's reserve from f_min and f_max (_hand_reserve)
         self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
         self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
         self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
