@@ -84,7 +84,8 @@ def largest_margin(AT, w, f_min, f_max) -> float:
     top = float(np.min(f_max - f_min)) / 2.0
     bu = np.r_[np.full(m, _INF), top, -w, np.full(m, _INF), f_max]
     bl = np.r_[np.full(m, -_INF), 0.0, -w, f_min, np.full(m, -_INF)]
-    sense = np.r_[np.zeros(m + 1, dtype=np.int32), np.full(n, 5, dtype=np.int32), np.zeros(2 * m, dtype=np.int32)]
+    sense = np.zeros(n + 3 * m + 1, dtype=np.int32)
+    sense[m + 1:m + 1 + n] = 5                           # the equality rows A^T f = -w
     x, _, exitflag, _ = daqp.solve(None, np.r_[np.zeros(m), -1.0], A, bu, bl, sense)
     return float(x[m]) if exitflag == 1 and np.isfinite(x[m]) else -np.inf
 
