@@ -167,7 +167,7 @@ class ControlLoop:
         axes) and the winch measurements."""
         robot = self.robot
         if self.command.theta_d is None:
-            self.command.reset(theta)
+            self.command.reset(theta, self.params.transfer_time)
         ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)
