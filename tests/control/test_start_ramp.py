@@ -1,4 +1,6 @@
-"""The start ramp of the joint command in the closed loop (docs/control.md, "A start ramp").
+"""The start ramp (docs/control.md, "A start ramp"): the joint command takes the controllers'
+command over from the lengths at power-on, the cable force controller's set-point rises from the
+forces measured then, both along :class:`cdpr_control.control.bumpless.StartRamp`.
 
 At a border pose of the Mini on the default mismatched plant (seed 2), the plant's power-on tension is
 up to 10 N from what the controllers command. Without the ramp the shipped force control drove a cable
@@ -9,6 +11,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from cdpr_control import kernels
+from cdpr_control.control import loop
+from cdpr_control.control.bumpless import StartRamp
+from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import hold, run
@@ -23,10 +29,8 @@ def robot():
     return load_robot("ipanema3_mini")
 
 
-def _start(robot, mode: str, transfer_time: float | None = None):
+def _start(robot, mode: str):
     params = dataclasses.replace(control_loop_params(robot), mode=mode)
-    if transfer_time is not None:
-        params = dataclasses.replace(params, transfer_time=transfer_time)
     return run(robot, hold(X_BORDER), 1.0, params=params, x0=X_BORDER,
                config=SimConfig(plant="mismatched", plant_seed=2))
 
@@ -43,8 +47,55 @@ def test_force_control_starts_at_a_border_pose_within_the_limits(robot):
     assert np.abs(r.f[-1] - r.f_d[-1]).max() < 1.0          # the CFC has its set-point after 1 s
 
 
-def test_without_the_ramp_the_same_start_overshoots(robot):
-    """The case the ramp is for: with transfer_time 0 (no ramp, the rate limit alone) the force watch holds."""
-    r = _start(robot, "force_control", transfer_time=0.0)
+def test_without_the_ramp_the_same_start_overshoots(robot, monkeypatch):
+    """The case the ramp is for: without it (the rate limit alone) the force watch holds."""
+    monkeypatch.setattr(loop, "START_RAMP", 0.0)
+    r = _start(robot, "force_control")
     assert r.f.max() > robot.cable.f_max.max() + TOLERANCE
     assert any("force_watch" in h for h in _holds(r))
+
+
+def test_start_ramp_share_is_a_cosine_from_0_to_1():
+    ramp = StartRamp(0.01, 0.001)
+    shares = [ramp.share() for _ in range(12)]
+    expected = [0.5 - 0.5 * np.cos(np.pi * k / 10) for k in range(1, 10)] + [1.0] * 3
+    np.testing.assert_allclose(shares, expected, atol=1e-15)
+    assert not ramp.running and not StartRamp(0.0, 0.001).running
+    for bad in (-1.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match="start ramp"):
+            StartRamp(bad, 0.001)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_cfc_set_point_rises_from_the_measured_forces(robot, compiled, monkeypatch):
+    """K_p = 0 (no PI output): f_c,out is the set-point itself, f_0 + s (f_d - f_0) over the ramp,
+    then f_d; the same through the stage's period law (compiled where the kernels are) as through
+    the controller's update."""
+    if not compiled:
+        monkeypatch.setattr(kernels, "ENABLED", False)
+    dt, n = 0.001, 20
+    stage = CableForceControl(robot, dt, CFCParams(K_p=0.0), start_ramp=n * dt)
+    theta = kernels.cable_lengths(robot, robot.home)
+    f_0 = np.linspace(10.0, 20.0, robot.m)
+    f_d = np.linspace(25.0, 15.0, robot.m)
+    c = robot.cable
+    outputs = []
+    for _ in range(n + 3):
+        stage.update(f_d, f_0, theta, c.f_min, c.f_max)
+        outputs.append(stage.controller.f_out.copy())
+    shares = [0.5 - 0.5 * np.cos(np.pi * k / n) for k in range(1, n)] + [1.0] * 4
+    np.testing.assert_allclose(outputs, [f_0 + s * (f_d - f_0) for s in shares], atol=1e-12)
+
+
+def test_cfc_ramps_only_at_its_first_reset(robot):
+    """A later reset (a new home calibration, as ControlLoop.set_home_calibration makes one) restarts
+    no ramp: the set-point is f_d at once."""
+    stage = CableForceControl(robot, 0.001, CFCParams(K_p=0.0), start_ramp=0.1)
+    theta = kernels.cable_lengths(robot, robot.home)
+    f_0, f_d = np.full(robot.m, 10.0), np.full(robot.m, 20.0)
+    c = robot.cable
+    stage.update(f_d, f_0, theta, c.f_min, c.f_max)
+    assert np.all(stage.controller.f_out < 11.0)
+    stage.controller.dq_0 = None
+    stage.update(f_d, f_0, theta, c.f_min, c.f_max)
+    np.testing.assert_allclose(stage.controller.f_out, f_d)

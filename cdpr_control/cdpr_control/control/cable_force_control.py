@@ -22,6 +22,7 @@ import numpy as np
 from cdpr_control.model import cable
 from cdpr_control import kernels
 from cdpr_control.model.calibration import DEFAULT_WINDOW, StartupCalibration
+from cdpr_control.control.bumpless import StartRamp
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.pi_control import PIController, pi_update
 from cdpr_control.kernels import cfc_constants
@@ -106,6 +107,8 @@ class CableForceController:
         self.feedback_filter = LowPass(params.T_filter, dt)      # (3.20)
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
+        self._ramp: StartRamp | None = None      # the set-point's start ramp, None once it has ended
+        self._f_start: np.ndarray | None = None  # the forces measured at the reset it starts from
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -115,11 +118,31 @@ class CableForceController:
         self.pi.set_limits(params.F_sat_n, params.F_sat_p)
         self.feedback_filter.set_time_constant(params.T_filter)
 
-    def reset(self, dq_0, f=None) -> None:
-        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration."""
+    def reset(self, dq_0, f=None, ramp_time: float = 0.0) -> None:
+        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration.
+
+        ``ramp_time`` [s] with the measured forces f: the start ramp (docs/control.md). The set-point
+        f_d (and f_ff) rises from f to the one given along the cosine of
+        :class:`cdpr_control.control.bumpless.StartRamp`, in step with the joint command's ramp of θ_d:
+        with the full f_d from the first period the integrator wound up while the drives had not yet
+        followed, and the forces overshot by 9 N at the ramp's end (a Mini border pose, f_d 39 N)."""
         self.dq_0 = np.asarray(dq_0, dtype=float).copy()
         self.pi.reset()
         self.feedback_filter.reset(f)
+        ramp = StartRamp(ramp_time, self.dt)
+        self._ramp = ramp if f is not None and ramp.running else None
+        self._f_start = None if self._ramp is None else np.asarray(f, dtype=float).copy()
+
+    def _set_point(self, f_d, f_ff):
+        """(f_d, f_ff) of this period: during the start ramp between the forces measured at the
+        reset and the given ones."""
+        ramp, f_0 = self._ramp, self._f_start
+        if ramp is None:
+            return f_d, f_ff
+        s = ramp.share()
+        if not ramp.running:
+            self._ramp = None
+        return f_0 + s * (f_d - f_0), None if f_ff is None else f_0 + s * (f_ff - f_0)
 
     @property
     def f_filtered(self) -> np.ndarray | None:
@@ -138,6 +161,7 @@ class CableForceController:
         """
         if self.dq_0 is None:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
+        f_d, f_ff = self._set_point(f_d, f_ff)
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
         sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
@@ -162,6 +186,7 @@ class CableForceController:
         where the kernels are), once the feedback filter has its first sample and while the PI
         integrates (not held); ``constants`` (:meth:`constants`) instead of K_l."""
         pi = self.pi
+        f_d, f_ff = self._set_point(f_d, f_ff)
         pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = cfc_period(
             f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
             pi.integrator, pi.K_p, pi.T_i, constants)
@@ -181,8 +206,9 @@ class CableForceControl:
     """
 
     def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True,
-                 calibration_window: int = DEFAULT_WINDOW):
+                 calibration_window: int = DEFAULT_WINDOW, start_ramp: float = 0.0):
         self.robot = robot
+        self.start_ramp = start_ramp      # s, the set-point's start ramp (CableForceController.reset)
         self.controller = CableForceController(robot.m, params or CFCParams(), dt)
         self._constants = self.controller.constants(robot.cable)     # of the period: set with the parameters
         self.enabled = enabled
@@ -223,8 +249,8 @@ class CableForceControl:
         l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
         c = self.controller
         if self.calibration.update(f, theta) or c.dq_0 is None:
-            if c.dq_0 is None:
-                c.reset(self._calibrated_dq_0(), f=f)
+            if c.dq_0 is None:                    # the start ramp once, at the first reset
+                c.reset(self._calibrated_dq_0(), f=f, ramp_time=self.start_ramp if c.feedback_filter.y is None else 0.0)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
         if c.feedback_filter.y is not None and not c.pi.hold:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_control import kernels
+from cdpr_control.control.bumpless import StartRamp
 from cdpr_control.control.safety import all_finite
 from cdpr_control.model.cable import total_free_length
 from cdpr_control.control.filters import LowPass
@@ -56,19 +57,22 @@ class JointCommand:
         self.dq_hold = np.zeros(robot.m)       # the force-watch hold's tension correction [m]
         self._hold_filter = LowPass(T_HOLD_FILTER, dt)
         self._start: np.ndarray | None = None  # θ at power-on while the start ramp runs
-        self._ramp_periods = 0                 # periods of the start ramp, and how many have passed
-        self._ramp_k = 0
+        self._gap: np.ndarray | None = None    # θ_0 minus the first target, ramped out
+        self._ramp = StartRamp(0.0, dt)
         kernels.warm_up(robot)               # the compiled IK and period loaded now, not in the first period
 
     def reset(self, theta, ramp_time: float = 0.0) -> None:
         """Start from the measured cable lengths θ, so that enabling the command does not jump.
 
-        ``ramp_time`` [s]: the start ramp. At power-on the plant holds the tension it was left with,
+        ``ramp_time`` [s]: the start ramp (0: none; the loop and the node give
+        :data:`cdpr_control.control.bumpless.START_RAMP`, which the cable force controller's set-point
+        ramp uses too). At power-on the plant holds the tension it was left with,
         which differs from what the controllers command by the model's errors (at a border pose of
         the Mini's default plant a cable 20 N from its set-point); rate-limited alone, the command
         closes that gap in a few periods, a force step that overshoots beyond f_max or slackens a
-        cable. Over the ramp θ_d follows θ_0 + s (target - θ_0), s rising as a cosine from 0 to 1,
-        so the drives take the controllers' command over smoothly."""
+        cable. Over the ramp θ_d = target + (1 - s) (θ_0 - target_0), s rising as a cosine from 0 to
+        1 and target_0 the first period's target, so the drives take the controllers' command over
+        smoothly."""
         theta = np.asarray(theta, dtype=float)
         if theta.shape != (self.robot.m,) or not np.all(np.isfinite(theta)):
             raise ValueError(f"reset needs {self.robot.m} finite cable lengths, got {theta}")
@@ -76,23 +80,25 @@ class JointCommand:
             raise ValueError(f"ramp_time must be a finite duration >= 0 s, got {ramp_time}")
         self.theta_d = theta.copy()
         self.velocity = np.zeros(self.robot.m)
-        self._ramp_periods = int(round(ramp_time / self.dt))
-        self._ramp_k = 0
-        self._start = theta.copy() if self._ramp_periods > 0 else None
+        self._ramp = StartRamp(ramp_time, self.dt)
+        self._start = theta.copy() if self._ramp.running else None
+        self._gap = None
 
     @property
     def starting(self) -> bool:
         """The start ramp of :meth:`reset` is still running."""
         return self._start is not None
 
-    def _ramp(self, target: np.ndarray) -> np.ndarray:
-        """The start ramp's share of ``target`` this period (see :meth:`reset`)."""
-        self._ramp_k += 1
-        if self._ramp_k >= self._ramp_periods:
-            self._start = None
-            return target
-        s = 0.5 - 0.5 * np.cos(np.pi * self._ramp_k / self._ramp_periods)
-        return self._start + s * (target - self._start)
+    def _ramped(self, target: np.ndarray) -> np.ndarray:
+        """The start ramp's θ_d this period: the target plus what is left of the first period's gap
+        θ_0 - target (see :meth:`reset`). Only the gap is ramped, so what the controllers change
+        during the ramp (the cable force controller's own ramped set-point) passes at once."""
+        if self._gap is None:
+            self._gap = self._start - target
+        theta = target + (1.0 - self._ramp.share()) * self._gap
+        if not self._ramp.running:
+            self._start = self._gap = None
+        return theta
 
     def target(self, x_d, offsets=(), dq_cfc=None) -> np.ndarray:
         """θ_d before rate limiting: IK of the offset set-point minus Δq_CFC (5.10)."""
@@ -145,7 +151,7 @@ class JointCommand:
         if not all_finite(target.tolist()):
             return self.update(None, hold=True)
         step = self.v_max * self.dt
-        delta = np.minimum(np.maximum(self._ramp(target) - self.theta_d, -step), step)
+        delta = np.minimum(np.maximum(self._ramped(target) - self.theta_d, -step), step)
         self.held = False
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
