@@ -8,7 +8,6 @@ import pytest
 from scipy.optimize import curve_fit
 
 from cdpr_control.control.admittance import damped_eigenfrequency
-from cdpr_control.control.bumpless import START_RAMP
 from cdpr_control.control.friction_compensation import FrictionCompensationParams
 from cdpr_control.model.robot import load_robot
 from cdpr_control.control.params import control_loop_params
@@ -58,9 +57,8 @@ def test_released_platform_oscillates_at_the_eigenfrequency_of_5_12(c, d, m, pus
     zone = {"zones.rest.radius": 0.03, "zones.free.box": [0.05, 0.05, 0.05, 0.05, 0.05, 0.05],
             "zones.rest.c": [c, 1000.0, 1000.0, 20.0, 20.0, 20.0], "zones.rest.d": [d, 40.0, 40.0, 0.5, 0.5, 0.5],
             "zones.rest.m": [m, 2.0, 2.0, 0.01, 0.01, 0.01]}
-    t_push = START_RAMP + 0.05                              # once the force control has raised the cables
-    t_release = t_push + length
-    r, _ = _guide(zone, [Segment(t_push, (force, 0, 0, 0, 0, 0), "rectangle", length)], t_release + 0.05 + window)
+    t_release = 0.05 + length
+    r, _ = _guide(zone, [Segment(0.05, (force, 0, 0, 0, 0, 0), "rectangle", length)], t_release + 0.05 + window)
     sel = r.t > t_release + 0.05
     f_exp = _fit_frequency(r.t[sel], r.x[sel, 0])
     assert np.ptp(r.x[sel, 0]) > 1e-3                       # it did oscillate, by millimetres

@@ -1,6 +1,6 @@
 """The start ramp (docs/control.md, "A start ramp"): the joint command takes the controllers'
-command over from the lengths at power-on, the cable force controller's set-point rises from the
-forces measured then, both along :class:`cdpr_control.control.bumpless.StartRamp`.
+command over from the lengths at power-on along :class:`cdpr_control.control.bumpless.StartRamp`,
+the cable force controller's set-point rises from the forces measured then at a bounded rate.
 
 At a border pose of the Mini on the default mismatched plant (seed 2), the plant's power-on tension is
 up to 10 N from what the controllers command. Without the ramp the shipped force control drove a cable
@@ -13,7 +13,7 @@ import pytest
 
 from cdpr_control import kernels
 from cdpr_control.control import loop
-from cdpr_control.control.bumpless import StartRamp
+from cdpr_control.control.bumpless import START_FORCE_RANGE_TIME, StartRamp
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.robot import load_robot
@@ -50,6 +50,8 @@ def test_force_control_starts_at_a_border_pose_within_the_limits(robot):
 def test_without_the_ramp_the_same_start_overshoots(robot, monkeypatch):
     """The case the ramp is for: without it (the rate limit alone) the force watch holds."""
     monkeypatch.setattr(loop, "START_RAMP", 0.0)
+    monkeypatch.setattr(loop, "CableForceControl",
+                        lambda *args, **kwargs: CableForceControl(*args, **{**kwargs, "start_ramp": False}))
     r = _start(robot, "force_control")
     assert r.f.max() > robot.cable.f_max.max() + TOLERANCE
     assert any("force_watch" in h for h in _holds(r))
@@ -67,30 +69,36 @@ def test_start_ramp_share_is_a_cosine_from_0_to_1():
 
 
 @pytest.mark.parametrize("compiled", [False, True])
-def test_cfc_set_point_rises_from_the_measured_forces(robot, compiled, monkeypatch):
-    """K_p = 0 (no PI output): f_c,out is the set-point itself, f_0 + s (f_d - f_0) over the ramp,
+def test_cfc_set_point_rises_from_the_measured_forces_at_the_force_range_rate(robot, compiled, monkeypatch):
+    """K_p = 0 (no PI output): f_c,out is the set-point itself, rising from the measured f_0 by at
+    most (f_max - f_min) dt / START_FORCE_RANGE_TIME per period until it has caught up with f_d,
     then f_d; the same through the stage's period law (compiled where the kernels are) as through
     the controller's update."""
     if not compiled:
         monkeypatch.setattr(kernels, "ENABLED", False)
-    dt, n = 0.001, 20
-    stage = CableForceControl(robot, dt, CFCParams(K_p=0.0), start_ramp=n * dt)
+    dt = 0.001
+    stage = CableForceControl(robot, dt, CFCParams(K_p=0.0), start_ramp=True)
     theta = kernels.cable_lengths(robot, robot.home)
-    f_0 = np.linspace(10.0, 20.0, robot.m)
-    f_d = np.linspace(25.0, 15.0, robot.m)
     c = robot.cable
-    outputs = []
-    for _ in range(n + 3):
+    step = (c.f_max - c.f_min) * dt / START_FORCE_RANGE_TIME
+    f_0 = np.linspace(10.0, 20.0, robot.m)
+    f_d = f_0 + np.linspace(-20.0, 20.0, robot.m) * step        # cable k catches up after |k - 3.5| * ... periods
+    f_ref, outputs, expected = f_0.copy(), [], []
+    for _ in range(25):
         stage.update(f_d, f_0, theta, c.f_min, c.f_max)
         outputs.append(stage.controller.f_out.copy())
-    shares = [0.5 - 0.5 * np.cos(np.pi * k / n) for k in range(1, n)] + [1.0] * 4
-    np.testing.assert_allclose(outputs, [f_0 + s * (f_d - f_0) for s in shares], atol=1e-12)
+        lag = f_d - f_ref
+        f_ref = f_d.copy() if np.all(np.abs(lag) <= step) else f_ref + np.clip(lag, -step, step)
+        expected.append(f_ref.copy())
+    np.testing.assert_allclose(outputs, expected, atol=1e-12)
+    np.testing.assert_allclose(outputs[-1], f_d, atol=1e-12)
+    assert np.all(np.abs(np.diff(np.array([f_0] + outputs), axis=0)) <= step + 1e-12)
 
 
 def test_cfc_ramps_only_at_its_first_reset(robot):
     """A later reset (a new home calibration, as ControlLoop.set_home_calibration makes one) restarts
     no ramp: the set-point is f_d at once."""
-    stage = CableForceControl(robot, 0.001, CFCParams(K_p=0.0), start_ramp=0.1)
+    stage = CableForceControl(robot, 0.001, CFCParams(K_p=0.0), start_ramp=True)
     theta = kernels.cable_lengths(robot, robot.home)
     f_0, f_d = np.full(robot.m, 10.0), np.full(robot.m, 20.0)
     c = robot.cable

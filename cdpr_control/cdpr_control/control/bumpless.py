@@ -11,12 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 # s: the start ramp's length. The drives take the controllers' command over from the lengths the
-# plant holds at power-on in this time (the joint command), and the cable force controller's
-# set-point rises from the forces measured then (so its integrator does not wind up while the
-# drives have not followed yet). Long against the feedback filter (T_1,r 80 ms, table 3.1) and the
-# platforms' lowest eigenfrequencies (2-5 Hz on the IPAnema 3), short against what a program waits
-# for at start (the G-code interpreter's first move, the validation's settle time of 1 s).
+# plant holds at power-on in this time (the joint command ramps out the first period's gap, the model's
+# error there). Long against the feedback filter (T_1,r 80 ms, table 3.1) and the platforms' lowest
+# eigenfrequencies (2-5 Hz on the IPAnema 3), short against what a program waits for at start.
 START_RAMP = 0.5
+# s: the cable force controller's set-point rises from the forces measured at power-on to f_d at most
+# at the cable's force range (f_max - f_min) in this time: a few periods at home (the Mini: 2.5 N in
+# 0.07 s), half a second where the plant's power-on tension is far from f_d (a Mini border pose: 15 N).
+START_FORCE_RANGE_TIME = 1.0
 
 
 class Blend:

@@ -112,7 +112,7 @@ class ControlLoop:
         # the loop runs the CFC in every mode (its filter and calibration stay current) and blends
         # its output; the stage's own on/off is for the node, which has no blend
         self.cfc = CableForceControl(robot, dt, p.cfc, enabled=True, calibration_window=p.calibration_window,
-                                     start_ramp=START_RAMP)
+                                     start_ramp=True)
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.watch = ForceWatch(p.safety, dt)     # the latched hold (tripped: the loop has failed)

@@ -32,7 +32,6 @@ from cdpr_msgs.msg import CableForces, ControllerState, ForceDistribution, Opera
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
-from cdpr_control.control.bumpless import START_RAMP
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.control.hybrid_force_control import ContactCableForceControl, HPFCParams, parse_state
 from cdpr_control.control.safety import all_finite
@@ -124,7 +123,7 @@ class CableForceControllerNode(CdprNode):
     def _apply(self, v: dict) -> None:
         if self.stage is None:
             self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"],
-                                           start_ramp=START_RAMP)
+                                           start_ramp=True)
         else:
             self.stage.set_params(self._cfc_params(v), enabled=v["enabled"])
         if self.contact is None:
