@@ -89,3 +89,49 @@ def test_safety_monitor_reports_each_fault():
     assert not any(f.holds for f in faults if f.code == FORCE_LIMIT)   # report-only by default
     nan = mon.check(0.0, f=np.array([np.nan, 1.0, 1.0]), f_min=f_min, f_max=f_max)
     assert nan[0].code == NON_FINITE and nan[0].holds
+
+
+def test_start_ramp_follows_a_cosine_from_the_measured_lengths(robot):
+    """reset(θ_0, ramp_time): θ_d = θ_0 + s (target - θ_0), s = (1 - cos(π k / n)) / 2, then the target."""
+    dt, ramp = 0.001, 0.05
+    jc = JointCommand(robot, dt=dt, v_max=1e9)
+    target = inverse_kinematics(robot, robot.home).q
+    theta_0 = target + np.linspace(-2e-3, 2e-3, robot.m)     # the plant's lengths at power-on
+    jc.reset(theta_0, ramp)
+    n = int(round(ramp / dt))
+    for k in range(1, n):
+        assert jc.starting
+        s = 0.5 - 0.5 * np.cos(np.pi * k / n)
+        np.testing.assert_allclose(jc.update(robot.home), theta_0 + s * (target - theta_0), atol=1e-14)
+    np.testing.assert_allclose(jc.update(robot.home), target, atol=1e-14)
+    assert not jc.starting
+
+
+def test_start_ramp_steps_are_smooth_and_rate_limited(robot):
+    """No period of the ramp moves a cable by more than the ramp's peak slope, π/2 |gap| / n, nor
+    by more than v_max dt; without a ramp the same gap is closed in one period."""
+    dt, ramp = 0.001, 0.5
+    target = inverse_kinematics(robot, robot.home).q
+    gap = np.linspace(-1e-3, 1e-3, robot.m)
+    jc = JointCommand(robot, dt=dt)
+    jc.reset(target + gap, ramp)
+    theta = [target + gap] + [jc.update(robot.home) for _ in range(int(ramp / dt) + 5)]
+    steps = np.abs(np.diff(np.array(theta), axis=0))
+    assert steps.max() <= np.pi / 2 * np.abs(gap).max() / (ramp / dt) * (1 + 1e-9)
+    assert steps.max() <= robot.drive.v_max * dt + 1e-15
+    np.testing.assert_allclose(theta[-1], target, atol=1e-14)
+    unramped = JointCommand(robot, dt=dt, v_max=1e9)
+    unramped.reset(target + gap)
+    np.testing.assert_allclose(unramped.update(robot.home), target, atol=1e-14)
+
+
+def test_hold_during_the_start_ramp_brakes_and_bad_ramp_is_refused(robot):
+    jc = JointCommand(robot, dt=0.001)
+    q0 = inverse_kinematics(robot, robot.home).q
+    jc.reset(q0 + 1e-3, 0.2)
+    jc.update(robot.home)
+    held = jc.update(robot.home, hold=True)
+    assert jc.held and np.all(np.isfinite(held))
+    for bad in (-0.1, np.nan, np.inf):
+        with pytest.raises(ValueError, match="ramp_time"):
+            jc.reset(q0, bad)

@@ -22,6 +22,7 @@ import numpy as np
 from cdpr_control.model import cable
 from cdpr_control import kernels
 from cdpr_control.model.calibration import DEFAULT_WINDOW, StartupCalibration
+from cdpr_control.control.bumpless import START_FORCE_RANGE_TIME
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.pi_control import PIController, pi_update
 from cdpr_control.kernels import cfc_constants
@@ -106,6 +107,7 @@ class CableForceController:
         self.feedback_filter = LowPass(params.T_filter, dt)      # (3.20)
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
+        self._f_ref: np.ndarray | None = None    # the start ramp's set-point, None once it has caught up
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -115,11 +117,32 @@ class CableForceController:
         self.pi.set_limits(params.F_sat_n, params.F_sat_p)
         self.feedback_filter.set_time_constant(params.T_filter)
 
-    def reset(self, dq_0, f=None) -> None:
-        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration."""
+    def reset(self, dq_0, f=None, ramp: bool = False) -> None:
+        """Start (or restart) with the pre-tension elongation Δq_0 [m] of the encoder calibration.
+
+        ``ramp`` with the measured forces f: the start ramp (docs/control.md). The set-point f_d (and
+        f_ff) rises from f to the one given at most at (f_max - f_min) per
+        :data:`cdpr_control.control.bumpless.START_FORCE_RANGE_TIME` per cable, until it has caught up:
+        with the full f_d from the first period the integrator wound up while the drives had not yet
+        followed, and the forces overshot by 8 N at a Mini border pose (f_d 39 N, f_max 40 N)."""
         self.dq_0 = np.asarray(dq_0, dtype=float).copy()
         self.pi.reset()
         self.feedback_filter.reset(f)
+        self._f_ref = np.asarray(f, dtype=float).copy() if ramp and f is not None else None
+
+    def _set_point(self, f_d, f_ff, f_min, f_max):
+        """(f_d, f_ff) of this period: during the start ramp the rate-limited set-point, f_ff shifted
+        by the same lag."""
+        f_ref = self._f_ref
+        if f_ref is None:
+            return f_d, f_ff
+        step = (np.asarray(f_max, dtype=float) - f_min) * (self.dt / START_FORCE_RANGE_TIME)
+        lag = f_d - f_ref
+        if np.all(np.abs(lag) <= step):
+            self._f_ref = None                   # caught up: f_d from now on
+            return f_d, f_ff
+        self._f_ref = f_ref = f_ref + np.clip(lag, -step, step)
+        return f_ref, None if f_ff is None else f_ff - (f_d - f_ref)
 
     @property
     def f_filtered(self) -> np.ndarray | None:
@@ -138,6 +161,7 @@ class CableForceController:
         """
         if self.dq_0 is None:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
+        f_d, f_ff = self._set_point(f_d, f_ff, f_min, f_max)
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
         sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
@@ -162,6 +186,7 @@ class CableForceController:
         where the kernels are), once the feedback filter has its first sample and while the PI
         integrates (not held); ``constants`` (:meth:`constants`) instead of K_l."""
         pi = self.pi
+        f_d, f_ff = self._set_point(f_d, f_ff, f_min, f_max)
         pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = cfc_period(
             f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
             pi.integrator, pi.K_p, pi.T_i, constants)
@@ -181,8 +206,9 @@ class CableForceControl:
     """
 
     def __init__(self, robot, dt: float, params: CFCParams | None = None, enabled: bool = True,
-                 calibration_window: int = DEFAULT_WINDOW):
+                 calibration_window: int = DEFAULT_WINDOW, start_ramp: bool = False):
         self.robot = robot
+        self.start_ramp = start_ramp      # the set-point's start ramp (CableForceController.reset)
         self.controller = CableForceController(robot.m, params or CFCParams(), dt)
         self._constants = self.controller.constants(robot.cable)     # of the period: set with the parameters
         self.enabled = enabled
@@ -223,8 +249,8 @@ class CableForceControl:
         l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
         c = self.controller
         if self.calibration.update(f, theta) or c.dq_0 is None:
-            if c.dq_0 is None:
-                c.reset(self._calibrated_dq_0(), f=f)
+            if c.dq_0 is None:                    # the start ramp once, at the first reset
+                c.reset(self._calibrated_dq_0(), f=f, ramp=self.start_ramp and c.feedback_filter.y is None)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
         if c.feedback_filter.y is not None and not c.pi.hold:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_control import kernels
+from cdpr_control.control.bumpless import StartRamp
 from cdpr_control.control.safety import all_finite
 from cdpr_control.model.cable import total_free_length
 from cdpr_control.control.filters import LowPass
@@ -55,15 +56,49 @@ class JointCommand:
         self.held = False
         self.dq_hold = np.zeros(robot.m)       # the force-watch hold's tension correction [m]
         self._hold_filter = LowPass(T_HOLD_FILTER, dt)
+        self._start: np.ndarray | None = None  # θ at power-on while the start ramp runs
+        self._gap: np.ndarray | None = None    # θ_0 minus the first target, ramped out
+        self._ramp = StartRamp(0.0, dt)
         kernels.warm_up(robot)               # the compiled IK and period loaded now, not in the first period
 
-    def reset(self, theta) -> None:
-        """Start from the measured cable lengths θ, so that enabling the command does not jump."""
+    def reset(self, theta, ramp_time: float = 0.0) -> None:
+        """Start from the measured cable lengths θ, so that enabling the command does not jump.
+
+        ``ramp_time`` [s]: the start ramp (0: none; the loop and the node give
+        :data:`cdpr_control.control.bumpless.START_RAMP`, which the cable force controller's set-point
+        ramp uses too). At power-on the plant holds the tension it was left with,
+        which differs from what the controllers command by the model's errors (at a border pose of
+        the Mini's default plant a cable 20 N from its set-point); rate-limited alone, the command
+        closes that gap in a few periods, a force step that overshoots beyond f_max or slackens a
+        cable. Over the ramp θ_d = target + (1 - s) (θ_0 - target_0), s rising as a cosine from 0 to
+        1 and target_0 the first period's target, so the drives take the controllers' command over
+        smoothly."""
         theta = np.asarray(theta, dtype=float)
         if theta.shape != (self.robot.m,) or not np.all(np.isfinite(theta)):
             raise ValueError(f"reset needs {self.robot.m} finite cable lengths, got {theta}")
+        if not (np.isfinite(ramp_time) and ramp_time >= 0.0):
+            raise ValueError(f"ramp_time must be a finite duration >= 0 s, got {ramp_time}")
         self.theta_d = theta.copy()
         self.velocity = np.zeros(self.robot.m)
+        self._ramp = StartRamp(ramp_time, self.dt)
+        self._start = theta.copy() if self._ramp.running else None
+        self._gap = None
+
+    @property
+    def starting(self) -> bool:
+        """The start ramp of :meth:`reset` is still running."""
+        return self._start is not None
+
+    def _ramped(self, target: np.ndarray) -> np.ndarray:
+        """The start ramp's θ_d this period: the target plus what is left of the first period's gap
+        θ_0 - target (see :meth:`reset`). Only the gap is ramped, so what the controllers change
+        during the ramp (the cable force controller's own ramped set-point) passes at once."""
+        if self._gap is None:
+            self._gap = self._start - target
+        theta = target + (1.0 - self._ramp.share()) * self._gap
+        if not self._ramp.running:
+            self._start = self._gap = None
+        return theta
 
     def target(self, x_d, offsets=(), dq_cfc=None) -> np.ndarray:
         """θ_d before rate limiting: IK of the offset set-point minus Δq_CFC (5.10)."""
@@ -92,6 +127,8 @@ class JointCommand:
         if self._hold_filter.y is not None:    # (released: the next hold starts afresh)
             self.dq_hold = np.zeros(self.robot.m)
             self._hold_filter.reset()
+        if self._start is not None and not hold:
+            return self._starting_period(x_d, offsets, dq_cfc)
         if not hold and len(offsets) == 1 and dq_cfc is not None:
             period = joint_command_period(self.robot, x_d, offsets[0], dq_cfc, self.theta_d, float(self.v_max * self.dt),
                                           float(self.dt))
@@ -103,6 +140,19 @@ class JointCommand:
         self.held = delta is None
         if self.held:
             delta = self.brake() * self.dt
+        self.velocity = delta / self.dt
+        self.theta_d = self.theta_d + delta
+        return self.theta_d.copy()
+
+    def _starting_period(self, x_d, offsets, dq_cfc) -> np.ndarray:
+        """A period of the start ramp: θ_d towards the ramped target, rate-limited; braking if the
+        target is not finite."""
+        target = self.target(x_d, offsets, dq_cfc)
+        if not all_finite(target.tolist()):
+            return self.update(None, hold=True)
+        step = self.v_max * self.dt
+        delta = np.minimum(np.maximum(self._ramped(target) - self.theta_d, -step), step)
+        self.held = False
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cdpr_control import kernels
-from cdpr_control.control.bumpless import Blend
+from cdpr_control.control.bumpless import START_RAMP, Blend
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.model.calibration import DEFAULT_WINDOW
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
@@ -111,7 +111,8 @@ class ControlLoop:
         self.force = ForceSetpoint(robot, dt, p.force)
         # the loop runs the CFC in every mode (its filter and calibration stay current) and blends
         # its output; the stage's own on/off is for the node, which has no blend
-        self.cfc = CableForceControl(robot, dt, p.cfc, enabled=True, calibration_window=p.calibration_window)
+        self.cfc = CableForceControl(robot, dt, p.cfc, enabled=True, calibration_window=p.calibration_window,
+                                     start_ramp=True)
         self.ospc = OperationalSpacePositionController(p.ospc, dt)
         self.monitor = SafetyMonitor(p.safety)
         self.watch = ForceWatch(p.safety, dt)     # the latched hold (tripped: the loop has failed)
@@ -167,7 +168,7 @@ class ControlLoop:
         axes) and the winch measurements."""
         robot = self.robot
         if self.command.theta_d is None:
-            self.command.reset(theta)
+            self.command.reset(theta, START_RAMP)
         ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)

@@ -122,7 +122,8 @@ class CableForceControllerNode(CdprNode):
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"])
+            self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"],
+                                           start_ramp=True)
         else:
             self.stage.set_params(self._cfc_params(v), enabled=v["enabled"])
         if self.contact is None:

@@ -11,7 +11,9 @@ is used while younger than its deadline. For safety it also watches ``winch/stat
 ``winch/command`` (sensor_msgs/JointState, position = θ_d [m]) and ``/diagnostics``.
 
 Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets.<name>.deadline``
-[s], live; ``transfer_time`` [s] ramps every switch on or off (bumpless transfer), Δq_CFC too.
+[s], live; ``transfer_time`` [s] ramps every switch on or off (bumpless transfer), Δq_CFC too. At
+start the first command is the measured θ, and the controllers' command is taken over along a
+cosine over ``START_RAMP`` (:meth:`cdpr_control.control.joint_command.JointCommand.reset`).
 
 ``mode`` switches between the thesis's force control and the IK-only reference control
 (section 2.3.2) at run time; the offsets and Δq_CFC are blended in and out over ``transfer_time``
@@ -42,7 +44,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from cdpr_control.control.bumpless import Blend
+from cdpr_control.control.bumpless import START_RAMP, Blend
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
@@ -206,7 +208,7 @@ class JointCommandNode(CdprNode):
         if theta_msg is None:
             return                                   # no measurement yet: nothing safe to start from
         if self.command.theta_d is None:
-            self.command.reset(np.asarray(theta_msg.position))
+            self.command.reset(np.asarray(theta_msg.position), START_RAMP)
         x_d = self._setpoint_pose(msgs["setpoint"].pose)
         force_control = self.mode == "force_control"
         samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
