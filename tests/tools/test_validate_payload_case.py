@@ -89,3 +89,41 @@ def test_a_held_or_diverged_run_fails_with_its_reason(monkeypatch, hold_at, dive
         assert result.metrics["sag_cut_percent"] == pytest.approx(50.0)
         assert result.metrics["estimate_error_percent"] == pytest.approx(0.0)
         assert result.note == ""
+
+
+def _rest_run(robot, forces, dip=None):
+    """A reference recorder at rest through the unloaded rest with the cable forces ``forces``
+    (m,), and ``dip`` (cable, force) for 60 ms after 0.1 s."""
+    t = np.arange(1, int(cases.PAYLOAD_REST * 1000) + 1) * 1e-3
+    f = np.tile(np.asarray(forces, dtype=float), (len(t), 1))
+    if dip is not None:
+        f[(t > 0.1) & (t <= 0.16), dip[0]] = dip[1]
+    rec = cases.Recorder(robot)
+    rec.rows.update(t=list(t), x=list(np.zeros((len(t), 6))), f=list(f))
+    return rec
+
+
+def test_ik_lc_is_refused_where_ik_only_leaves_a_cable_slack_before_the_payload():
+    """The Mini (f_min 5 N, the watch's edge 3.25 N): tensed cables pass; a 60 ms dip of cable 6 to
+    2 N (the watch would hold ik_lc before the step) or a cable hanging at 0.5 N (slack: below
+    0.2 f_min, no stiffness for (4.6)) refuses ik_lc with the cable named; force_control still runs."""
+    robot = load_robot("ipanema3_mini")
+    assert cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0))) is None
+    assert cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0), dip=(5, 4.0))) is None
+    dipped = cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0), dip=(5, 2.0)))
+    assert "cable(s) 6 (2.0 N)" in dipped and "3.1.2" in dipped
+    hanging = cases.ik_only_slack(robot, _rest_run(robot, np.r_[np.full(7, 8.0), 0.5]))
+    assert "cable(s) 8 (0.5 N)" in hanging
+
+
+def test_payload_case_refuses_only_ik_lc_where_ik_only_leaves_cables_slack(monkeypatch):
+    robot = load_robot("ipanema3_mini")
+    slack = _rest_run(robot, np.r_[np.full(7, 8.0), 0.0])
+    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass: (slack, np.zeros(0), True, None))
+    ran = []
+    monkeypatch.setattr(cases, "_payload_result", lambda s, *a: ran.append(s.variant["controller"]) or "run")
+    spec = CaseSpec("payload", "ipanema3_mini", 0, list(robot.home), False, "nominal", 0, {"fraction": 0.5})
+    out = cases.payload_case(spec)
+    assert ran == ["force_control"] and out[0] == "run"
+    assert out[1].status == "refused" and out[1].spec.variant["controller"] == "ik_lc"
+    assert "cable(s) 8 (0.0 N)" in out[1].note

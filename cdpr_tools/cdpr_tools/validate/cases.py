@@ -475,7 +475,40 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     reference, _, ok_ref, _ = _payload_run(spec, robot, REFERENCE, mass)       # (its force watch off)
     sag_reference = 1e3 * _sag(reference) if ok_ref else float("nan")
     note_ref = "" if ok_ref else f"the IK-only reference diverged at {reference.diverged_at:.3f} s"
-    return [_payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
+    unheld = ik_only_slack(robot, reference)
+    return [CaseResult(s, dict(base), {}, "refused", unheld) if unheld and s.variant["controller"] == "ik_lc"
+            else _payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
+
+
+def ik_only_slack(robot, reference: Recorder) -> str | None:
+    """Why IK-only control does not hold the empty platform at this pose with its cables tensed
+    (None where it does), from the reference run's rest before the payload: a cable below the force
+    watch's lower edge (f_min less its band, the watch would hold ik_lc there before any payload),
+    or a window-mean force below the load compensation's slack share of f_min (no stiffness for
+    (4.6)). IK-only commands lengths, not forces: its cables carry what the pre-tension set at home
+    leaves at the pose (thesis 3.1.2, "the cable forces can only be controlled in limited manner by
+    the initial pre-tension of the cables in the home position"), and x_d,LC, a pose offset, cannot
+    tension a slack cable; the thesis evaluates the compensation near home only (4.1.3)."""
+    from cdpr_control.control.load_compensation import LoadCompensationParams
+    from cdpr_tools.identify.load_steps import loop_params
+
+    t, f = reference.array("t"), reference.array("f")
+    if not len(t):
+        return None
+    f_min, f_max = (np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min,
+                                                                                        robot.cable.f_max))
+    rest = t <= PAYLOAD_REST
+    lowest = f[rest].min(axis=0)
+    edge = f_min - loop_params(REFERENCE, robot.file.stem).safety.force_band * (f_max - f_min)
+    window = f[rest & (t > PAYLOAD_REST - SAG_WINDOW)].mean(axis=0)
+    slack = window < LoadCompensationParams().slack_fraction * f_min
+    low = np.flatnonzero((lowest < edge) | slack)
+    if not len(low):
+        return None
+    cables = ", ".join(f"{i + 1} ({lowest[i]:.1f} N)" for i in low)
+    return (f"IK-only control does not hold this pose's cables tensed before any payload: cable(s) {cables} "
+            f"at their lowest in the unloaded rest (force watch edge {edge.min():.1f} N); its forces are the home "
+            "pre-tension's (thesis 3.1.2) and x_d,LC cannot tension a slack cable")
 
 
 def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_reference: float, note_ref: str) -> CaseResult:
