@@ -115,9 +115,13 @@ class NumpyLoadCompensation(LoadCompensation):
             self.guarded = True
             return
         w_z, a = self.wrench_filter.update([w[2], xddots[2]])
+        w_z_base = self.base_filter.update([w_z])[0]
+        self.pose_acceleration = False
         if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
             a_est = self._estimated_acceleration(float(x[2]))
-            a = a if a_est is None else a_est
+            if a_est is not None:
+                w_z, a = w_z_base, a_est
+                self.pose_acceleration = True
         estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
         self.guarded = estimate is None
         if self.guarded:
@@ -143,7 +147,8 @@ class NumpyLoadCompensation(LoadCompensation):
         self.m_c = self.m_hat - self.m_p
         self.periods += 1
         if (self.params.tare_at_start and not self.tared
-                and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
+                and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)
+                and (self.pose_acceleration or x is None or self.params.acceleration_source == "commanded")):
             self.tare()
         self.cog = self._centre_of_gravity()
         finite = all_finite(f)

@@ -9,7 +9,7 @@ from cdpr_control.model.robot import load_robot
 from cdpr_control.model.workspace import feasible_poses
 from cdpr_control.motion.program_check import payload_capacity
 from cdpr_tools.validate import cases
-from cdpr_tools.validate.cases import CaseSpec, planned_capacity
+from cdpr_tools.validate.cases import DYNAMIC_LOAD_FACTOR, CaseSpec, dynamic_capacity, planned_capacity
 from cdpr_tools.validate.grid import planned_f_min
 
 
@@ -23,6 +23,40 @@ def test_planned_capacity_is_the_last_payload_the_shipped_distribution_holds():
     f_min = planned_f_min(robot)
     for mass, held in ((planned, True), (1.01 * planned, False)):
         assert feasible_poses(robot.with_payload(mass), x[None], f_min=f_min)[0] == held
+
+
+@pytest.mark.parametrize("ramp_periods", [0.0, 0.1, 0.3, 0.7, 1.0, 1.5, 3.0])
+def test_a_load_put_down_at_any_speed_peaks_below_the_dynamic_load_factor(ramp_periods):
+    """An undamped mode (omega_n 1) under the sweep's cosine placement over ramp_periods of its
+    period: the peak is at most DYNAMIC_LOAD_FACTOR times the static response, reaches it for a
+    sudden step and falls towards 1 for a slow placement (the bound dynamic_capacity rests on)."""
+    dt, T_n = 1e-3, 2.0 * np.pi
+    t_r = ramp_periods * T_n
+    t = np.arange(0.0, t_r + 3.0 * T_n, dt)
+    load = np.ones_like(t) if t_r == 0.0 else 0.5 * (1.0 - np.cos(np.pi * np.minimum(t / t_r, 1.0)))
+    x, v, peak = 0.0, 0.0, 0.0
+    for F in load:                    # symplectic Euler, x'' = F - x: static response 1
+        v += dt * (F - x)
+        x += dt * v
+        peak = max(peak, x)
+    assert peak <= DYNAMIC_LOAD_FACTOR + 1e-3
+    if ramp_periods == 0.0:
+        assert peak > 0.99 * DYNAMIC_LOAD_FACTOR
+    if ramp_periods >= 1.5:
+        assert peak < 1.1
+
+
+def test_dynamic_capacity_is_the_payload_whose_double_the_distribution_still_holds():
+    """At a border pose of the IPAnema 3 and at the Mini's home: twice the dynamic capacity is the
+    planned static capacity (held with the distribution's f_min), 1 % more is not."""
+    for name, x in (("ipanema3", np.r_[2.283, -3.842, 1.983, 0.0, 0.0, 0.0]), ("ipanema3_mini", None)):
+        robot = load_robot(name)
+        x = robot.home if x is None else x
+        capacity = dynamic_capacity(robot, x)
+        assert capacity == pytest.approx(planned_capacity(robot, x) / 2.0)
+        f_min = planned_f_min(robot)
+        for mass, held in ((DYNAMIC_LOAD_FACTOR * capacity, True), (1.01 * DYNAMIC_LOAD_FACTOR * capacity, False)):
+            assert feasible_poses(robot.with_payload(mass), np.asarray(x)[None], f_min=f_min)[0] == held
 
 
 def _stand_in(robot, hold_at=None, diverged_at=None):
@@ -55,3 +89,41 @@ def test_a_held_or_diverged_run_fails_with_its_reason(monkeypatch, hold_at, dive
         assert result.metrics["sag_cut_percent"] == pytest.approx(50.0)
         assert result.metrics["estimate_error_percent"] == pytest.approx(0.0)
         assert result.note == ""
+
+
+def _rest_run(robot, forces, dip=None):
+    """A reference recorder at rest through the unloaded rest with the cable forces ``forces``
+    (m,), and ``dip`` (cable, force) for 60 ms after 0.1 s."""
+    t = np.arange(1, int(cases.PAYLOAD_REST * 1000) + 1) * 1e-3
+    f = np.tile(np.asarray(forces, dtype=float), (len(t), 1))
+    if dip is not None:
+        f[(t > 0.1) & (t <= 0.16), dip[0]] = dip[1]
+    rec = cases.Recorder(robot)
+    rec.rows.update(t=list(t), x=list(np.zeros((len(t), 6))), f=list(f))
+    return rec
+
+
+def test_ik_lc_is_refused_where_ik_only_leaves_a_cable_slack_before_the_payload():
+    """The Mini (f_min 5 N, the watch's edge 3.25 N): tensed cables pass; a 60 ms dip of cable 6 to
+    2 N (the watch would hold ik_lc before the step) or a cable hanging at 0.5 N (slack: below
+    0.2 f_min, no stiffness for (4.6)) refuses ik_lc with the cable named; force_control still runs."""
+    robot = load_robot("ipanema3_mini")
+    assert cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0))) is None
+    assert cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0), dip=(5, 4.0))) is None
+    dipped = cases.ik_only_slack(robot, _rest_run(robot, np.full(8, 8.0), dip=(5, 2.0)))
+    assert "cable(s) 6 (2.0 N)" in dipped and "3.1.2" in dipped
+    hanging = cases.ik_only_slack(robot, _rest_run(robot, np.r_[np.full(7, 8.0), 0.5]))
+    assert "cable(s) 8 (0.5 N)" in hanging
+
+
+def test_payload_case_refuses_only_ik_lc_where_ik_only_leaves_cables_slack(monkeypatch):
+    robot = load_robot("ipanema3_mini")
+    slack = _rest_run(robot, np.r_[np.full(7, 8.0), 0.0])
+    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass: (slack, np.zeros(0), True, None))
+    ran = []
+    monkeypatch.setattr(cases, "_payload_result", lambda s, *a: ran.append(s.variant["controller"]) or "run")
+    spec = CaseSpec("payload", "ipanema3_mini", 0, list(robot.home), False, "nominal", 0, {"fraction": 0.5})
+    out = cases.payload_case(spec)
+    assert ran == ["force_control"] and out[0] == "run"
+    assert out[1].status == "refused" and out[1].spec.variant["controller"] == "ik_lc"
+    assert "cable(s) 8 (0.0 N)" in out[1].note

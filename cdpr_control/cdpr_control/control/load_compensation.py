@@ -53,7 +53,12 @@ from cdpr_control.model.stiffness import operational_stiffness
 STIFFNESS_MODELS = ("linear", "nonlinear")
 OFFSET_MODELS = ("secant", "tangent")
 ACCELERATION_SOURCES = ("commanded", "estimated")
-VELOCITY_BASE = 0.01     # s, difference quotient of the estimated velocity (smooths sensor noise)
+# s, h: the estimated velocity's difference quotient. The window-mean acceleration it gives,
+# ((z(t) - z(t - h)) - (z(t - T) - z(t - T - h))) / (h T), is the mean over h of the window means of
+# the acceleration, so w_z gets the same mean over h (LoadCompensation.base_filter): the ratio (4.4)
+# stays exact for a platform swinging at any frequency, and the forward kinematics' noise, which the
+# quotient divides by h T, counts 20 times less than with 10 ms (measured: docs/load_compensation.md)
+VELOCITY_BASE = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -359,7 +364,7 @@ class LoadCompensationParams:
     cog_min_mass: float = 5.0       # kg, the payload's cog is identified (and published) above this m_c
     T_output: float = 1.0           # s, PT1 on C_x w_c: keeps the compensation loop below the platform modes
     v_max: float = 0.02             # m/s, rate limit of the translation of x_d,LC
-    tare_at_start: bool = False     # tare the estimate once its first window is full (start at a known payload)
+    tare_at_start: bool = False     # tare the estimate once (4.4) is in its final form (start at a known payload)
     tare_payload: float = 0.0       # kg, the payload known to be on the platform at a tare
     omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
     settlement_ratio: float = 0.0   # -, cable settlement model (SettlementModel, identified); 0: off
@@ -407,6 +412,8 @@ class LoadCompensation:
         self.delay_index = 0
         self.z_history: list[float] = []                       # estimated z of the last window + h
         self._velocity_base = max(int(round(VELOCITY_BASE / dt)), 1)   # h, periods
+        self.base_filter = MovingAverage(self._velocity_base * dt, dt)   # w_z's window means over h
+        self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
         self.m_c = 0.0
         self.guarded = True
@@ -482,7 +489,8 @@ class LoadCompensation:
 
     def _estimated_acceleration(self, z: float) -> float | None:
         """Mean vertical acceleration of the estimated pose over the window, (v(t) - v(t - T)) / T
-        with v a difference quotient over VELOCITY_BASE; None until the history is long enough."""
+        with v a difference quotient over VELOCITY_BASE h: the mean over h of the window means of
+        the acceleration (see VELOCITY_BASE); None until the history is long enough."""
         n, h = self.wrench_filter.n, self._velocity_base
         self.z_history.append(z)
         del self.z_history[:-(n + h + 1)]
@@ -506,9 +514,13 @@ class LoadCompensation:
             self.guarded = True
             return                                                           # hold the estimate
         w_z, a = self.wrench_filter.push([w_floats[2], shifted[14]])        # means over the window (ẍ_z)
+        w_z_base = self.base_filter.push([w_z])[0]                          # and over h (VELOCITY_BASE)
+        self.pose_acceleration = False
         if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
             a_est = self._estimated_acceleration(float(x[2]))
-            a = a if a_est is None else a_est          # commanded until the history spans a window
+            if a_est is not None:                      # commanded until the history spans a window and h
+                w_z, a = w_z_base, a_est               # both averaged alike: (4.4) exact for any motion
+                self.pose_acceleration = True
         estimate = mass_estimate(w_z, a, float(self.robot.gravity[2]), self.params.accel_guard)
         self.guarded = estimate is None
         if self.guarded:
@@ -552,8 +564,12 @@ class LoadCompensation:
         self.identify(x_d, xdot_d, xddot_d, f, AT, x)
         self.m_c = self.m_hat - self.m_p
         self.periods += 1
+        # tared once (4.4) is in its final form: the window full and, with the estimated pose's
+        # acceleration, its history of a window and h (a tare of the commanded form before would
+        # leave the difference of the two as an offset)
         if (self.params.tare_at_start and not self.tared
-                and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)):
+                and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)
+                and (self.pose_acceleration or x is None or self.params.acceleration_source == "commanded")):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
         f_floats = f.ravel().tolist()

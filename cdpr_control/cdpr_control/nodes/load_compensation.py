@@ -54,8 +54,8 @@ PARAMS = [
               "the tangent of the non-linear cable (2.16)-(2.17)", choices=STIFFNESS_MODELS),
     ParamSpec("slack_fraction", D.slack_fraction, "measured cable forces below this share of f_min count as "
               "(partly) slack", range=(0.0, 1.0)),
-    ParamSpec("tare_at_start", D.tare_at_start, "tare the estimate once its first window is full (start at a "
-              "known payload, tare_payload)"),
+    ParamSpec("tare_at_start", D.tare_at_start, "tare the estimate once (4.4) is in its final form (its window "
+              "and, with the estimated acceleration, the velocity base full; start at a known payload, tare_payload)"),
     ParamSpec("tare_payload", D.tare_payload, "the payload on the platform at a tare (~/tare, tare_at_start) [kg]",
               range=(0.0, 1e4)),
     ParamSpec("platform_mass", D.platform_mass, "the platform's own mass m_p [kg]; 0 = the robot file's",
