@@ -34,12 +34,13 @@ def test_recorded_bag_has_the_graph_topics(friction_bag):
     assert np.allclose(t_s[1:] - t_c, 1e-3)
 
 
-def test_friction_fit_meets_tolerance_and_writes_parameter_file(friction_bag, tmp_path, capsys):
+def test_friction_fit_meets_tolerance_and_writes_parameter_file(identified_friction):
+    # `cdpr identify friction BAG -o friction.yaml --plot fit.png`, run once (conftest.py)
     robot = load_robot("ipanema3_mini")
-    params, png = tmp_path / "friction.yaml", tmp_path / "fit.png"
-    assert cli.main(["identify", "friction", str(friction_bag), "-o", str(params), "--plot", str(png)]) == 0
-    assert capsys.readouterr().out.count("cable ") >= robot.m          # a progress line per cable
-    assert png.stat().st_size > 10_000
+    params = identified_friction.params
+    assert identified_friction.code == 0
+    assert identified_friction.out.count("cable ") >= robot.m          # a progress line per cable
+    assert identified_friction.plot.stat().st_size > 10_000
     doc = yaml.safe_load(params.read_text())
     p = doc["friction_compensation"]["ros__parameters"]
     assert set(p) == {"mu", "sigma", "F_pv"}
