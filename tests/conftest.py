@@ -47,6 +47,24 @@ def friction_bag(tmp_path_factory):
         amplitudes=(0.0005, 0.002, 0.005), pause=0.05, fast_amplitude=0.01, fast_velocities=(0.2, 0.4))
 
 
+@pytest.fixture(scope="session")
+def identified_friction(friction_bag, tmp_path_factory):
+    """``cdpr identify friction BAG -o friction.yaml --plot fit.png`` on the session's friction run,
+    run once (the fit of 8 cables takes about 10 s): tests/tools/test_identify.py asserts on its
+    exit status, output and files, tests/model/test_friction_hysteresis.py loads its parameter file."""
+    import contextlib
+    import io
+    from types import SimpleNamespace
+
+    from cdpr_tools import cli
+
+    directory = tmp_path_factory.mktemp("identified_friction")
+    params, plot, out = directory / "friction.yaml", directory / "fit.png", io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = cli.main(["identify", "friction", str(friction_bag), "-o", str(params), "--plot", str(plot)])
+    return SimpleNamespace(code=code, out=out.getvalue(), params=params, plot=plot)
+
+
 @pytest.fixture(scope="module", params=("ipanema3_mini", "ipanema3"))
 def robot(request):
     """Each shipped robot (thesis tables 2.1-2.4) with the compiled kernels loaded for it, for the

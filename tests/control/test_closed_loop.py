@@ -46,9 +46,12 @@ def _move(x_a, x_b, T):
     return source
 
 
+# The Mini at home without a payload is not among them: that is test_holds_home_stably_within_force_limits
+# [force_control-ipanema3_mini] (the same loop on the default plant, within 0.1 mm); on the nominal plant
+# it is the model itself (0.0004 mm after 6 s), and no cable carries more than at power-on, so the
+# plant's settlement has nothing to add.
 CASES = [
-    ("ipanema3_mini", [0.0, 0.0, 0.0], 0.0), ("ipanema3_mini", [0.1, 0.05, 0.05], 0.5),
-    ("ipanema3_mini", [-0.1, -0.05, -0.05], 0.5),
+    ("ipanema3_mini", [0.1, 0.05, 0.05], 0.5), ("ipanema3_mini", [-0.1, -0.05, -0.05], 0.5),
     ("ipanema3", [0.0, 0.0, 0.0], 40.0), ("ipanema3", [1.0, 1.0, 0.5], 0.0), ("ipanema3", [-1.0, 0.5, -0.2], 40.0),
 ]
 

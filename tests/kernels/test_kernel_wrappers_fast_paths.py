@@ -94,11 +94,12 @@ def test_friction_step_loop_equals_the_compiled_reference_bit_for_bit():
     """kernels.friction.platform_force_kernel against friction.platform_force_step compiled by numba
     (what the wrapper ran before): the same forces and Dahl state, bit for bit, over a random walk
     with standstill, direction changes, speeds at v_eps, signed zeros and a NaN."""
-    import numba
-
+    from cdpr_control.kernels.jit import njit
     from cdpr_control.model import friction as np_friction
 
-    reference = numba.njit(np_friction.platform_force_step)
+    # numba.njit with the project's disk cache (the simulator compiles the same function so): loaded,
+    # not compiled again in every run (the compile was most of this test's time)
+    reference = njit(np_friction.platform_force_step)
     rng = np.random.default_rng(7)
     m = 8
     alpha_t, gamma_t = rng.uniform(0.8, 1.3, (3, m)), rng.uniform(-5.0, 5.0, (3, m))

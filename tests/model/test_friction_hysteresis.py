@@ -23,7 +23,6 @@ from cdpr_control.model.friction import winch_force_from_sensor
 from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.model.robot import load_robot
-from cdpr_tools import cli
 
 ROBOT = "ipanema3_mini"
 DT = 1e-3
@@ -65,11 +64,11 @@ def simulate_crossing(robot, seed: int = 5) -> dict:
     return rec
 
 
-def identified_parameters(bag, tmp_path) -> FrictionCompensationParams:
-    """`cdpr identify friction -o` on the identification run, and the file read as the node does."""
-    params_file = tmp_path / "friction.yaml"
-    assert cli.main(["identify", "friction", str(bag), "-o", str(params_file)]) == 0
-    p = yaml.safe_load(params_file.read_text())["friction_compensation"]["ros__parameters"]
+def identified_parameters(identified) -> FrictionCompensationParams:
+    """The file `cdpr identify friction -o` wrote from the identification run (conftest.py's
+    ``identified_friction``, shared with tests/tools/test_identify.py), read as the node does."""
+    assert identified.code == 0
+    p = yaml.safe_load(identified.params.read_text())["friction_compensation"]["ros__parameters"]
     return FrictionCompensationParams(mu=np.array(p["mu"]), sigma=np.array(p["sigma"]), F_pv=np.array(p["F_pv"]))
 
 
@@ -92,9 +91,9 @@ def hysteresis_width(z, zdot, e, z_home) -> float:
 
 
 @pytest.fixture(scope="module")
-def widths(friction_bag, tmp_path_factory):
+def widths(identified_friction):
     robot = load_robot(ROBOT)
-    params = identified_parameters(friction_bag, tmp_path_factory.mktemp("hysteresis"))
+    params = identified_parameters(identified_friction)
     run = simulate_crossing(robot)
 
     f_w = winch_force_from_sensor(run["F_s"], robot.sensor.beta_1)             # (3.40), no compensation

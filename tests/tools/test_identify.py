@@ -2,6 +2,8 @@
 
 The bags are recorded on the default, mismatched plant (cdpr_sim.plant): the fits must recover
 the plant's parameters, not the robot file's the controller starts from."""
+import dataclasses
+
 import numpy as np
 import pytest
 import yaml
@@ -34,12 +36,13 @@ def test_recorded_bag_has_the_graph_topics(friction_bag):
     assert np.allclose(t_s[1:] - t_c, 1e-3)
 
 
-def test_friction_fit_meets_tolerance_and_writes_parameter_file(friction_bag, tmp_path, capsys):
+def test_friction_fit_meets_tolerance_and_writes_parameter_file(identified_friction):
+    # `cdpr identify friction BAG -o friction.yaml --plot fit.png`, run once (conftest.py)
     robot = load_robot("ipanema3_mini")
-    params, png = tmp_path / "friction.yaml", tmp_path / "fit.png"
-    assert cli.main(["identify", "friction", str(friction_bag), "-o", str(params), "--plot", str(png)]) == 0
-    assert capsys.readouterr().out.count("cable ") >= robot.m          # a progress line per cable
-    assert png.stat().st_size > 10_000
+    params = identified_friction.params
+    assert identified_friction.code == 0
+    assert identified_friction.out.count("cable ") >= robot.m          # a progress line per cable
+    assert identified_friction.plot.stat().st_size > 10_000
     doc = yaml.safe_load(params.read_text())
     p = doc["friction_compensation"]["ros__parameters"]
     assert set(p) == {"mu", "sigma", "F_pv"}
@@ -71,22 +74,28 @@ def _node_parameters(params_file) -> dict:
     return values
 
 
-def test_friction_offset_epsilon_is_identified(friction_bag):
+@pytest.fixture(scope="module")
+def friction_data(friction_bag):
+    """The friction run's samples as the fit reads them (about 2 s), once for the tests below; a test
+    that changes a field does it on its own copy (dataclasses.replace)."""
+    return friction.load_data(BagReader(friction_bag), load_robot("ipanema3_mini"))
+
+
+def test_friction_offset_epsilon_is_identified(friction_data):
     """A calibration offset between sensor and reference shows up as epsilon (3.45), mu unaffected."""
     robot = load_robot("ipanema3_mini")
-    data = friction.load_data(BagReader(friction_bag), robot)
-    plain = friction.fit_cable(robot, data, 4)         # epsilon: the plant's own sensor offset
-    data.f_ref = data.f_ref - 0.3                      # the reference sensor reads 0.3 N low
-    fit = friction.fit_cable(robot, data, 4)
+    plain = friction.fit_cable(robot, friction_data, 4)      # epsilon: the plant's own sensor offset
+    # the reference sensor reads 0.3 N low
+    fit = friction.fit_cable(robot, dataclasses.replace(friction_data, f_ref=friction_data.f_ref - 0.3), 4)
     assert fit.epsilon - plain.epsilon == pytest.approx(-0.3, abs=0.02)
     assert fit.mu == pytest.approx(_plant("ipanema3_mini").friction.mu[4], rel=0.10)
     assert fit.rms_with < 0.5 * fit.rms_without
 
 
-def test_friction_model_without_friction_is_the_sensor_line(friction_bag):
+def test_friction_model_without_friction_is_the_sensor_line(friction_data):
     """mu = F_pv = 0: Psi_PF reduces to f_w = F_s / (1 - cos beta_1) (3.36)-(3.40), for every column."""
     robot = load_robot("ipanema3_mini")
-    data = friction.load_data(BagReader(friction_bag), robot)
+    data = friction_data
     F = friction.model_forces(robot, data, 2, [[0.0, 1000.0, 0.0], [0.0, 500.0, 0.0]])
     expected = data.F_s[:, 2] / (1.0 - np.cos(robot.sensor.beta_1))
     assert np.allclose(F, expected[:, None], rtol=0, atol=1e-9)
