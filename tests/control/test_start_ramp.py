@@ -29,8 +29,8 @@ def robot():
     return load_robot("ipanema3_mini")
 
 
-def _start(robot, mode: str):
-    params = dataclasses.replace(control_loop_params(robot), mode=mode)
+def _start(robot, mode: str, **params):
+    params = dataclasses.replace(control_loop_params(robot), mode=mode, **params)
     return run(robot, hold(X_BORDER), 1.0, params=params, x0=X_BORDER,
                config=SimConfig(plant="mismatched", plant_seed=2))
 
@@ -49,10 +49,9 @@ def test_force_control_starts_at_a_border_pose_within_the_limits(robot):
 
 def test_without_the_ramp_the_same_start_overshoots(robot, monkeypatch):
     """The case the ramp is for: without it (the rate limit alone) the force watch holds."""
-    monkeypatch.setattr(loop, "START_RAMP", 0.0)
     monkeypatch.setattr(loop, "CableForceControl",
                         lambda *args, **kwargs: CableForceControl(*args, **{**kwargs, "start_ramp": False}))
-    r = _start(robot, "force_control")
+    r = _start(robot, "force_control", start_ramp=0.0)
     assert r.f.max() > robot.cable.f_max.max() + TOLERANCE
     assert any("force_watch" in h for h in _holds(r))
 

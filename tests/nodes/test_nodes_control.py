@@ -10,6 +10,7 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from cdpr_control.control.bumpless import START_FORCE_RANGE_TIME  # noqa: E402
 from cdpr_control.model import cable  # noqa: E402
 from cdpr_control.model.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.ros.base import CdprNode  # noqa: E402
@@ -32,6 +33,7 @@ def graph():
                  # already shows the full sum of (5.10) (the ramp is tested in test_offset_inputs.py)
                  JointCommandNode(parameter_overrides=overrides + [
                      Parameter("v_max", value=100.0), Parameter("transfer_time", value=0.0),
+                     Parameter("start_ramp", value=0.0),
                      Parameter("offset_inputs", value=["ospc", "probe_offset"])])]
         return nodes
     with node_graph(make_nodes) as graph:
@@ -77,11 +79,13 @@ def test_one_period_through_cfc_ospc_and_joint_command(graph):
     dq = np.asarray(cfc_states[-1].output)
     np.testing.assert_allclose(theta_d, inverse_kinematics(robot, x_d + ospc + x_probe).q - dq, atol=1e-12)
     assert ospc[2] > 0.0                                        # pushes up against the sag
-    # Δq_CFC (3.23) with Δq_0 = f_0 / K_l from the first measured force; after three periods of a
-    # constant error e = f_d - f: f_c,out = f_d + K_p e + 3 K_p dt / T_i e  (3.19), (3.22)
+    # Δq_CFC (3.23) with Δq_0 = f_0 / K_l from the first measured force; the set-point rises from f
+    # by (f_max - f_min) dt / START_FORCE_RANGE_TIME a period (the start ramp), so after three periods
+    # f_c,out = f_ref,3 + K_p e_3 + K_p dt / T_i (e_1 + e_2 + e_3), e_k = f_ref,k - f  (3.19), (3.22)
     k_l = robot.cable.k_spec_nominal / cable.total_free_length(robot, q)
-    e = f_d - f
-    f_out = f_d + 0.85 * e + 3 * 0.85 * 0.001 / 0.1 * e
+    step = (robot.cable.f_max - robot.cable.f_min) * 0.001 / START_FORCE_RANGE_TIME
+    e = [k * step for k in (1, 2, 3)]
+    f_out = f + e[2] + 0.85 * e[2] + 0.85 * 0.001 / 0.1 * sum(e)
     np.testing.assert_allclose(dq, f_out / k_l - f / k_l, rtol=1e-9)
 
 

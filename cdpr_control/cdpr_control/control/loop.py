@@ -54,6 +54,7 @@ class ControlLoopParams:
     friction: FrictionCompensationParams = field(default_factory=FrictionCompensationParams)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     transfer_time: float = 0.5           # s, blend of the CFC and OSPC outputs on a switch (bumpless)
+    start_ramp: float = START_RAMP       # s, the joint command's start ramp (JointCommand.reset)
     calibration_window: int = DEFAULT_WINDOW   # samples averaged for the start-up Δq_0 (3.9), (3.23)
     hpfc: HPFCParams | None = None       # hybrid position/force control stage (5.1); None: not in the loop
     hpfc_enabled: bool = False           # its `enabled` (M103/M104 switch it in a program)
@@ -168,7 +169,7 @@ class ControlLoop:
         axes) and the winch measurements."""
         robot = self.robot
         if self.command.theta_d is None:
-            self.command.reset(theta, START_RAMP)
+            self.command.reset(theta, self.params.start_ramp)
         ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
         f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
         x, w = self.estimator.update(theta, f, x_d, ik_d)

@@ -39,7 +39,7 @@ STAGES = {
 }
 # node parameters that are loop switches rather than dataclass fields
 SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enabled"): "ospc_enabled",
-            ("joint_command", "mode"): "mode",
+            ("joint_command", "mode"): "mode", ("joint_command", "start_ramp"): "start_ramp",
             # the start-up calibration window of forward_kinematics and cable_force_controller
             ("/**", "calibration_window"): "calibration_window"}
 

@@ -13,7 +13,7 @@ is used while younger than its deadline. For safety it also watches ``winch/stat
 Per offset input ``<name>``: parameters ``offsets.<name>.enabled`` and ``offsets.<name>.deadline``
 [s], live; ``transfer_time`` [s] ramps every switch on or off (bumpless transfer), Δq_CFC too. At
 start the first command is the measured θ, and the controllers' command is taken over along a
-cosine over ``START_RAMP`` (:meth:`cdpr_control.control.joint_command.JointCommand.reset`).
+cosine over ``start_ramp`` [s] (:meth:`cdpr_control.control.joint_command.JointCommand.reset`).
 
 ``mode`` switches between the thesis's force control and the IK-only reference control
 (section 2.3.2) at run time; the offsets and Δq_CFC are blended in and out over ``transfer_time``
@@ -44,7 +44,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from cdpr_control.control.bumpless import START_RAMP, Blend
+from cdpr_control.control.bumpless import Blend
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
@@ -102,6 +102,9 @@ PARAMS = [
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
     ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
               "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
+    ParamSpec("start_ramp", ControlLoopParams.start_ramp, "the drives take the controllers' command over from the "
+              "lengths measured at start in this time: the first command's gap is ramped out along a cosine "
+              "(docs/control.md, \"A start ramp\") [s]", range=(0.0, 10.0), read_only=True),
     ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
               "input are blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
               range=(0.0, 10.0)),
@@ -208,7 +211,7 @@ class JointCommandNode(CdprNode):
         if theta_msg is None:
             return                                   # no measurement yet: nothing safe to start from
         if self.command.theta_d is None:
-            self.command.reset(np.asarray(theta_msg.position), START_RAMP)
+            self.command.reset(np.asarray(theta_msg.position), self.params.values["start_ramp"])
         x_d = self._setpoint_pose(msgs["setpoint"].pose)
         force_control = self.mode == "force_control"
         samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
