@@ -64,6 +64,9 @@ B_MARGIN = 3.0
 # B's top speed keeps the contact force's filter lag at stiffness K_p within this share of F_d
 # (HybridForceControl._brake_speed; ASSUMPTION, docs/hybrid_force_control.md)
 LAG_SHARE = 0.1
+# the stiffness B measures is taken as at least this share of K_p (a force that hardly rises yet
+# would plan a stroke of metres; ASSUMPTION)
+K_MIN = 0.25
 
 
 @dataclass
@@ -245,9 +248,11 @@ class HybridForceControl:
         params.validate()
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
-        # B's stiffness is the force's rise over x_t's across 2 T_F (at least 2 periods): long enough
-        # that the PT1's lag shifts both ends alike, short enough to see the surface met
-        self.brake_track = deque(self.brake_track, maxlen=max(2, int(round(2.0 * params.T_F / self.dt)) + 1))
+        # B's stiffness is the force's rise over x_t's across 2 T_F (at least 2 periods), x_t taken
+        # T_F earlier (the PT1's lag behind x_t): _brake_ahead
+        self.brake_window = max(2, int(round(2.0 * params.T_F / self.dt)))
+        self.brake_delay = int(round(params.T_F / self.dt))
+        self.brake_track = deque(self.brake_track, maxlen=self.brake_window + self.brake_delay + 1)
         self.mass = self.robot.platform.mass + params.payload
         self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
         self._weight = self.weight.tolist()
@@ -277,7 +282,7 @@ class HybridForceControl:
         faster than A, as long as the filtered force lags by at most LAG_SHARE F_d at stiffness
         K_p (T_F K_p v <= LAG_SHARE F_d: the lead of _brake_ahead corrects the lag, not the
         platform's own dynamics at speed), at most v_max, at least the speed of the detection.
-        Kept at the approach's speed the IPAnema 3's floor program settled in 3.6 s instead of 2.8 s;
+        Kept at the approach's speed the IPAnema 3's floor program settled in 3.6 s instead of 2.3 s;
         at v_max, 150 N on the IPAnema 3 overshot by 27 %."""
         p = self.params
         v_lag = LAG_SHARE * F_d / (p.T_F * p.K_p) if p.T_F > 0.0 else p.v_max
@@ -286,18 +291,24 @@ class HybridForceControl:
     def _brake_ahead(self, F_d: float, F: float) -> float:
         """B's stroke left [m] to where the force is expected to reach F_d: (F_d - F_lead) / k.
 
-        k is the stiffness met, the rise of the filtered force over that of x_t across B's last
-        2 T_F (:attr:`brake_track`), or K_p (table 5.1's effective stiffness) where that is higher
-        or not yet measured: a stiffer contact than K_p planned with K_p ran 20-40 % past F_d
-        (issue 25). F_lead = F + T_F k v_t is the force the PT1 of T_F lags behind at the speed
-        v_t (a ramp of slope k v_t through a PT1 lags by T_F k v_t): planned on F alone, B stopped
-        where the filtered force reached F_d, the true one that much beyond.
+        k is the stiffness met: the rise of the filtered force across B's last 2 T_F over that of
+        x_t across the same time T_F earlier (:attr:`brake_track`; the PT1 of T_F follows x_t about
+        T_F late, also while B speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness)
+        until measured. Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer
+        one (the IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
+        F_lead = F + T_F k v_t is the force the PT1 lags behind at the speed v_t (a ramp of slope
+        k v_t through a PT1 lags by T_F k v_t): planned on F alone, B stopped where the filtered
+        force reached F_d, the true one that much beyond.
         """
         p = self.params
-        self.brake_track.append((self.x_t, F))
-        (x_0, F_0), k = self.brake_track[0], p.K_p
-        if len(self.brake_track) == self.brake_track.maxlen and self.x_t - x_0 > 0.0:
-            k = max(k, (F - F_0) / (self.x_t - x_0))
+        track = self.brake_track
+        track.append((self.x_t, F))
+        k = p.K_p
+        if len(track) == track.maxlen:
+            x_1, x_0 = track[-1 - self.brake_delay][0], track[0][0]
+            F_0 = track[self.brake_delay][1]
+            if x_1 - x_0 > 0.0 and F - F_0 > 0.0:
+                k = max(K_MIN * p.K_p, (F - F_0) / (x_1 - x_0))
         return max(0.0, F_d - F - p.T_F * k * self.v_t) / k
 
     def approach_speed(self, F_d: float) -> float:
