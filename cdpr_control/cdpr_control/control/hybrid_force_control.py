@@ -283,7 +283,7 @@ class HybridForceControl:
         K_p (T_F K_p v <= LAG_SHARE F_d: the lead of _brake_ahead corrects the lag, not the
         platform's own dynamics at speed), at most v_max, at least the speed of the detection.
         Kept at the approach's speed the IPAnema 3's floor program settled in 3.6 s instead of 2.3 s;
-        at v_max, 150 N on the IPAnema 3 overshot by 27 %."""
+        at v_max, 150 N on the IPAnema 3 (sweep pose #1) overshot by 27 % (k then at least K_p)."""
         p = self.params
         v_lag = LAG_SHARE * F_d / (p.T_F * p.K_p) if p.T_F > 0.0 else p.v_max
         return max(self.v_t, min(p.v_max, v_lag))
