@@ -38,6 +38,7 @@ Table 5.1's unit of T_d (s^-1) is read as s (a derivative time constant).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +61,12 @@ CFC_PAUSED = (APPROACH, BRAKE, LOST)
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
 B_MARGIN = 3.0
+# B's top speed keeps the contact force's filter lag at stiffness K_p within this share of F_d
+# (HybridForceControl._brake_speed; ASSUMPTION, docs/hybrid_force_control.md)
+LAG_SHARE = 0.1
+# the stiffness B measures is taken as at least this share of K_p (a force that hardly rises yet
+# would plan a stroke of metres; ASSUMPTION)
+K_MIN = 0.25
 
 
 @dataclass
@@ -80,6 +87,8 @@ class HPFCParams:
     tare: bool = True            # zero the contact force at the start of an approach (reading < F_th / 2)
     k_env: float = 0.0           # N/m, the stiffest surface expected; the approach is slowed so that the
                                  # impact of the platform's mass on it stays below F_d (0: v_max always)
+    d_env: float = 0.0           # N s/m, that surface's damping: at the impact it pushes back with d_env v
+                                 # besides the spring's v sqrt(k_env m) (approach_speed)
     T_on: float = 0.0            # s, the joint command's switch-on ramp of this output (its transfer_time):
                                  # x_t leaves 0 in A no earlier than T_on after the output is reported
                                  # active (not in the thesis, docs/hybrid_force_control.md)
@@ -88,7 +97,7 @@ class HPFCParams:
         checks = {"K_p": self.K_p > 0.0, "T_i": self.T_i > 0.0, "T_d": self.T_d >= 0.0, "T_MA": self.T_MA >= 0.0,
                   "F_th": self.F_th > 0.0, "v_max": self.v_max > 0.0, "a_max": self.a_max > 0.0,
                   "x_max": self.x_max > 0.0, "T_F": self.T_F >= 0.0, "payload": self.payload >= 0.0,
-                  "T_on": self.T_on >= 0.0, "k_env": self.k_env >= 0.0}
+                  "T_on": self.T_on >= 0.0, "k_env": self.k_env >= 0.0, "d_env": self.d_env >= 0.0}
         bad = [k for k, ok in checks.items() if not (ok and np.isfinite(getattr(self, k)))]
         if bad:
             raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
@@ -228,6 +237,9 @@ class HybridForceControl:
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
+        self.brake_track: deque = deque()      # (x_t, F) of B's last periods: the stiffness met (_brake_ahead)
+        self.braking = False                   # B has begun to slow down (it does not speed up again)
+        self.brake_speed = 0.0                 # m/s, B's top speed (_brake_speed)
         self.force_filter = LowPass(0.0, dt)
         self.set_params(params or HPFCParams())
 
@@ -236,6 +248,11 @@ class HybridForceControl:
         params.validate()
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
+        # B's stiffness is the force's rise over x_t's across 2 T_F (at least 2 periods), x_t taken
+        # T_F earlier (the PT1's lag behind x_t): _brake_ahead
+        self.brake_window = max(2, int(round(2.0 * params.T_F / self.dt)))
+        self.brake_delay = int(round(params.T_F / self.dt))
+        self.brake_track = deque(self.brake_track, maxlen=self.brake_window + self.brake_delay + 1)
         self.mass = self.robot.platform.mass + params.payload
         self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
         self._weight = self.weight.tolist()
@@ -255,21 +272,57 @@ class HybridForceControl:
 
     def _brake_limit(self, F_d: float, F: float) -> float:
         """The longest B [s] from a contact detected at F [N]: B_MARGIN times the time of B's
-        profile were the effective stiffness K_p (the stroke (F_d - F) / K_p at the speed of the
-        detection, then braking at a_max)."""
+        profile were the effective stiffness K_p (the stroke (F_d - F) / K_p at v_max, which B
+        may regain in contact, then braking at a_max)."""
         p = self.params
-        v = max(self.v_t, V_END * p.v_max)
-        return B_MARGIN * (max(0.0, F_d - F) / p.K_p / v + v / p.a_max)
+        return B_MARGIN * (max(0.0, F_d - F) / p.K_p / p.v_max + p.v_max / p.a_max)
+
+    def _brake_speed(self, F_d: float) -> float:
+        """B's top speed [m/s]: in contact the impact's limit (approach_speed) is past, so B may be
+        faster than A, as long as the filtered force lags by at most LAG_SHARE F_d at stiffness
+        K_p (T_F K_p v <= LAG_SHARE F_d: the lead of _brake_ahead corrects the lag, not the
+        platform's own dynamics at speed), at most v_max, at least the speed of the detection.
+        Kept at the approach's speed the IPAnema 3's floor program settled in 3.6 s instead of 2.3 s;
+        at v_max, 150 N on the IPAnema 3 (sweep pose #1) overshot by 27 % (k then at least K_p)."""
+        p = self.params
+        v_lag = LAG_SHARE * F_d / (p.T_F * p.K_p) if p.T_F > 0.0 else p.v_max
+        return max(self.v_t, min(p.v_max, v_lag))
+
+    def _brake_ahead(self, F_d: float, F: float) -> float:
+        """B's stroke left [m] to where the force is expected to reach F_d: (F_d - F_lead) / k.
+
+        k is the stiffness met: the rise of the filtered force across B's last 2 T_F over that of
+        x_t across the same time T_F earlier (:attr:`brake_track`; the PT1 of T_F follows x_t about
+        T_F late, also while B speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness)
+        until measured. Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer
+        one (the IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
+        F_lead = F + T_F k v_t is the force the PT1 lags behind at the speed v_t (a ramp of slope
+        k v_t through a PT1 lags by T_F k v_t): planned on F alone, B stopped where the filtered
+        force reached F_d, the true one that much beyond.
+        """
+        p = self.params
+        track = self.brake_track
+        track.append((self.x_t, F))
+        k = p.K_p
+        if len(track) == track.maxlen:
+            x_1, x_0 = track[-1 - self.brake_delay][0], track[0][0]
+            F_0 = track[self.brake_delay][1]
+            if x_1 - x_0 > 0.0 and F - F_0 > 0.0:
+                k = max(K_MIN * p.K_p, (F - F_0) / (x_1 - x_0))
+        return max(0.0, F_d - F - p.T_F * k * self.v_t) / k
 
     def approach_speed(self, F_d: float) -> float:
         """The speed of A and C [m/s]: v_max, or less where the platform's mass m (with a known
-        payload) hitting a surface of stiffness k_env at v would press v sqrt(k_env m) > F_d at the
-        impact alone, before any control acts (undamped mass on a spring; not in the thesis, which
-        approaches at v_max,HPFC and names the overshoot its price)."""
+        payload) hitting a surface of stiffness k_env and damping d_env at v could press more than
+        F_d at the impact alone, before any control acts: v (sqrt(k_env m) + d_env) bounds that
+        press (a mass on a spring and damper in parallel: the spring stores at most the kinetic
+        energy, k delta <= v sqrt(k m); the surface is entered at most at v, d delta' <= d v).
+        Not in the thesis, which approaches at v_max,HPFC and names the overshoot its price."""
         p = self.params
-        if p.k_env <= 0.0:
+        impedance = math.sqrt(p.k_env * self.mass) + p.d_env        # N s/m
+        if impedance <= 0.0:
             return p.v_max
-        return min(p.v_max, max(F_d, p.F_th) / math.sqrt(p.k_env * self.mass))
+        return min(p.v_max, max(F_d, p.F_th) / impedance)
 
     def _move(self, v_target: float) -> None:
         """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
@@ -335,16 +388,20 @@ class HybridForceControl:
             if (F_rise if self.v_t > 0.0 else F) >= p.F_th:    # (F_rise once x_t moves: start-up transients)
                 self._enter(BRAKE)
                 self.contact = (self.x_t, F)             # where the contact was detected
+                self.brake_track.clear()
+                self.braking, self.brake_speed = False, self._brake_speed(F_d)
                 self.brake_periods, self.brake_limit = 0, self._brake_limit(F_d, F)
             elif self.active_periods * dt >= p.T_on - 1e-12:
                 self._move(self.approach_speed(F_d))
             # else x_t waits at 0 while the joint command ramps the output in (T_on): a moving x_t
             # times a rising ramp would approach, and press after B, faster than v_max
         if self.state == BRAKE:
-            # to standstill where the force is expected to reach F_d: (F_d - F) / K_p ahead, K_p
-            # being the effective stiffness (table 5.1), braking at a_max at the latest
-            ahead = max(0.0, F_d - F) / p.K_p
-            self._move(min(self.v_t, math.sqrt(2.0 * p.a_max * ahead)))
+            # to standstill where the force is expected to reach F_d, braking at a_max at the latest;
+            # up to the speed of B (_brake_speed) until the braking begins, then never faster again
+            # (the lead T_F k v_t falls with v_t, which would otherwise speed B up again)
+            v_stop = math.sqrt(2.0 * p.a_max * self._brake_ahead(F_d, F))
+            self.braking = self.braking or v_stop < self.v_t
+            self._move(min(self.v_t if self.braking else self.brake_speed, v_stop))
             self.brake_periods += 1
             # standstill, or creeping (v_t < V_END v_max: what is left to go, v^2 / 2 a_max, is below
             # a micrometre), or B has lasted its bound: closed-loop force control. A force that

@@ -64,8 +64,9 @@ PARAMS = [
     ParamSpec("x_max", _D.x_max, "saturation of x_t, farthest approach [m]", range=(1e-5, 1.0)),
     ParamSpec("T_F", _D.T_F, "PT1 time constant on the contact force [s]", range=(0.0, 1.0)),
     ParamSpec("payload", _D.payload, "known payload whose weight is no contact force [kg]", range=(0.0, 1e4)),
-    ParamSpec("k_env", _D.k_env, "stiffest surface expected [N/m]: the approach is slowed to F_d / sqrt(k_env m) "
-              "where that is below v_max (0: v_max always)", range=(0.0, 1e12)),
+    ParamSpec("k_env", _D.k_env, "stiffest surface expected [N/m]: the approach is slowed to F_d / (sqrt(k_env m) "
+              "+ d_env) where that is below v_max (k_env = d_env = 0: v_max always)", range=(0.0, 1e12)),
+    ParamSpec("d_env", _D.d_env, "damping of the stiffest surface expected [N s/m] (see k_env)", range=(0.0, 1e9)),
     ParamSpec("T_on", _D.T_on, "the joint command's switch-on ramp of this output [s] (joint_command's "
               "transfer_time): x_t leaves 0 in A no earlier than T_on after the output is reported active",
               range=(0.0, 10.0)),
