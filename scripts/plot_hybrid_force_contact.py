@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "control"))
 from test_hybrid_force_control import floor_program_run  # noqa: E402
 
 from cdpr_control.control.hybrid_force_control import STATES  # noqa: E402
