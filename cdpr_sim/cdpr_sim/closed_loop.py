@@ -69,7 +69,8 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
     robot is the plant of ``config`` (by default one that differs from the robot file).
     ``setpoints(t)`` returns (x_d, xdot_d, xddot_d), optionally followed by the desired force F_d,0
     (3,) and a list of parameter commands; a set-point source with a ``bind(loop)`` method (one that
-    closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first;
+    closes the loop through a measurement, e.g. :class:`HandGuiding` below) gets the loop first,
+    and one with a ``w_user`` attribute hands the loop the user's wrench of its set-point each period;
     ``offset_stages`` are further offset inputs of the joint command (see
     :class:`cdpr_control.control.loop.ControlLoop`)."""
     x0 = robot.home if x0 is None else np.asarray(x0, dtype=float)
@@ -94,7 +95,7 @@ def run(robot, setpoints: Callable[[float], tuple], duration: float, params: Con
             for command in rest[1] if len(rest) > 1 else ():
                 loop.set_parameter(command.node, command.parameter, command.value)
             state = loop.step(out.t, x_d, xdot_d, xddot_d, out.theta, out.thetadot, out.F_s,
-                              rest[0] if rest else None)
+                              rest[0] if rest else None, getattr(setpoints, "w_user", None))
             out = sim.step(state.theta_d)
             for key, value in (("t", out.t), ("x_d", x_d), ("x", out.x), ("x_est", state.x), ("f", out.f),
                                ("f_d", state.f_d), ("theta_d", state.theta_d), ("status", state.status),
@@ -115,6 +116,10 @@ class HandGuiding:
     As in the node graph, the wrench measured in period k acts on the set-point of period k + 1.
     Starts holding ``x_hold`` (default the robot's home) with the controller enabled or not as it
     is; ``outputs`` records every period's :class:`cdpr_control.control.admittance.AdmittanceOutput`.
+    ``w_user`` is the user's wrench w_Adm of the set-point last returned while the controller is the
+    set-point source (else None), which :func:`run` hands to the loop's force set-point (the hand's
+    reserve): the graph's force distribution node uses the admittance state of t_k in period k + 1,
+    the same value.
     """
 
     def __init__(self, controller, x_hold=None):
@@ -123,6 +128,7 @@ class HandGuiding:
         self.setpoint = (x, np.zeros(6), np.zeros(6))
         self.loop: ControlLoop | None = None
         self.outputs: list = []
+        self.w_user: np.ndarray | None = None
 
     def bind(self, loop: ControlLoop) -> None:
         self.loop = loop
@@ -133,4 +139,5 @@ class HandGuiding:
             out = self.controller.step(state.w, *self.setpoint)
             self.setpoint = (out.x, *out.twist())
             self.outputs.append(out)
+            self.w_user = out.w_user if out.active else None
         return tuple(v.copy() for v in self.setpoint)

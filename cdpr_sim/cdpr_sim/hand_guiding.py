@@ -45,9 +45,9 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
     (:func:`cdpr_control.control.admittance.fitted_settings`; how: ``GuidingRun.clipping``);
     ValueError where not even the virtual wall's reach fits.
 
-    Each period the user's wrench w_Adm of the last one enters the force set-point
-    (:meth:`cdpr_control.control.force_setpoint.ForceSetpoint.set_user_wrench`: the hand's reserve
-    from both force limits, so the cables keep them when the hand lets go; docs/admittance.md)."""
+    Each period the user's wrench w_Adm of the set-point enters the force set-point through the loop
+    (``HandGuiding.w_user``, ``ControlLoop.step``'s ``w_user``: the hand's reserve from both force
+    limits, so the cables keep them when the hand lets go; docs/admittance.md)."""
     robot = load_robot(robot_name)
     shipped = shipped_configuration(robot)
     x_hold = np.array(robot.home if x_hold is None else x_hold, dtype=float)
@@ -60,9 +60,6 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
     def step(k, loop, sim):
         if k == k_enable:
             controller.enable()
-        # the user's wrench of the last period into the force set-point (the hand's reserve)
-        last = source.outputs[-1] if source.outputs else None
-        loop.force.set_user_wrench(last.w_user if last is not None and last.active else None)
         hand.apply(sim)
         if before_step is not None:
             before_step(k, loop, sim)

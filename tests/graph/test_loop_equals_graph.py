@@ -10,7 +10,9 @@ set-point with its force F_d,0 and the winch state θ, θ̇, F_s) and its output
 from the same parameter file (:func:`control_loop_params` with the hybrid force controller's and
 the load compensation's sections), replays those inputs period by period, so neither timing nor
 the program's start enter: every stage's output of every period must equal the graph's topic of
-that period exactly. The graph has no blends of its own (the loop's CFC/OSPC/HPFC blends): they
+that period exactly. The admittance controller's state is an input too (its user wrench w_Adm, the
+force set-point's hand's reserve while guided: tests/graph/test_hand_reserve_graph.py replays a
+guided run with these functions). The graph has no blends of its own (the loop's CFC/OSPC/HPFC blends): they
 stay at weight 1.0, where they multiply exactly.
 
 The replay also compares the intermediate topics (cable forces, pose, wrench, force distribution,
@@ -46,7 +48,7 @@ from cdpr_tools.program_client import run_program  # noqa: E402
 # the case: robot, program name and text, a floor to press on, load compensation on
 FLOOR = SimpleNamespace(robot="ipanema3", name="floor_contact_ipanema3", program=programs.read("floor_contact_ipanema3"),
                         floor=True, load_compensation=True)
-INPUTS = ["/setpoint", "/winch/state"]
+INPUTS = ["/setpoint", "/winch/state", "/admittance_controller/state"]
 OUTPUTS = ["/winch/command", "/cable_forces", "/platform/pose", "/platform/wrench", "/force_distribution",
            "/cable_force_controller/state", "/ospc/state", "/hybrid_force_controller/state",
            "/load_compensation/state", "/load_compensation/payload"]
@@ -131,6 +133,13 @@ def _hpfc_enabled(series, stamps) -> list[bool]:
     return out
 
 
+def user_wrench(series, stamps, k: int):
+    """The loop's ``w_user`` of period k: the admittance controller's w_Adm of t_k-1 while it guided
+    (the force distribution node's ``guiding_controller`` input), else None."""
+    state = series["/admittance_controller/state"].get(stamps[k - 1]) if k else None
+    return np.asarray(state.feedback, dtype=float) if state is not None and state.enabled else None
+
+
 def replay(stamps, series, robot, load_compensation: bool) -> list[dict]:
     """ControlLoop.step on every recorded period's inputs -> per period, the differences
     (max |loop - graph|) of each compared quantity."""
@@ -143,7 +152,7 @@ def replay(stamps, series, robot, load_compensation: bool) -> list[dict]:
         loop.set_parameter("hybrid_force_controller", "enabled", enabled[k])
         s = loop.step(t_ns * 1e-9, pose_from_msg(sp.pose), twist_from_msg(sp.velocity),
                       accel_from_msg(sp.acceleration), np.asarray(ws.position), np.asarray(ws.velocity),
-                      np.asarray(ws.effort), from_vector3(sp.force))
+                      np.asarray(ws.effort), from_vector3(sp.force), user_wrench(series, stamps, k))
         g = {topic: series[topic].get(t_ns) for topic in OUTPUTS}
         fd, cfc, ospc = g["/force_distribution"], g["/cable_force_controller/state"], g["/ospc/state"]
         hpfc, lc = g["/hybrid_force_controller/state"], g["/load_compensation/state"]

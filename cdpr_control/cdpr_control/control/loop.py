@@ -164,9 +164,12 @@ class ControlLoop:
         else:
             raise ValueError(f"the in-process loop has no parameter {node}.{parameter}")
 
-    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s, F_d0=None) -> LoopState:
+    def step(self, t: float, x_d, xdot_d, xddot_d, theta, thetadot, F_s, F_d0=None, w_user=None) -> LoopState:
         """One period from the set-point (pose, twist, acceleration, desired force F_d,0 of the force
-        axes) and the winch measurements."""
+        axes) and the winch measurements. ``w_user``: while a user guides (section 5.2), the user's
+        wrench w_Adm (5.9) the admittance controller computed with this set-point (the force
+        distribution node's ``guiding_controller`` input), else None: the force set-point's hand's
+        reserve (:meth:`cdpr_control.control.force_setpoint.ForceSetpoint.set_user_wrench`)."""
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta, self.params.start_ramp)
@@ -182,6 +185,7 @@ class ControlLoop:
             self.hpfc.take_over(self.contact.F_a)
             hpfc, x_hpfc = self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w, self._cfc_applied)
             contact = (hpfc.state, hpfc.F_d0, hpfc.F_vec)     # its expected contact force in the wrench
+        self.force.set_user_wrench(w_user)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, w_model=sum(w_models) if w_models else None,
                                  contact=contact)
         p = self.params

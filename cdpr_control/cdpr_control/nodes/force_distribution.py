@@ -22,6 +22,13 @@ measured contact force along the task axis by the desired one in the wrench it d
 (section 5.1.2, :func:`cdpr_control.control.hybrid_force_control.expected_contact_wrench`), so the cables
 are planned for the contact being made and nothing of the contact stays in the wrench filter
 after the release.
+
+With ``guiding_controller`` (read-only) naming the admittance controller it also subscribes
+``<guiding_controller>/state`` and, while that controller is the set-point source (``enabled``),
+hands its user wrench w_Adm (5.9) (``feedback``) to the force set-point's hand's reserve
+(:meth:`cdpr_control.control.force_setpoint.ForceSetpoint.set_user_wrench`, docs/admittance.md).
+The state of t_k goes with the set-point x_d,Adm it computed, that of t_k+1: it acts in period
+k + 1, as ``ControlLoop.step``'s ``w_user`` with :class:`cdpr_sim.closed_loop.HandGuiding`.
 """
 from __future__ import annotations
 
@@ -50,6 +57,9 @@ from cdpr_control.ros.sync import StampSync
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
                              "replaces the measured one in the distributed wrench (5.1.2); empty: none",
                              read_only=True)
+GUIDING_CONTROLLER = ParamSpec("guiding_controller", "", "admittance controller whose user wrench w_Adm "
+                               "(5.9) keeps the hand's reserve on the cable forces while it guides; empty: none",
+                               read_only=True)
 # the raw values of a set-point (pose, twist, acceleration): compared as bytes, so that a repeated
 # period is recognised exactly (a tuple would take -0.0 for 0.0)
 _SETPOINT_KEY = struct.Struct("19d").pack
@@ -90,13 +100,18 @@ class ForceDistributionNode(CdprNode):
         self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
         force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
         self._controller, self._state = None, None   # the hybrid force controller's last controller field, its state
+        self.declare_parameter(GUIDING_CONTROLLER.name, GUIDING_CONTROLLER.default, GUIDING_CONTROLLER.descriptor())
+        guiding_controller = self.get_parameter(GUIDING_CONTROLLER.name).value
+        self._w_user = None     # the user's wrench of the last period's admittance state (_user_wrench)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
             inputs["payload"] = (InertiaStamped, "load_compensation/payload")
         if force_controller:
             inputs["hpfc"] = (ControllerState, f"{force_controller}/state")
+        if guiding_controller:
+            inputs["guide"] = (ControllerState, f"{guiding_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
-                              optional=tuple(n for n in ("payload", "hpfc") if n in inputs))
+                              optional=tuple(n for n in ("payload", "hpfc", "guide") if n in inputs))
         self._setpoint_key: bytes | None = None     # the raw values of the last set-point (its _arrays)
         self._arrays: tuple = ()                     # its (x_d, ẋ_d, ẍ_d)
 
@@ -153,6 +168,16 @@ class ForceDistributionNode(CdprNode):
             self._controller, self._state = controller, parse_state(controller)
         return self._state, np.asarray(hpfc.reference[:3], dtype=float), np.asarray(hpfc.feedback[:3], dtype=float)
 
+    def _user_wrench(self, guide) -> np.ndarray | None:
+        """w_Adm of the admittance controller's state while it guides, else None (a feedback that is
+        no wrench is reported and ignored)."""
+        if guide is None or not guide.enabled:
+            return None
+        if len(guide.feedback) != 6 or not np.all(np.isfinite(guide.feedback)):
+            self.input_fault(self.sync.topics["guide"], "feedback (w_Adm) is not 6 finite values")
+            return None
+        return np.asarray(guide.feedback, dtype=float)
+
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d, xdot_d, xddot_d = self._setpoint(msgs["setpoint"])
         payload = msgs.get("payload")
@@ -163,6 +188,9 @@ class ForceDistributionNode(CdprNode):
             w_model = self.stage.payload_wrench(x_d, xdot_d, xddot_d, p._m, (com._x, com._y, com._z))
         hpfc = msgs.get("hpfc")
         contact = None if hpfc is None else self._contact(hpfc)
+        # the user's wrench of t_k-1: the one the set-point of t_k was computed with (the hand's reserve)
+        self.stage.set_user_wrench(self._w_user)
+        self._w_user = self._user_wrench(msgs.get("guide"))
         res = self.stage.update(x_d, xdot_d, xddot_d, wrench_from_msg(msgs["wrench"].wrench), w_model, contact)
         max_violation = float(res.max_violation)
         self.publisher.publish(self._message(res, max_violation, t_ns))
