@@ -39,7 +39,7 @@ def main(out: str) -> None:
     axes[2].set_ylabel("[mm]")
     axes[2].set_xlabel("t [s]")
     axes[2].legend(fontsize=8)
-    fig.suptitle("IPAnema 3, floor_contact_ipanema3.gcode: 500 N approached at 50 mm/s", fontsize=10)
+    fig.suptitle("IPAnema 3, floor_contact_ipanema3.gcode: 500 N on 1e6 N/m (approach bounded by k_env, d_env)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=80)
 
