@@ -112,11 +112,13 @@ def _float64_sequence(slot_type) -> bool:
 
 def payload_class(cls) -> type | None:
     """The payload class of message class ``cls`` (generated once per class from its definition), or
-    None for a class with a field name that is a Python keyword (it has no keyword constructor)."""
+    None for a class with a field name that is a Python keyword (it has no keyword constructor) or
+    a name of :class:`Payload`'s own (``msg_type``, ``to_msg``)."""
     if cls in _classes:
         return _classes[cls]
     names = list(cls.get_fields_and_field_types())
-    made = None if any(keyword.iskeyword(n) for n in names) else _generate(cls, names)
+    clash = any(keyword.iskeyword(n) or hasattr(Payload, n) for n in names)   # e.g. a field "to_msg"
+    made = None if clash else _generate(cls, names)
     _classes[cls] = made
     return made
 
@@ -151,6 +153,8 @@ def _generate(cls, names: list[str]) -> type:
 def payload_of(msg) -> Payload:
     """The payload standing for message ``msg`` (tests, tools: a node builds its payloads directly)."""
     cls = payload_class(type(msg))
+    if cls is None:
+        raise TypeError(f"{type(msg).__name__} has no payload class (a field named like a keyword or a Payload attribute)")
     return cls(**{name: getattr(msg, name) for name in type(msg).get_fields_and_field_types()})
 
 
