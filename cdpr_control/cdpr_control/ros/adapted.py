@@ -2,10 +2,11 @@
 
 The nodes of a composed graph hand their stage's output to each other as a *payload*, not as a
 ROS message: an immutable object of a class generated per message type (:func:`payload_class`)
-with the message's fields, its float64 sequences (f, q, theta, the controllers' outputs) held as
-read-only numpy arrays and every other field (header with stamp and frame, names, nested messages)
-as given. The ROS message is built from it only when it must leave the process or a subscriber
-asks for one, at most once per publication (:meth:`Payload.to_msg`, lazily, cached on the payload):
+with the message's fields: the float64 sequences a stage computed as numpy arrays (f, q, theta,
+the controllers' outputs) as read-only numpy arrays, those given as lists as tuples, every other
+field (header with stamp and frame, names, nested messages) as given. The ROS message is built
+from it only when it must leave the process or a subscriber asks for one, at most once per
+publication (:meth:`Payload.to_msg`, lazily, cached on the payload):
 
 - ``IntraProcessPublisher.publish`` (intraprocess.py) takes a payload of the publisher's type like
   a message; local subscriptions created with ``adapted=True`` receive the payload itself, every
@@ -93,16 +94,22 @@ def as_message(obj):
     return obj.to_msg() if isinstance(obj, Payload) else obj
 
 
-def read_only(values, field: str = "value") -> np.ndarray:
-    """A read-only float64 copy of a 1-D sequence (what a payload keeps of a float64 sequence): the
-    array over an immutable ``bytes`` copy, which is read-only without setting the flag (half the cost)."""
-    if type(values) is not np.ndarray or values.dtype is not _FLOAT64:
+def read_only(values, field: str = "value"):
+    """What a payload keeps of a float64 sequence: of a numpy array a read-only float64 copy (the
+    array over an immutable ``bytes`` copy, read-only without setting the flag, which costs twice as
+    much), of a list or tuple of numbers a tuple (converting the few numbers a node lists to an array
+    would cost more than every reader's ``np.asarray`` of them)."""
+    if type(values) is tuple:
+        return values           # (a received payload's tuple passed on: immutable)
+    if type(values) is not np.ndarray:
+        if type(values) is list:
+            return tuple(values)
         values = np.asarray(values, dtype=np.float64)
-    elif type(values.base) is bytes and values.ndim == 1:
+    elif type(values.base) is bytes and values.ndim == 1 and values.dtype is _FLOAT64:
         return values           # one of these already (a received payload's array passed on): immutable
     if values.ndim != 1:
         raise ValueError(f"{field}: a 1-D sequence of numbers expected, got shape {values.shape}")
-    return np.frombuffer(values.tobytes())
+    return np.frombuffer(values.tobytes() if values.dtype is _FLOAT64 else values.astype(np.float64).tobytes())
 
 
 def _float64_sequence(slot_type) -> bool:
@@ -125,14 +132,16 @@ def payload_class(cls) -> type | None:
 
 def _generate(cls, names: list[str]) -> type:
     default = cls(check_fields=False)
-    env: dict = {"_MISSING": _MISSING, "_ro": read_only, "_array": array.array, "_b": builder(cls)}
+    env: dict = {"_MISSING": _MISSING, "_ro": read_only, "_array": array.array, "_ndarray": np.ndarray,
+                 "_b": builder(cls)}
     init, build = ["    self._adapted_msg_ = None"], ["    _kw = {}"]
     for name, slot_type in zip(names, cls.SLOT_TYPES):
         env[f"_d_{name}"] = (read_only((), name) if _float64_sequence(slot_type)
                              else getattr(default, name))          # shared: nobody modifies a payload
         if _float64_sequence(slot_type):
             init.append(f"    self._{name} = _d_{name} if {name} is _MISSING else _ro({name}, {name!r})")
-            given = f"_array('d', self._{name}.tobytes())"         # what the generated setter stores
+            given = (f"_array('d', self._{name}.tobytes() if type(self._{name}) is _ndarray "
+                     f"else self._{name})")                         # what the generated setter stores
         else:
             init.append(f"    self._{name} = _d_{name} if {name} is _MISSING else {name}")
             given = f"self._{name}"
