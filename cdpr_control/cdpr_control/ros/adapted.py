@@ -154,7 +154,7 @@ def _generate(cls, names: list[str]) -> type:
     body = {"__slots__": tuple(f"_{n}" for n in names), "msg_type": cls, "__init__": env["__init__"],
             "_build": env["_build"], "__module__": __name__,
             "__doc__": f"Payload of a {cls.__module__.split('.')[0]}/{cls.__name__} (cdpr_control.ros.adapted): "
-                       "its fields, float64 sequences as read-only numpy arrays."}
+                       "its fields, float64 sequences as read-only numpy arrays or tuples."}
     body.update({n: property(operator.attrgetter(f"_{n}")) for n in names})
     return type(f"{cls.__name__}Payload", (Payload,), body)
 
