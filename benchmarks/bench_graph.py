@@ -8,6 +8,11 @@ so only figures of one run compare):
   every message over DDS: the transport before intra-process delivery, the baseline),
   ``processes`` (one process per node), ``two_processes`` (simulator | controllers, each composed,
   DDS between them), each plain and (but two_processes) recording every topic;
+- type adaptation (cdpr_control.ros.adapted): ``composed`` passes payloads between the nodes (the
+  stages' arrays; a ROS message only for whoever needs one), ``composed_messages`` is the message
+  path before it (``CDPR_TYPE_ADAPT=0``: every node publishes ROS messages), in-process both, plain,
+  recording and on the cuboid program; measured alternately in this run, side by side in
+  ``speedup_vs_messages``;
 - lockstep on the cuboid program (cuboid_mini), composed and composed_dds;
 - free-running at wall-clock 1 kHz (``sync_mode: latest``), composed and composed_dds: the
   simulator's step lateness against its schedule and the latency from publishing winch/state to
@@ -61,6 +66,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 
 from cdpr_control import programs  # noqa: E402
+from cdpr_control.ros import adapted  # noqa: E402
 from cdpr_control.ros.intraprocess import IntraProcess  # noqa: E402
 from cdpr_control.ros.qos import DIAGNOSTICS  # noqa: E402
 from cdpr_control.ros.timing import DurationStats  # noqa: E402
@@ -224,7 +230,21 @@ def stop_part(process: subprocess.Popen) -> None:
 
 def measure(mode: str, record: bool = False, intra_process: bool = True, program: str | None = None,
             sync_mode: str = "exact", split: bool = False, window_s: float = WINDOW_S,
-            description: LaunchDescription | None = None) -> dict:
+            description: LaunchDescription | None = None, type_adapt: bool = True) -> dict:
+    """``type_adapt``: the nodes of this process publish payloads (False: ROS messages, as with
+    CDPR_TYPE_ADAPT=0); see :func:`measure_graph`."""
+    was = adapted.enabled()
+    adapted.set_enabled(type_adapt)     # for the whole run: a node chooses at its first publication
+    try:
+        result = measure_graph(mode, record, intra_process, program, sync_mode, split, window_s, description)
+    finally:
+        adapted.set_enabled(was)
+    result["type_adapt"] = type_adapt
+    return result
+
+
+def measure_graph(mode: str, record: bool, intra_process: bool, program: str | None, sync_mode: str,
+                  split: bool, window_s: float, description: LaunchDescription | None) -> dict:
     """One configuration: the window's RTF and CPU per period (untimed callbacks); composed and holding
     home, the CPU per node in a second window (NODE_WINDOW_S); free-running: timing too.
     ``description``: another graph than GRAPH (the skeleton of :func:`transport_floor`; lockstep,
@@ -431,19 +451,28 @@ def table(result: dict) -> str:
 CONFIGS = {  # name -> measure() arguments, in the order run
     "composed_dds": dict(mode="composed", intra_process=False),
     "composed_dds_recording": dict(mode="composed", intra_process=False, record=True),
+    "composed_messages": dict(mode="composed", type_adapt=False),
     "composed": dict(mode="composed"),
+    "composed_messages_recording": dict(mode="composed", record=True, type_adapt=False),
     "composed_recording": dict(mode="composed", record=True),
     "processes": dict(mode="processes"),
     "processes_recording": dict(mode="processes", record=True),
     "two_processes": dict(mode="composed", split=True),
     "composed_dds_cuboid": dict(mode="composed", intra_process=False, program=PROGRAM),
+    "composed_messages_cuboid": dict(mode="composed", program=PROGRAM, type_adapt=False),
     "composed_cuboid": dict(mode="composed", program=PROGRAM),
+    "composed_messages_cuboid_recording": dict(mode="composed", program=PROGRAM, record=True, type_adapt=False),
     "composed_cuboid_recording": dict(mode="composed", program=PROGRAM, record=True),
     "free_running_dds": dict(mode="composed", intra_process=False, sync_mode="latest"),
     "free_running": dict(mode="composed", sync_mode="latest"),
 }
 RECORDING_PAIRS = {"composed": "composed_recording", "composed_dds": "composed_dds_recording",
-                   "processes": "processes_recording", "composed_cuboid": "composed_cuboid_recording"}
+                   "composed_messages": "composed_messages_recording",
+                   "processes": "processes_recording", "composed_cuboid": "composed_cuboid_recording",
+                   "composed_messages_cuboid": "composed_messages_cuboid_recording"}
+TYPE_ADAPT_PAIRS = (("composed", "composed_messages"), ("composed_recording", "composed_messages_recording"),
+                    ("composed_cuboid", "composed_messages_cuboid"),
+                    ("composed_cuboid_recording", "composed_messages_cuboid_recording"))
 
 
 def main() -> None:
@@ -484,6 +513,8 @@ def main() -> None:
                            for name, base in (("composed", "composed_dds"), ("composed_recording", "composed_dds_recording"),
                                               ("composed_cuboid", "composed_dds_cuboid"))
                            if name in configs and base in configs},
+        "speedup_vs_messages": {name: configs[name]["rtf"] / configs[base]["rtf"] for name, base in TYPE_ADAPT_PAIRS
+                                if name in configs and base in configs},
         "recording_slowdown_pct": {plain: slowdown_pct(configs[plain], configs[rec])
                                    for plain, rec in RECORDING_PAIRS.items() if plain in configs and rec in configs},
         "failed": failed,

@@ -145,7 +145,7 @@ class AdmittanceControllerNode(CdprNode):
             header=header, pose=pose_to_msg(out.x), velocity=twist_to_msg(xdot), acceleration=accel_to_msg(xddot),
             force=sp.force, line=0))
         x_0 = self.controller.zones.x_0
-        self.state_pub.publish(builder(ControllerState)(
+        self.state_pub.publish(self.message_factory(ControllerState)(
             header=header, controller="admittance_controller", enabled=out.active, names=list(AXES),
             reference=x_0.tolist(), feedback=out.w_user.tolist(), error=(out.x - x_0).tolist(),
             feedforward=out.xd.tolist(), output=out.x.tolist(), saturated=out.limited.tolist()))
@@ -165,7 +165,7 @@ class AdmittanceControllerNode(CdprNode):
         out._force, out._line = sp.force, 0
         self.setpoint_pub.publish(out)
         x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
-        self.state_pub.publish(builder(ControllerState)(
+        self.state_pub.publish(self.message_factory(ControllerState)(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
             reference=x_0, feedback=_ZEROS, error=[a - b for a, b in zip(x_d, x_0)],
             feedforward=_ZEROS, output=x_d, saturated=[False] * 6))

@@ -35,7 +35,6 @@ from sensor_msgs.msg import JointState
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
 from cdpr_control.control.hybrid_force_control import ContactCableForceControl, HPFCParams, parse_state
 from cdpr_control.control.safety import all_finite
-from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg
@@ -145,7 +144,7 @@ class CableForceControllerNode(CdprNode):
         # the constructor copies into the float64 arrays that f_d.tolist() and f.tolist() would fill
         if not _valid(self.robot.m, f_d_values, f_values, theta_values):
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite); output 0", stamp_ns=t_ns)
-            self.publisher.publish(builder(ControllerState)(
+            self.publisher.publish(self.message_factory(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
                 reference=f_d_values, feedback=f_values, output=[0.0] * self.robot.m))
             return
@@ -162,15 +161,15 @@ class CableForceControllerNode(CdprNode):
             saturated = c.pi.saturated.tolist()
             self.report(DiagnosticStatus.WARN if any(saturated) else DiagnosticStatus.OK,
                         "saturated" if any(saturated) else "ok", stamp_ns=t_ns)
-            state = builder(ControllerState)(
+            state = self.message_factory(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
-                reference=f_d_values, feedback=f_fb.tolist(), error=(f_ref - f_fb).tolist(),
-                integrator=c.pi.integrator.tolist(), feedforward=(f_d if f_ff is None else f_ff).tolist(),
-                output=self.dq_held.tolist(), saturated=saturated)
+                reference=f_d_values, feedback=f_fb, error=f_ref - f_fb,
+                integrator=c.pi.integrator, feedforward=f_d if f_ff is None else f_ff,
+                output=self.dq_held, saturated=saturated)
         else:
-            state = builder(ControllerState)(
+            state = self.message_factory(ControllerState)(
                 header=header, controller="cable_force_controller", enabled=enabled, names=self.names,
-                reference=f_d_values, feedback=f_values, error=(f_ref - f).tolist(), output=self.dq_held.tolist())
+                reference=f_d_values, feedback=f_values, error=f_ref - f, output=self.dq_held)
         self.publisher.publish(state)
 
     def _contact(self, msgs: dict, f_d, f, theta, fd_msg, t_ns: int, header) -> np.ndarray:
@@ -195,7 +194,7 @@ class CableForceControllerNode(CdprNode):
         dq = contact.update(state, F_d0, x_d, f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
         F_a, z = contact.F_a, contact.z_t
         stage = self.stage
-        self.hand_over.publish(builder(ControllerState)(
+        self.hand_over.publish(self.message_factory(ControllerState)(
             header=header, controller="cable_force_controller:hand_over",
             enabled=bool(stage.enabled and not stage.controller.pi.hold), names=HAND_OVER_NAMES,
             output=(F_a * z[0], F_a * z[1], F_a * z[2], 0.0, 0.0, 0.0)))

@@ -44,7 +44,6 @@ from rclpy.parameter import Parameter
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import parse_state
-from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
@@ -203,9 +202,9 @@ class ForceDistributionNode(CdprNode):
             self.report(_OK, "feasible", stamp_ns=t_ns)
 
     def _message(self, res, max_violation: float, t_ns: int) -> ForceDistribution:
-        return builder(ForceDistribution)(
-            header=self.header(t_ns), f_d=res.f.tolist(), f_ref=res.f_ref.tolist(), f_min=res.f_min.tolist(),
-            f_max=res.f_max.tolist(), w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
+        return self.message_factory(ForceDistribution)(
+            header=self.header(t_ns), f_d=res.f, f_ref=res.f_ref, f_min=res.f_min,
+            f_max=res.f_max, w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
             max_violation=max_violation, residual=float(res.residual), iterations=int(res.iterations),
             solve_time=float(res.solve_time))
 

@@ -22,7 +22,6 @@ from sensor_msgs.msg import JointState
 from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control import kernels
 from cdpr_control.control.safety import all_finite
-from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
@@ -55,7 +54,7 @@ class FrictionCompensationNode(CdprNode):
         self.params = ParameterSet(self, specs, self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
         self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
-        self.create_subscription(JointState, "winch/command", self._keep_command, CONTROL)
+        self.create_subscription(JointState, "winch/command", self._keep_command, CONTROL, adapted=True)
         self.sync = StampSync(self, {
             "state": (JointState, "winch/state"),
             "setpoint": (OperationalSetpoint, "setpoint"),
@@ -116,8 +115,8 @@ class FrictionCompensationNode(CdprNode):
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
         f = self.stage.update(F_s, theta, thetadot, self._wrap_angles(msgs["setpoint"].pose))
-        self.publisher.publish(builder(CableForces)(header=self.header(t_ns), f=f.tolist(), f_min=self.f_min,
-                                                    f_max=self.f_max))
+        self.publisher.publish(self.message_factory(CableForces)(header=self.header(t_ns), f=f, f_min=self.f_min,
+                                                                 f_max=self.f_max))
 
 
 def main(args=None):

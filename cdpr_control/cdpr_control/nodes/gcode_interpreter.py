@@ -232,14 +232,14 @@ class GCodeInterpreterNode(CdprNode):
         self._last_command_ns: int | None = None       # newest winch/command stamp
         self._last_state_wall = time.monotonic()
         self.fault_source = self.params.values["fault_source"]
-        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL)
+        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL, adapted=True)
         if self.fault_source:
             self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, DIAGNOSTICS)
         if self.sync_mode == "exact":
             # lockstep: one period per new winch state, stamped like it (a deterministic data flow;
             # a timer on /clock could not produce the period of t = 0 before the loop has run)
             self._last_tick_ns = -1
-            self.create_subscription(JointState, "winch/state", self._on_state, CONTROL)
+            self.create_subscription(JointState, "winch/state", self._on_state, CONTROL, adapted=True)
             self.create_timer(0.1, self._state_watchdog, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         else:
             self.timer = self.create_timer(self.dt, self._tick)  # node clock: sim time when use_sim_time

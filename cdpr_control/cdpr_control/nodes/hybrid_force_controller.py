@@ -40,7 +40,6 @@ from cdpr_control.control.force_setpoint import ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceStage,
     format_state)
 from cdpr_control.control.ospc import AXES
-from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
@@ -91,7 +90,8 @@ class HybridForceControllerNode(CdprNode):
             "pose": (PoseStamped, "platform/pose"),
         }, primary="pose", callback=self._cycle, mode=self.sync_mode)
         # the previous period's hand-over (not synchronised: the CFC of period k runs after this node)
-        self.create_subscription(ControllerState, "cable_force_controller/hand_over", self._on_hand_over, CONTROL)
+        self.create_subscription(ControllerState, "cable_force_controller/hand_over", self._on_hand_over, CONTROL,
+                                 adapted=True)
 
     @staticmethod
     def _hpfc_params(v: dict) -> HPFCParams:
@@ -134,7 +134,7 @@ class HybridForceControllerNode(CdprNode):
         feedforward = _ZEROS if s.state in (CONTACT, IDLE) else x     # the position-controlled x_t
         reference, feedback = s.F_d0.tolist() + _ZERO3, s.F_vec.tolist() + _ZERO3
         integrator = s.integrator
-        self.publisher.publish(builder(ControllerState)(
+        self.publisher.publish(self.message_factory(ControllerState)(
             header=self.header(t_ns), controller=format_state(NAME, s.state), enabled=s.active, names=list(AXES),
             reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
             integrator=[integrator * z for z in s.z_t.tolist()] + _ZERO3, feedforward=feedforward,

@@ -51,7 +51,6 @@ from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
                                           SafetyMonitor, braking)
-from cdpr_control.ros.message_builders import builder
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
@@ -139,7 +138,7 @@ class JointCommandNode(CdprNode):
                                       ("fk", ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics"),
                                       ("fd", ForceDistribution, "force_distribution")):
             self.watched_topics[name] = topic
-            self.create_subscription(msg_type, topic, self._keep(name, topic), CONTROL)
+            self.create_subscription(msg_type, topic, self._keep(name, topic), CONTROL, adapted=True)
         self.publisher = self.create_publisher(JointState, "winch/command", CONTROL)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"),
                   "cfc": (ControllerState, "cable_force_controller/state")}
@@ -274,8 +273,8 @@ class JointCommandNode(CdprNode):
 
     def _publish(self, t_ns: int, theta_d, faults: list, hold: bool, send: bool = True) -> None:
         if send:
-            self.publisher.publish(builder(JointState)(header=self.header(t_ns), name=self.names,
-                                                       position=theta_d.tolist()))
+            self.publisher.publish(self.message_factory(JointState)(header=self.header(t_ns), name=self.names,
+                                                                    position=theta_d))
         if faults:
             level = _ERROR if hold else _WARN
             self.report(level, "; ".join(f.message for f in faults[:3]) + ("; holding" if hold else ""),

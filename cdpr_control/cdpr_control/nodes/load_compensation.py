@@ -124,7 +124,7 @@ class LoadCompensationNode(CdprNode):
         else:
             x_lc = lc.x_lc.copy() if lc.params.enabled else np.zeros(6)     # hold: never NaN
         enabled = lc.params.enabled
-        self.state_pub.publish(builder(ControllerState)(
+        self.state_pub.publish(self.message_factory(ControllerState)(
             header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
             reference=reference, feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
             saturated=lc.rate_limited.tolist()))

@@ -23,7 +23,6 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_st
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
-from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
@@ -130,20 +129,18 @@ class OSPCNode(CdprNode):
             if axis is not None:
                 x = select_position_feedback(x_d, x, axis / np.linalg.norm(axis))
         feedback = x.tolist()
-        # e = x_d - x element by element: the bits of numpy's subtraction
-        state = builder(ControllerState)(header=self.header(t_ns), controller="ospc", enabled=self.enabled,
-                                         names=self.names, reference=reference, feedback=feedback,
-                                         error=[a - b for a, b in zip(reference, feedback)])
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
         if self.enabled and all_finite(feedback) and reference_finite:
             pi = self.controller.pi
-            state.output = self.controller.update(x_d, x).tolist()
-            state.integrator = pi.integrator.tolist()
-            state.saturated = pi.saturated.tolist()
+            output = {"output": self.controller.update(x_d, x), "integrator": pi.integrator,
+                      "saturated": pi.saturated.tolist()}
         else:
-            state.output = [0.0] * 6
-        self.publisher.publish(state)
+            output = {"output": [0.0] * 6}
+        # e = x_d - x element by element: the bits of numpy's subtraction
+        self.publisher.publish(self.message_factory(ControllerState)(
+            header=self.header(t_ns), controller="ospc", enabled=self.enabled, names=self.names,
+            reference=reference, feedback=feedback, error=[a - b for a, b in zip(reference, feedback)], **output))
 
 
 def main(args=None):

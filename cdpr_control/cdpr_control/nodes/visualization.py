@@ -54,7 +54,7 @@ class VisualizationNode(CdprNode):
         self.marker_pub = self.create_publisher(MarkerArray, "visualization/markers", CONTROL)
         self.latest: dict = {}
         for key, (cls, topic) in INPUTS.items():
-            self.create_subscription(cls, topic, self._keep(key), SAMPLED)
+            self.create_subscription(cls, topic, self._keep(key), SAMPLED, adapted=True)   # (reads fields only)
         rate = self.get_parameter("rate").value
         self.markers = Markers()
         self.create_timer(1.0 / rate, self.publish_markers, clock=Clock(clock_type=ClockType.STEADY_TIME))

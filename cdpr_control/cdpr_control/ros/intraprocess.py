@@ -33,6 +33,11 @@ same to every tool, but the nodes of one rclpy ``Context`` also register them in
   through the queue: for a callback that only takes the message away (the bag recorder, 20 topics a
   period), the queue's append, pop and executor dispatch would cost more than the callback itself.
   A tap must be short, must not publish and must not raise.
+- A payload (adapted.py: the arrays and stamp a node's stage computed, standing for a message of
+  the publisher's type) is published like a message: a subscription created with ``adapted=True``
+  receives the payload itself, every other local subscription, DDS and a ``raw`` subscription the
+  message built from it, once per publication (``Payload.to_msg``, cached); nothing builds it when
+  only adapted subscriptions take the topic. Type adaptation in the spirit of REP 2007.
 - The nodes' TimeSources (``use_sim_time``) take /clock as one delivery per message: the time is
   converted once and set on every node's clock (rather than one callback per node and period).
 - Transient-local publishers keep their last ``depth`` messages for local subscriptions that
@@ -61,6 +66,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.time import Time
 from rclpy.time_source import TimeSource
 
+from cdpr_control.ros.adapted import Payload, as_message, baseline, factory
+
 BUDGET_S = 0.005        # longest time one drain keeps the executor from other events [s]
 # runner.spin: longest slice of a lockstep chain between two executor turns [s]. One turn of the
 # SingleThreadedExecutor rebuilds its wait set over every entity of the composed graph (about 1.6 ms
@@ -83,8 +90,10 @@ def compatible(pub_qos, sub_qos) -> bool:
 class LocalSubscription:
     """The in-process side of one subscription: its callback and the DDS subscription beside it."""
 
-    def __init__(self, registry: "IntraProcess", callback, raw: bool, urgent: bool = False, tap: bool = False):
+    def __init__(self, registry: "IntraProcess", callback, raw: bool, urgent: bool = False, tap: bool = False,
+                 adapted: bool = False):
         self.registry, self.callback, self.raw, self.urgent, self.tap = registry, callback, raw, urgent, tap
+        self.adapted = adapted      # takes payloads (adapted.py) as well as messages
         self.topic: Topic | None = None
         self.qos = None
         self.dds = None   # the rclpy Subscription and its node, set once created
@@ -138,7 +147,7 @@ class Topic:
         local subscription gets one). A remote message equal to a recent local one (same stamp and
         content) is taken for a copy too."""
         if raw:
-            return any(serialize_message(local) == msg for local in self.recent)
+            return any(serialize_message(as_message(local)) == msg for local in self.recent)
         return any(local == msg for local in self.recent)
 
 
@@ -283,7 +292,10 @@ class IntraProcess:
 
     @staticmethod
     def _as(local: LocalSubscription, msg):
-        return serialize_message(msg) if local.raw else msg
+        """What ``local`` receives of a published ``msg`` (a message or a payload)."""
+        if local.raw:
+            return serialize_message(as_message(msg))
+        return msg if local.adapted else as_message(msg)
 
     def remove_subscription(self, subscription) -> None:
         for topic in self.topics.values():
@@ -322,41 +334,40 @@ class IntraProcessPublisher(Publisher):
     def publish(self, msg) -> None:
         topic = self._ipc_topic
         if topic is None:
-            return super().publish(msg)
+            return super().publish(as_message(msg))
         if isinstance(msg, bytes):
             obj = deserialize_message(msg, self.msg_type) if topic.subscriptions or self.history is not None else None
-        elif isinstance(msg, self.msg_type):
+        elif isinstance(msg, self.msg_type) or (isinstance(msg, Payload) and msg.msg_type is self.msg_type):
             obj = msg
         else:
-            raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
+            raise TypeError(f"Expected {self.msg_type} or its payload, got {type(msg)}")
         if self._ipc_version != topic.version:      # the local subscriptions changed: match again
             self._rematch(topic)
-        matched, items, urgent = self._ipc_matched, [], []
+        matched, items, urgent, data = self._ipc_matched, [], [], None
         if obj is not None:
             if self.history is not None:
                 self.history.append(obj)
             if matched:
-                data = None
                 if self._ipc_clocks is not None:
-                    items.append((self._ipc_clocks, obj))
+                    items.append((self._ipc_clocks, as_message(obj)))
                 for s in self._ipc_others:
                     if s.raw:
-                        data = serialize_message(obj) if data is None else data
+                        data = serialize_message(as_message(obj)) if data is None else data
                         (urgent if s.urgent else items).append((s.callback, data))
                     else:
-                        (urgent if s.urgent else items).append((s.callback, obj))
+                        (urgent if s.urgent else items).append((s.callback, obj if s.adapted else as_message(obj)))
                 topic.recent.append(obj)
         # rcl's count without rclpy's handle guard (this thread owns the publisher; 20 calls a period).
         # Transient local: always, so that DDS keeps the history for a reader that joins later
         if self.history is not None or self._Publisher__publisher.get_subscription_count() > len(matched):
-            super().publish(msg)    # first: outside, a message is seen before those it causes
+            super().publish(as_message(msg))    # first: outside, a message is seen before those it causes
         if obj is not None and matched:
             for s in self._ipc_taps:
                 if s.raw:
-                    data = serialize_message(obj) if data is None else data
+                    data = serialize_message(as_message(obj)) if data is None else data
                     s.callback(data)
                 else:
-                    s.callback(obj)
+                    s.callback(obj if s.adapted else as_message(obj))
             if items or urgent:
                 self._ipc_registry.post(items, urgent)
 
@@ -392,6 +403,17 @@ class IntraProcessNode(Node):
         registry.add_node(self)
         return registry
 
+    def message_factory(self, msg_type):
+        """What this node builds its outputs of ``msg_type`` with, from keyword arguments named like the
+        fields (adapted.factory): payloads where intra-process delivery and type adaptation are on, else
+        ROS messages. Chosen once per node and type (a node of the baseline stays one)."""
+        factories = self.__dict__.setdefault("_message_factories", {})
+        made = factories.get(msg_type)
+        if made is None:
+            made = factories[msg_type] = (factory(msg_type) if IntraProcess.of(self.context).enabled
+                                          else baseline(msg_type))
+        return made
+
     def create_publisher(self, msg_type, topic, qos_profile, **kwargs):
         kwargs.setdefault("event_callbacks", PublisherEventCallbacks(use_default_callbacks=False))  # see NO_EVENTS
         registry = self._intra_process()
@@ -408,15 +430,16 @@ class IntraProcessNode(Node):
         return publisher
 
     def create_subscription(self, msg_type, topic, callback, qos_profile, *, raw: bool = False,
-                            urgent: bool = False, tap: bool = False, **kwargs):
+                            urgent: bool = False, tap: bool = False, adapted: bool = False, **kwargs):
         """``urgent``: in-process deliveries to this subscription go before the others queued (the
         robot's command path: a free-running period's command does not wait for the rest of the graph).
         ``tap``: they are made inside ``publish`` (see the module's docstring); DDS messages of other
-        processes come through the executor as usual."""
+        processes come through the executor as usual. ``adapted``: the callback takes the payload a
+        local publisher publishes (adapted.py) as well as a message, and only reads its fields."""
         registry = self._intra_process()
         if registry is None:
             return super().create_subscription(msg_type, topic, callback, qos_profile, raw=raw, **kwargs)
-        local = LocalSubscription(registry, callback, raw, urgent, tap)
+        local = LocalSubscription(registry, callback, raw, urgent, tap, adapted)
         subscription = super().create_subscription(msg_type, topic, local.from_dds, qos_profile, raw=raw, **kwargs)
         local.dds, local.node, local.qos = subscription, self, subscription.qos_profile
         local.topic = registry.topic(subscription.topic_name)

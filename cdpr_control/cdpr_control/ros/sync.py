@@ -36,6 +36,7 @@ from sensor_msgs.msg import JointState
 
 from cdpr_control.control.safety import all_finite
 
+from cdpr_control.ros.adapted import Payload
 from cdpr_control.ros.qos import CONTROL
 
 BASE_FRAMES = ("", "base", "world")     # frame_id accepted for poses, wrenches and set-points
@@ -141,7 +142,7 @@ def input_problem(msg, m: int, size: int | None = None) -> str | None:
     if entry is not None and entry[0] is msg and entry[1] == m:
         problem = entry[2]
     else:
-        check = CHECKS.get(type(msg))
+        check = CHECKS.get(msg.msg_type if isinstance(msg, Payload) else type(msg))
         problem = check(msg, m) if check is not None else None
         if len(_CHECKED) >= _CHECKED_MAX:
             _CHECKED.clear()
@@ -227,7 +228,7 @@ class StampSync:
         if not set(urgent) <= set(inputs):
             raise ValueError(f"urgent inputs {urgent} must be among {list(inputs)}")
         self.subscriptions = [
-            node.create_subscription(msg_type, topic, self._receiver(name), qos,
+            node.create_subscription(msg_type, topic, self._receiver(name), qos, adapted=True,  # reads fields only
                                      **({"urgent": True} if name in urgent else {}))
             for name, (msg_type, topic) in inputs.items()
         ]

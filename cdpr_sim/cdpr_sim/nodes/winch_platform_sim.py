@@ -152,7 +152,7 @@ class WinchPlatformSimNode(CdprNode):
         if self.sim.config.obstacles:
             self.truth_pubs["contact"] = self.create_publisher(WrenchStamped, "ground_truth/contact_wrench", CONTROL)
         # on the command path: in-process, delivered before the rest of the graph's period (intraprocess.py)
-        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL, urgent=True)
+        self.create_subscription(JointState, "winch/command", self._on_command, CONTROL, urgent=True, adapted=True)
         self.create_subscription(WrenchStamped, "sim/wrench", self._on_wrench, CONTROL)
         self.create_service(SetPayload, "sim/set_payload", self._on_set_payload)
         self.create_service(ApplyWrench, "sim/apply_wrench", self._on_apply_wrench)
@@ -332,8 +332,8 @@ class WinchPlatformSimNode(CdprNode):
             self._states_sent[t_ns] = time.perf_counter()
             if len(self._states_sent) > LATENCY_WINDOW:   # never answered: forget the oldest
                 del self._states_sent[next(iter(self._states_sent))]
-        self.state_pub.publish(builder(JointState)(header=header, name=self.names, position=out.theta.tolist(),
-                                                   velocity=out.thetadot.tolist(), effort=out.F_s.tolist()))
+        self.state_pub.publish(self.message_factory(JointState)(header=header, name=self.names, position=out.theta,
+                                                                velocity=out.thetadot, effort=out.F_s))
         if not self.publish_truth:
             return
         c = self.robot.cable
@@ -344,8 +344,8 @@ class WinchPlatformSimNode(CdprNode):
         if has_subscribers(pubs["twist"]):
             pubs["twist"].publish(builder(TwistStamped)(header=header, twist=twist_to_msg(out.xdot)))
         if has_subscribers(pubs["forces"]):
-            pubs["forces"].publish(builder(CableForces)(header=header, f=out.f.tolist(), f_min=c.f_min.tolist(),
-                                                        f_max=c.f_max.tolist()))
+            pubs["forces"].publish(self.message_factory(CableForces)(header=header, f=out.f, f_min=c.f_min,
+                                                                     f_max=c.f_max))
         if has_subscribers(pubs["external"]):
             pubs["external"].publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(out.w_ext)))
         if "contact" in pubs and has_subscribers(pubs["contact"]):

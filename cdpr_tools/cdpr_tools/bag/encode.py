@@ -18,7 +18,8 @@ interface packages around it. Types with fields this does not cover (wide string
 arrays of char or octet, long double, bounded strings and sequences, whose bounds rclpy enforces)
 get no encoder: :func:`serialize` then uses rclpy. Values are taken as rclpy takes them (for
 the values the generated setters accept): numeric sequences by their buffer (``array.array``,
-numpy arrays) or element by element, strings as UTF-8 up to the first NUL, booleans true only if
+numpy arrays; inline for ``array.array``, float64 numpy arrays and tuples, what messages and the
+payloads of cdpr_control.ros.adapted hold) or element by element, strings as UTF-8 up to the first NUL, booleans true only if
 they are ``True``.
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ import struct
 from array import array
 from typing import Callable
 
+import numpy as np
 from rclpy.serialization import serialize_message
 from rosidl_parser.definition import (
     AbstractGenericString,
@@ -99,7 +101,7 @@ class _Generator:
 
     def __init__(self):
         self.lines: list[str] = []
-        self.env: dict = {"_array": array, "_utf8": _utf8, "_strseq": _string_sequence, "_raw": _raw_sequence,
+        self.env: dict = {"_array": array, "_ndarray": np.ndarray, "_F64": np.dtype(np.float64), "_utf8": _utf8, "_strseq": _string_sequence, "_raw": _raw_sequence,
                           "_COUNT": _COUNT, "_COUNT_SIZE": _COUNT_SIZE, "_COUNT8": _COUNT8,
                           "_COUNT8_SIZE": _COUNT8_SIZE, "_PAD4": _PAD4}
         self.indent = 1
@@ -222,9 +224,11 @@ class _Generator:
             b = self.name("_b")
             if code == "?":
                 self.emit(f"{b} = bytes({var}) if type({var}) is list else _raw({var}, '?', 1)")
-            else:
-                self.emit(f"{b} = {var}.tobytes() if type({var}) is _array and {var}.typecode == '{code}' "
-                          f"else _raw({var}, '{code}', {size})")
+            else:   # inline for what messages and payloads hold (cdpr_control.ros.adapted), else _raw
+                ndarray = f" or (_t is _ndarray and {var}.dtype is _F64)" if code == "d" else ""
+                self.emit(f"_t = type({var})")
+                self.emit(f"{b} = {var}.tobytes() if (_t is _array and {var}.typecode == '{code}'){ndarray} "
+                          f"else _array('{code}', {var}).tobytes() if _t is tuple else _raw({var}, '{code}', {size})")
             if size == 8:                             # the elements start 8-aligned, if there are any
                 self.emit(f"if {b}:")
                 self.emit("    _r = pos & 7")

@@ -8,8 +8,10 @@ for. Follows the node convention of docs/tools.md, so the launcher can compose i
 Composed with the graph's nodes (one context), the recorder gets their messages in-process
 (cdpr_control.ros.intraprocess), on the thread that runs the control loop, and the nodes need
 not publish over DDS for it. So it does as little as it can there: a topic with a publisher in the
-process is subscribed to as message objects, each encoded once by the generated encoder of its type
-(:mod:`.encode`, a few us where rclpy's serialization takes 3-11), and the bytes are queued for the
+process is subscribed to as objects, payloads where the publisher publishes them
+(cdpr_control.ros.adapted: no ROS message is built for the bag) and messages otherwise, each encoded
+once by the generated encoder of its type (:mod:`.encode`, which reads the message's slots, which a
+payload has too; a few us where rclpy's serialization takes 3-11), and the bytes are queued for the
 writer child process (:mod:`.writer_process`), which writes the bag on the other core. Topics
 published elsewhere only are subscribed to serialized (``raw``), as ``ros2 bag record`` does.
 """
@@ -23,6 +25,7 @@ from rclpy.clock import Clock, ClockType
 from cdpr_tools.bag.encode import encoder, serialize
 from cdpr_tools.bag.writer_process import BagWriterProcess
 from cdpr_tools.message_convert import message_class
+from cdpr_control.ros.adapted import as_message
 from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode
 from cdpr_control.ros.runner import run_node
 from cdpr_tools.ros_graph import TopicSelection, adapted_qos
@@ -86,11 +89,11 @@ class BagRecorder(IntraProcessNode):
         append, now = queue.append, self.get_clock().handle.get_now   # (Clock.now() builds a Time: 2 us)
         encode = encoder(type_name)
         if encode is not None and self._published_here(topic):
-            def on_message(msg) -> None:  # the publisher's object (or rclpy's, from another process)
+            def on_message(msg) -> None:  # the publisher's payload or message (or rclpy's, from another process)
                 try:
                     data = encode(msg)
                 except Exception:  # noqa: BLE001 - a value the encoder cannot pack: rclpy decides
-                    data = serialize(msg, type_name)
+                    data = serialize(as_message(msg), type_name)
                 append((index, now().nanoseconds, data, True))
                 if len(queue) >= batch:
                     send()
@@ -102,7 +105,7 @@ class BagRecorder(IntraProcessNode):
                     send()
             raw = True
         self._recording[topic] = self.create_subscription(
-            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw, tap=True)
+            msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw, tap=True, adapted=not raw)
         self.get_logger().info(f"subscribed to {topic} [{type_name}]")
         return True
 
