@@ -78,6 +78,9 @@ def qos_of(d: dict) -> QoSProfile:
 
 
 def encode(msg) -> str:
+    """CDR of a received message, base64; a payload of the type adaptation (ros/adapted.py) as the
+    message it stands for."""
+    msg = msg.to_msg() if hasattr(msg, "to_msg") else msg
     return base64.b64encode(serialize_message(msg)).decode("ascii")
 
 
