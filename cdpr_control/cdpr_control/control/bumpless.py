@@ -44,9 +44,8 @@ class Blend:
 
 
 class StartRamp:
-    """A share s rising from 0 to 1 as a cosine over ``duration`` (of periods of ``dt``), then 1:
-    ``blend(start, target)`` is start + s (target - start) of the next period. Smooth at both ends
-    (no velocity step), its steepest slope π/2 per duration at the middle."""
+    """A share s rising from 0 to 1 as a cosine over ``duration`` (of periods of ``dt``), then 1.
+    Smooth at both ends (no velocity step), its steepest slope π/2 per duration at the middle."""
 
     def __init__(self, duration: float, dt: float):
         if not (np.isfinite(duration) and duration >= 0.0 and dt > 0.0):
@@ -64,6 +63,3 @@ class StartRamp:
         if self.k >= self.periods:
             return 1.0
         return 0.5 - 0.5 * float(np.cos(np.pi * self.k / self.periods))
-
-    def blend(self, start, target):
-        return start + self.share() * (target - start)

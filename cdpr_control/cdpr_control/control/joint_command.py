@@ -64,9 +64,8 @@ class JointCommand:
     def reset(self, theta, ramp_time: float = 0.0) -> None:
         """Start from the measured cable lengths θ, so that enabling the command does not jump.
 
-        ``ramp_time`` [s]: the start ramp (0: none; the loop and the node give
-        :data:`cdpr_control.control.bumpless.START_RAMP`, which the cable force controller's set-point
-        ramp uses too). At power-on the plant holds the tension it was left with,
+        ``ramp_time`` [s]: the start ramp (0: none; the loop and the node give ``start_ramp``,
+        default :data:`cdpr_control.control.bumpless.START_RAMP`). At power-on the plant holds the tension it was left with,
         which differs from what the controllers command by the model's errors (at a border pose of
         the Mini's default plant a cable 20 N from its set-point); rate-limited alone, the command
         closes that gap in a few periods, a force step that overshoots beyond f_max or slackens a
@@ -150,12 +149,7 @@ class JointCommand:
         target = self.target(x_d, offsets, dq_cfc)
         if not all_finite(target.tolist()):
             return self.update(None, hold=True)
-        step = self.v_max * self.dt
-        delta = np.minimum(np.maximum(self._ramped(target) - self.theta_d, -step), step)
-        self.held = False
-        self.velocity = delta / self.dt
-        self.theta_d = self.theta_d + delta
-        return self.theta_d.copy()
+        return self._move_towards(self._ramped(target), held=False)
 
     def _restore_tension(self, x_safe, f_safe, f) -> None:
         """One period of Δq_hold: dt / T_HOLD of the filtered internal force error as elongation (2.15)."""
@@ -177,9 +171,13 @@ class JointCommand:
         if theta_safe is not finite."""
         if not all_finite(theta_safe.tolist()):
             return self.update(None, hold=True)
+        return self._move_towards(theta_safe, held=True)
+
+    def _move_towards(self, theta: np.ndarray, held: bool) -> np.ndarray:
+        """One period of θ_d towards θ, at most v_max dt per cable."""
         step = self.v_max * self.dt
-        delta = np.minimum(np.maximum(theta_safe - self.theta_d, -step), step)
-        self.held = True
+        delta = np.minimum(np.maximum(theta - self.theta_d, -step), step)
+        self.held = held
         self.velocity = delta / self.dt
         self.theta_d = self.theta_d + delta
         return self.theta_d.copy()
