@@ -210,3 +210,54 @@ def test_after_preload_leaves_out_the_rests_up_to_the_highest_forces():
     mask = np.array([True] * 3 + [False] * 2 + [True] * 3 + [False] + [True] * 2)
     force_sum = np.array([10.0] * 5 + [40.0] * 3 + [30.0] * 3)      # power-on level, pre-load, a step down
     assert stiffness.after_preload(mask, force_sum).tolist() == [False] * 9 + [True] * 2
+
+
+def test_samples_the_recorder_lost_are_left_out_with_a_warning(friction_bag, tmp_path):
+    """A recorder in a process of its own on a busy machine loses a message now and then (CI did, in
+    the graph's identification test). Every 40th ground-truth pose and every 55th reference force
+    dropped from the friction run: the winch state keeps the samples that have both, warns with the
+    count, and those samples are the original's."""
+    from cdpr_tools.bag.writer import BagWriter
+    from cdpr_tools.identify import bag_data
+
+    original, lossy = BagReader(friction_bag), tmp_path / "lossy"
+    counts = {experiments.TOPIC_POSE: 0, experiments.TOPIC_FORCES: 0}
+    lost = {experiments.TOPIC_POSE: set(), experiments.TOPIC_FORCES: set()}
+    with BagWriter(lossy) as writer:
+        for message in original.messages():
+            if message.topic in counts:
+                counts[message.topic] += 1
+                every = 40 if message.topic == experiments.TOPIC_POSE else 55
+                if counts[message.topic] % every == 0:
+                    lost[message.topic].add(message.msg.header.stamp.sec * 10**9 + message.msg.header.stamp.nanosec)
+                    continue
+            writer.write(message.topic, message.type, message.data, message.log_time_ns,
+                         publish_time_ns=message.publish_time_ns)
+    robot = load_robot("ipanema3_mini")
+    full = friction.load_data(original, robot)
+    with pytest.warns(UserWarning, match=r"samples of /winch/state have no sample of .* \(the recorder lost them\)"):
+        data = friction.load_data(BagReader(lossy), robot)
+    ns_full, ns = (np.rint(t * 1e9).astype(np.int64) for t in (full.t, data.t))
+    dropped = set(ns_full) - set(ns)
+    assert dropped and dropped <= lost[experiments.TOPIC_POSE] | lost[experiments.TOPIC_FORCES]
+    assert len(ns) == len(ns_full) - len(dropped)
+    keep = np.isin(ns_full, ns)
+    for name in ("theta", "thetadot", "F_s", "f_ref"):
+        np.testing.assert_array_equal(getattr(data, name), getattr(full, name)[keep], err_msg=name)
+    # beta is held until the platform moved 1 mm (wrap_angles): a lost sample can shift a refresh by a
+    # period, so the two differ by what 1 mm turns a cable of the Mini (about 1 mrad), no more
+    np.testing.assert_allclose(data.beta, full.beta[keep], rtol=0, atol=2e-3)
+
+
+def test_a_bag_of_two_graphs_is_refused(friction_bag, tmp_path):
+    """Two graphs in one ROS domain (two users) interleave their winch states: a clear error, not a fit."""
+    from cdpr_tools.bag.writer import BagWriter
+    from cdpr_tools.identify import bag_data
+
+    twice = tmp_path / "twice"
+    with BagWriter(twice) as writer:
+        for message in BagReader(friction_bag).messages():
+            for shift in (0, 1):          # the second graph's messages arrive 1 ns later, stamps alike
+                writer.write(message.topic, message.type, message.data, message.log_time_ns + shift)
+    with pytest.raises(ValueError, match="go back in time: two graphs published"):
+        bag_data.winch_state(BagReader(twice))

@@ -1,6 +1,7 @@
 """Aligned numpy series of the identification topics from a bag (header stamps = sim time)."""
 from __future__ import annotations
 
+import warnings
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,18 +46,42 @@ def _series(bag, topic: str, *fields: str) -> tuple[np.ndarray, ...]:
 
 
 def winch_state(bag, aligned: bool = True) -> WinchSeries:
-    """The winch state; ``aligned``: only the samples within the stamps of the reference forces and the
-    poses (those in the bag). A recorder subscribes to each topic at its own moment and stops
-    anywhere, so a bag of the graph starts and ends its topics a few periods apart."""
+    """The winch state; ``aligned``: only the samples whose stamps the reference forces and the
+    ground-truth poses of the bag have too (within the span of the set-points when the bag holds
+    those instead). A recorder subscribes to each topic at its own moment and stops anywhere, so a
+    bag of the graph starts and ends its topics a few periods apart; a recorder in a process of its
+    own on a busy machine also loses a message now and then (a reliable keep-last publisher drops
+    what a reader has not taken in time). Such samples are left out with a warning that counts them."""
     t, theta, thetadot, F_s = _series(bag, TOPIC_STATE, "position", "velocity", "effort")
+    ns = np.rint(t * 1e9).astype(np.int64)
+    if np.any(np.diff(ns) <= 0):
+        raise ValueError(f"the stamps of {TOPIC_STATE} go back in time: two graphs published in the recorded "
+                         "ROS domain (record in a ROS_DOMAIN_ID of your own)")
     if aligned:
-        spans = [_series(bag, TOPIC_FORCES, "f")[0]] if TOPIC_FORCES in bag.topics else []
-        spans.append(_series(bag, _pose_topic(bag), *_POSE_FIELDS)[0])
-        inside = (t >= max(s[0] for s in spans)) & (t <= min(s[-1] for s in spans))
+        others = [TOPIC_FORCES] if TOPIC_FORCES in bag.topics else []
+        pose_topic = _pose_topic(bag)
+        if pose_topic == TOPIC_POSE:
+            others.append(pose_topic)
+        inside = np.ones(len(t), dtype=bool)
+        for topic in others:
+            inside &= np.isin(ns, np.rint(_stamps(bag, topic) * 1e9).astype(np.int64))
+        if pose_topic != TOPIC_POSE:                   # x_d holds between its stamps: its span only
+            t_p = _stamps(bag, pose_topic)
+            inside &= (t >= t_p[0]) & (t <= t_p[-1])
         if not inside.any():
             raise ValueError(f"{TOPIC_STATE} and the poses and forces of the bag do not overlap in time")
+        first, last = np.flatnonzero(inside)[[0, -1]]
+        lost = int(np.count_nonzero(~inside[first:last + 1]))
+        if lost:
+            warnings.warn(f"{lost} of {last - first + 1} samples of {TOPIC_STATE} have no sample of "
+                          f"{' or '.join(others)} with their stamp (the recorder lost them): left out", stacklevel=2)
         t, theta, thetadot, F_s = t[inside], theta[inside], thetadot[inside], F_s[inside]
     return WinchSeries(t, theta, thetadot, F_s)
+
+
+def _stamps(bag, topic: str) -> np.ndarray:
+    """The header stamps [s] of ``topic`` (read with the fields the loaders read, so once per bag)."""
+    return _series(bag, topic, *(("f",) if topic == TOPIC_FORCES else _POSE_FIELDS))[0]
 
 
 def reference_forces(bag, t) -> np.ndarray:
