@@ -226,8 +226,11 @@ class GCodeInterpreterNode(CdprNode):
         self._last_setpoint: OperationalSetpoint | None = None
         self._setpoint_key, self._setpoint_body = None, {}    # see _setpoint_fields
         if self.source:
+            # adapted: _forward only reads their fields, so the source's state payload (published every
+            # period, guiding or not) is not built into a message for this node (issue 26)
             for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
-                self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
+                self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL,
+                                         adapted=True)
         self.state_jumps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         self._last_command_ns: int | None = None       # newest winch/command stamp
         self._last_state_wall = time.monotonic()
