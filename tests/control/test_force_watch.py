@@ -281,3 +281,31 @@ def test_the_ipanema3_holds_too():
     outside = ((r.f < 0.5 * c.f_min) | (r.f > 1.5 * c.f_max)).any(axis=1)
     assert outside[tripped:].sum() <= 100 and not outside[:500].any()    # (measured: 8 ms)
     assert np.all(r.f[-300:] >= c.f_min) and np.all(r.f[-300:] <= c.f_max)
+
+
+def test_compiled_and_reference_watch_trip_alike():
+    """The watch on its compiled per-cable period (kernels.force_watch_period) and on the numpy
+    reference: the same faults, in the same period, with the same message, for a force that leaves
+    the band, one that oscillates and a position error."""
+    from cdpr_control import kernels
+    c = MINI.cable
+    x_d, zero6, zero8 = MINI.home, np.zeros(6), np.zeros(MINI.m)
+    rng = np.random.default_rng(3)
+    f0 = np.full(MINI.m, 0.5 * (c.f_min + c.f_max))
+
+    def trace(forces, x_off):
+        watch, out = ForceWatch(SafetyConfig(), DT), []
+        for k, f in enumerate(forces):
+            fault = watch.update(f, c.f_min, c.f_max, x_d, zero6, zero8, f0, x_d + x_off * (k > 600))
+            out.append(None if fault is None else fault.message)
+        return out
+    band = [f0 + (k > 500) * np.eye(MINI.m)[5] * 2 * c.f_max for k in range(700)]
+    wobble = [f0 + np.sin(0.5 * k) * min(k, 500) * 0.02 * (c.f_max - c.f_min) * rng.uniform(0.9, 1.0, MINI.m)
+              for k in range(700)]
+    lag = [f0 + rng.normal(0.0, 0.01, MINI.m) for _ in range(700)]
+    for forces, x_off in ((band, 0.0), (wobble, 0.0), (lag, 0.1)):
+        compiled = trace(forces, x_off)
+        with kernels.numpy_reference():
+            reference = trace(forces, x_off)
+        assert compiled == reference
+        assert any(m is not None and m.startswith("force watch: ") for m in compiled)

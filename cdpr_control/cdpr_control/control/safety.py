@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_control import kernels
+
 FORCE_LIMIT = "force_limit"
 POSITION_LAG = "position_lag"
 FK_NOT_CONVERGED = "fk_not_converged"
@@ -205,13 +207,14 @@ class ForceWatch:
         self._outputs: tuple | None = None           # (offset, Δq_CFC, f_d) of the newest safe period
         self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
         self._clean = 0
-        self._outside: list | None = None            # per cable, periods beyond the band in a row
-        self._f_prev: list | None = None
-        self._rate: list | None = None               # per cable, filtered df/dt [N/s]
-        self._away: list | None = None               # per cable, that rate away from f_d [N/s]
-        self._bounds_key, self._bounds = None, None
+        # per cable: periods beyond the band in a row, filtered df/dt [N/s], that rate away from f_d
+        # [N/s], the last force [N] (force_watch_period's state; None until a finite period)
+        self._state: np.ndarray | None = None
+        self._out = np.empty(5)                      # force_watch_period's summary of the period
+        self._bounds_key, self._bounds, self._bounds_array = None, None, None
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
+        kernels.warm_up()                            # force_watch_period loaded now, not in the first period
 
     def configure(self, config: SafetyConfig) -> None:
         """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
@@ -226,14 +229,15 @@ class ForceWatch:
     def release(self) -> None:
         """End the hold (an operator's decision): the watch starts again from the next period."""
         self.fault = None
-        self._outside = self._f_prev = self._rate = self._away = None
+        self._state = None
         self._clean = self._periods = 0
         self._history.clear()
         self.safe = self._outputs = None
 
     def _limits(self, f_min, f_max, m: int) -> tuple:
         """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
-        while the limits' bytes repeat (the robot's, every period)."""
+        while the limits' bytes repeat (the robot's, every period); the last three as the rows of
+        :attr:`_bounds_array` (force_watch_period's bounds)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
         key = (f_min.tobytes(), f_max.tobytes(), m)
         if key != self._bounds_key:
@@ -242,6 +246,7 @@ class ForceWatch:
             self._bounds_key = key
             self._bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
                                                       self.config.max_force_rate * (f_max - f_min)))
+            self._bounds_array = np.array(self._bounds[3:])
         return self._bounds
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
@@ -253,15 +258,28 @@ class ForceWatch:
             return self.fault
         self._remember(np.array(offset, dtype=float), np.array(dq_cfc, dtype=float),
                        None if f_d is None else np.array(f_d, dtype=float))
-        values = None if f is None else _floats(f)
-        if values is None or not all_finite(values):
+        values = None if f is None else _vector(f)
+        m = 0 if values is None else len(values)
+        fresh = self._state is None or self._state.shape[1] != m     # the first period: the rate from 0
+        if values is None or (fresh and not all_finite(values)):
             self._clean = 0
             return None
-        bounds = self._limits(f_min, f_max, len(values))
-        clean = self._watch_forces(values, None if f_d is None else _floats(f_d), bounds)
+        bounds = self._limits(f_min, f_max, m)
+        if fresh:
+            self._state = np.zeros((4, m))
+            self._state[3] = values
+        targets = values if f_d is None else _vector(f_d)
+        if targets.shape != (m,):
+            raise ValueError(f"f_d needs {m} forces like f, got {targets.shape[0]}")
+        if not force_watch_period(values, targets, f_d is not None, self._bounds_array, self._state, self._alpha,
+                                  1.0 / self.dt, self._out):
+            self._clean = 0
+            return None
+        clean, longest, i_longest, worst, i_worst = self._out.tolist()
         self._periods += 1
-        self.fault = (self._band(values, bounds) or (self._oscillation(values, bounds) if self._periods > self._rate_from
-                                                     else None) or self._lag(x_d, x))
+        self.fault = (self._band(values, bounds, longest, int(i_longest))
+                      or (self._oscillation(values, bounds, worst, int(i_worst)) if self._periods > self._rate_from
+                          else None) or self._lag(x_d, x))
         self._clean = self._clean + 1 if clean else 0
         if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
             self._outputs = self._history[0]
@@ -274,48 +292,23 @@ class ForceWatch:
             self._outputs = (offset, dq_cfc, f_d)    # the first period: the robot stood there
         self._history.append((offset, dq_cfc, f_d))
 
-    def _watch_forces(self, f: list, f_d: list | None, bounds: tuple) -> bool:
-        """One period of the per-cable counters and rates, on Python floats (at 1 kHz numpy's
-        per-call cost on 8 values is more than the arithmetic) -> whether the period is clean."""
-        m = len(f)
-        lower, upper, limit = bounds[3], bounds[4], bounds[5]
-        if self._rate is None or len(self._rate) != m:
-            self._outside, self._rate, self._away, self._f_prev = [0] * m, [0.0] * m, [0.0] * m, list(f)
-        outside, rate, away, prev, alpha, inv_dt = self._outside, self._rate, self._away, self._f_prev, self._alpha, 1.0 / self.dt
-        clean = True
-        for i in range(m):
-            fi = f[i]
-            out = fi < lower[i] or fi > upper[i]
-            outside[i] = outside[i] + 1 if out else 0
-            r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
-            # towards f_d is following a set-point (a new tension level); away from it is not
-            away[i] = abs(r) if f_d is None else (r if fi > f_d[i] else -r if fi < f_d[i] else 0.0)
-            clean = clean and not out and abs(r) < 0.5 * limit[i]
-        self._f_prev = f
-        return clean
-
-    def _band(self, f: list, bounds: tuple) -> Fault | None:
-        """A cable beyond [f_min - tol, f_max + tol] for longer than force_limit_time."""
-        longest = max(self._outside)
+    def _band(self, f: np.ndarray, bounds: tuple, longest: float, i: int) -> Fault | None:
+        """Cable i beyond [f_min - tol, f_max + tol] for ``longest`` periods (the longest run),
+        longer than force_limit_time."""
         if longest <= self._limit_periods:
             return None
         f_min, f_max, tol, lower = bounds[:4]
-        i = self._outside.index(longest)
         side = f"below f_min {f_min[i]:.1f} N" if f[i] < lower[i] else f"above f_max {f_max[i]:.1f} N"
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
                      f"for {1e3 * longest * self.dt:.0f} ms (limit {1e3 * self.config.force_limit_time:.0f} ms)", True)
 
-    def _oscillation(self, f: list, bounds: tuple) -> Fault | None:
-        """The filtered force rate away from f_d (any direction without f_d) beyond max_force_rate
-        force ranges per second."""
-        limit = bounds[5]
-        excess = [a / lim for a, lim in zip(self._away, limit)]
-        worst = max(excess)
+    def _oscillation(self, f: np.ndarray, bounds: tuple, worst: float, i: int) -> Fault | None:
+        """The filtered force rate away from f_d (any direction without f_d) of cable i, ``worst``
+        times max_force_rate force ranges per second (the largest), beyond it."""
         if worst <= 1.0:
             return None
-        i = excess.index(worst)
-        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._rate[i]):.0f} N/s beyond "
-                     f"{limit[i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._state[1, i]):.0f} N/s beyond "
+                     f"{bounds[5][i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
 
     def _lag(self, x_d, x) -> Fault | None:
         if x_d is None or x is None:
@@ -325,3 +318,43 @@ class ForceWatch:
             return None
         return Fault(FORCE_WATCH, f"force watch: position error {1e3 * dr:.1f} mm beyond "
                      f"{1e3 * self.config.max_position_lag:.1f} mm", True)
+
+
+def _vector(values) -> np.ndarray:
+    """values as force_watch_period takes them: a flat C-contiguous float64 array (kernels.vector)."""
+    v = kernels.vector(values)
+    return v if v.ndim == 1 else v.ravel()
+
+
+def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out) -> bool:
+    """One period of :class:`ForceWatch`'s per-cable counters and rates on Python floats (at 1 kHz
+    numpy's per-call cost on 8 values is more than the arithmetic), the reference of its compiled
+    twin: f (m,) the measured forces [N]; f_d (m,) their set-point, read when has_f_d (then only a
+    rate away from it counts: a force that follows a new set-point moves towards it; else any
+    rate); bounds (3, m) per cable the band's lower and upper edge [N] and the rate limit [N/s];
+    state (4, m) per cable the periods beyond the band in a row, the filtered df/dt (PT1 of alpha,
+    inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s] and the last f [N], updated in place;
+    out (5,) <- (clean: every force within the band and every rate below half its limit, the
+    longest run beyond the band, its cable, the largest rate away from f_d in limits, its cable; the
+    first cable of equal ones) -> whether f is finite (else nothing is changed)."""
+    values = f.tolist()
+    if not all_finite(values):
+        return False
+    lower, upper, limit = bounds.tolist()
+    outside, rate, away, prev = state.tolist()
+    targets = f_d.tolist()
+    clean = True
+    for i, fi in enumerate(values):
+        out_i = fi < lower[i] or fi > upper[i]
+        outside[i] = outside[i] + 1.0 if out_i else 0.0
+        r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
+        away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
+        clean = clean and not out_i and abs(r) < 0.5 * limit[i]
+    excess = [a / lim for a, lim in zip(away, limit)]
+    longest, worst = max(outside), max(excess)
+    state[:] = (outside, rate, away, values)
+    out[:] = (clean, longest, outside.index(longest), worst, excess.index(worst))
+    return True
+
+
+force_watch_period = kernels.law("force_watch_period", _force_watch_period, kernels.force_watch_period)

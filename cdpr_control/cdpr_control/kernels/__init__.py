@@ -6,7 +6,8 @@ overhead. This package holds the numeric cores of one period compiled with numba
 kinematics of one pose with pulleys (2.3)-(2.10), the elastic forward kinematics with frozen pulleys
 (3.7)-(3.9), the platform wrench w_dyn (2.33), the Dahl friction step (3.43)-(3.44), the Smith
 predictor of the wrench set-point (3.24)-(3.26), the PI arithmetic (3.16)/(3.19), the whole CFC
-period (3.19)-(3.23) and the joint command's period (5.10); for the simulator, the pulley friction to
+period (3.19)-(3.23), the joint command's period (5.10) and the force watch's per-cable period
+(control.safety.ForceWatch); for the simulator, the pulley friction to
 the force sensors (3.43)-(3.44) (:mod:`.friction`). The control flow and the state stay in the stage
 classes (and the simulator's models), which call the functions below at their call sites.
 
@@ -35,6 +36,7 @@ from cdpr_control.model import dynamics as np_dynamics
 from cdpr_control.model import kinematics as np_kinematics
 from cdpr_control.kernels.control import CFC_CONSTANTS, cfc_constants
 from cdpr_control.kernels.control import cfc_period as _cfc_period
+from cdpr_control.kernels.control import force_watch_period
 from cdpr_control.kernels.control import pi_update as _pi_update
 from cdpr_control.kernels.control import widened_saturation_kernel
 from cdpr_control.kernels.friction import friction_platform_force, friction_sensor_force
@@ -53,7 +55,7 @@ ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
            "cfc_constants", "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
-           "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
+           "force_watch_period", "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
            "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
            "vector", "warm_up"]
 
@@ -220,6 +222,7 @@ def warm_up(robot=None) -> None:
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
         compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, cfc_constants(**dict.fromkeys(CFC_CONSTANTS.names, 1.0)))
+        force_watch_period(f, f, True, np.ones((3, 8)), np.zeros((4, 8)), 0.5, 1e3, np.empty(5))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return

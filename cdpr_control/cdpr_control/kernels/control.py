@@ -85,3 +85,38 @@ def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, c
             k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
         out[2, i] = f_out
         out[3, i] = f_out / k - dq_0[i]                                # (3.23)
+
+
+@njit(error_model="numpy")
+def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out):
+    """One period of the force watch's per-cable counters and rates, the twin of
+    control.safety.force_watch_period (see there for the arguments) -> whether f is finite."""
+    m = f.shape[0]
+    for i in range(m):
+        if not np.isfinite(f[i]):
+            return False
+    clean, longest, i_longest, worst, i_worst = True, -1.0, 0, -np.inf, 0
+    for i in range(m):
+        fi = f[i]
+        outside = fi < bounds[0, i] or fi > bounds[1, i]
+        state[0, i] = state[0, i] + 1.0 if outside else 0.0
+        r = state[1, i] + alpha * ((fi - state[3, i]) * inv_dt - state[1, i])
+        state[1, i] = r
+        if not has_f_d:
+            away = abs(r)
+        elif fi > f_d[i]:
+            away = r
+        elif fi < f_d[i]:
+            away = -r
+        else:
+            away = 0.0
+        state[2, i] = away
+        state[3, i] = fi
+        clean = clean and not outside and abs(r) < 0.5 * bounds[2, i]
+        if state[0, i] > longest:
+            longest, i_longest = state[0, i], i
+        excess = away / bounds[2, i]
+        if excess > worst:
+            worst, i_worst = excess, i
+    out[0], out[1], out[2], out[3], out[4] = clean, longest, i_longest, worst, i_worst
+    return True
