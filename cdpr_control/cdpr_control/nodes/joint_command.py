@@ -216,11 +216,12 @@ class JointCommandNode(CdprNode):
         samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
             if force_control else {}
         offset, offset_faults = self.offsets.update(t_ns * 1e-9, samples)
-        faults = self._faults(t_ns, x_d) + offset_faults
+        x = self._estimated_pose()
+        faults = self._faults(t_ns, x_d, x) + offset_faults
         cfc = msgs["cfc"]
         s_cfc = self.blend_cfc.update(force_control and cfc.enabled)
         dq_cfc = s_cfc * np.asarray(cfc._output)
-        forces = self._watch(x_d, offset, dq_cfc, faults)
+        forces = self._watch(x_d, offset, dq_cfc, faults, x)
         hold = any(f.holds for f in faults)
         theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold, safe=self.watch.safe if self.watch.fault else None,
                                       f=forces)                          # IK only at s_cfc = 0
@@ -228,15 +229,16 @@ class JointCommandNode(CdprNode):
         self._last_cycle_ns = max(self._last_cycle_ns, t_ns)
         self._publish(t_ns, theta_d, faults, hold)
 
-    def _watch(self, x_d, offset, dq_cfc, faults: list):
-        """One period of the force watch (x_d None: a period without a set-point, forces only);
-        its fault first in ``faults`` (the report names it) -> the measured forces (or None)."""
-        f_msg, fd_msg, x_msg = self.latest.get("f"), self.latest.get("fd"), self.latest.get("x")
+    def _watch(self, x_d, offset, dq_cfc, faults: list, x=None):
+        """One period of the force watch (x_d None: a period without a set-point, forces only), x the
+        estimated pose (:meth:`_estimated_pose`); its fault first in ``faults`` (the report names it)
+        -> the measured forces (or None)."""
+        f_msg, fd_msg = self.latest.get("f"), self.latest.get("fd")
         f = None if f_msg is None else np.asarray(f_msg.f)
         f_d = None if fd_msg is None or len(fd_msg.f_d) != self.robot.m else np.asarray(fd_msg.f_d)
         # the position error only while no other fault holds: braking for one, the robot lags the
         # set-point by design
-        x = None if x_msg is None or x_d is None or braking(faults) else pose_from_msg(x_msg.pose)
+        x = None if x_d is None or braking(faults) else x
         c = self.robot.cable
         if x_d is None:
             tripped = self.watch.fault
@@ -264,7 +266,7 @@ class JointCommandNode(CdprNode):
             return                                   # (this period has its command already)
         self._last_cycle_ns = t_ns
         moving = bool(self.command.velocity.any())
-        faults = self._faults(t_ns, None)
+        faults = self._faults(t_ns, None, self._estimated_pose())
         forces = self._watch(None, None, None, faults)
         theta_d = self.command.update(None, hold=True, safe=self.watch.safe if self.watch.fault else None, f=forces)
         self._publish(t_ns, theta_d, faults, True,
@@ -292,10 +294,15 @@ class JointCommandNode(CdprNode):
             return None
         return OffsetSample(stamp_ns(msg) * 1e-9, True, np.asarray(msg._output))
 
-    def _faults(self, t_ns: int, x_d):
-        f_msg, fk, x_msg = self.latest.get("f"), self.latest.get("fk"), self.latest.get("x")
+    def _estimated_pose(self):
+        """The forward kinematics' pose of the period (None before the first), converted once for
+        the safety monitor and the force watch."""
+        x_msg = self.latest.get("x")
+        return None if x_msg is None else pose_from_msg(x_msg.pose)
+
+    def _faults(self, t_ns: int, x_d, x):
+        f_msg, fk = self.latest.get("f"), self.latest.get("fk")
         now = t_ns * 1e-9
-        x = None if x_msg is None else pose_from_msg(x_msg.pose)
         c = self.robot.cable
         faults = self.monitor.check(
             now, f=None if f_msg is None else np.asarray(f_msg.f), f_min=c.f_min, f_max=c.f_max,
