@@ -91,6 +91,22 @@ def test_a_held_or_diverged_run_fails_with_its_reason(monkeypatch, hold_at, dive
         assert result.note == ""
 
 
+def test_a_run_the_loop_held_is_not_measured(monkeypatch):
+    """A run held by a fault of the loop other than the force watch (ipanema3 #38, ik_lc: the
+    forward kinematics not converging at 2.32 s) is held, and its estimate and sag, those of the
+    held command, are not measured (before, they were: its 25.5 % was the sweep's worst estimate)."""
+    robot = load_robot("ipanema3_mini")
+    rec, m_c, ok, hold = _stand_in(robot)
+    rec.held = "held at 2.323 s: fk_not_converged: forward kinematics did not converge"
+    monkeypatch.setattr(cases, "_payload_run", lambda *a: (rec, m_c + 1.0, ok, hold))
+    spec = CaseSpec("payload", "ipanema3_mini", 0, list(robot.home), False, "nominal", 0,
+                    {"fraction": 0.25, "controller": "ik_lc"})
+    result = cases._payload_result(spec, robot, 2.0, {}, -2.0, "")
+    assert result.status == "held" and "fk_not_converged" in result.note
+    for metric in ("estimate_error_percent", "sag_mm", "sag_cut_percent"):
+        assert np.isnan(result.metrics[metric])
+
+
 def _rest_run(robot, forces, dip=None):
     """A reference recorder at rest through the unloaded rest with the cable forces ``forces``
     (m,), and ``dip`` (cable, force) for 60 ms after 0.1 s."""

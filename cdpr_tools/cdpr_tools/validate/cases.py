@@ -524,7 +524,9 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
     rec, m_c, ok, held = _payload_run(spec, robot, spec.variant["controller"], mass)
     after = rec.array("t") >= PAYLOAD_REST + 1.0
     f = rec.array("f")
-    usable = ok and held is None
+    # held by the force watch or by any other holding fault of the loop (the forward kinematics
+    # not converging, a pose lag): what follows is the held command's, not the controller's
+    usable = ok and held is None and rec.held is None
     sag = 1e3 * _sag(rec) if usable else float("nan")
     metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if usable
                else float("nan"), "sag_reference_mm": sag_reference, "sag_mm": sag,
