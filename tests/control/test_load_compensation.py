@@ -320,6 +320,27 @@ def test_payload_steps_at_standstill_sag_cut_by_90_percent_up_to_128_kg():
     assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
 
 
+@pytest.mark.parametrize("plant, cut", [("mismatched", 0.85), ("nominal", 0.90)])
+def test_shipped_settlement_model_cuts_the_ik_lc_sag_on_both_plants(plant, cut):
+    """The IPAnema 3's shipped load compensation (its settlement model, ratio 0.15 from the thesis'
+    9.2 mm, params/ipanema3.yaml) under IK-only at home with 40.4 kg (the sweep's pose #0 at 25 %
+    of its dynamic capacity): the sag cut is within issue 25's band on the settling mismatched
+    plant (seed 1; without the model 81 %) and on the nominal plant, which does not settle (the
+    model over-compensates there, by less than the band)."""
+    from cdpr_control.control.params import shipped_configuration
+
+    shipped = shipped_configuration(IPANEMA3).load_compensation
+    assert shipped.settlement_ratio > 0.0
+    kwargs = dict(step_mass=40.4, steps=1, dwell=4.0, ramp=0.3, down=False, plant=plant)
+    _, s_ik = _steps(IPANEMA3, "ik", IPANEMA3.home[:3], **kwargs)
+    lc, s_lc = _steps(IPANEMA3, "ik_lc", IPANEMA3.home[:3], lc_params=shipped, **kwargs)
+    sag_ik = s_ik["steps"][0]["z_error_mm"] - s_ik["unloaded_z_error_mm"]
+    sag_lc = s_lc["steps"][0]["z_error_mm"] - s_lc["unloaded_z_error_mm"]
+    assert sag_ik < -15.0                                   # the platform sinks by about 21-26 mm
+    assert abs(sag_lc) <= (1.0 - cut) * abs(sag_ik), (sag_ik, sag_lc)
+    assert np.all(np.isfinite(lc.theta_d)) and np.all(np.isfinite(lc.x_lc))
+
+
 @pytest.mark.parametrize("robot, position, step_mass", [(IPANEMA3, (-1.0, -1.0, 0.5), 32.0),
                                                         (MINI, (0.0, 0.0, 0.0), 1.0)])
 def test_estimate_within_3_percent_1s_after_each_step_on_the_mismatched_plant(robot, position, step_mass):
