@@ -48,11 +48,16 @@ PARAMS = [
 ]
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return [*PARAMS, *calibration_params(robot.m)]
+
+
 class ForwardKinematicsNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("forward_kinematics", **kwargs)
         self.estimator = PoseEstimator(self.robot)
-        self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m),
+        self.params = ParameterSet(self, parameters(self.robot),
                                    lambda v: startup_calibration(self.robot, v), self._apply)
         self.estimator.calibration = startup_calibration(self.robot, self.params.values)
         self._x_d_key, self._x_d = None, (None, False)   # (x_d, finite) of the last set-point pose

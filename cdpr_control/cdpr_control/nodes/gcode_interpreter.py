@@ -98,6 +98,11 @@ PARAMS = [
               range=(1e-2, 600.0)),
 ]
 
+
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
+
 SOURCE_START_TOLERANCE = 1e-3   # m, rad: a source must take over at the held set-point (no jump)
 
 _STATUS = {
@@ -200,7 +205,7 @@ class GCodeInterpreterNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("gcode_interpreter", **kwargs)
         self.limits = Limits()
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.frame_id = self.params.values["frame_id"]
         self.q = np.r_[self.robot.home, np.zeros(3)]  # held set-point [x (6), F_d,0 (3)]
         self.xd = np.zeros(6)

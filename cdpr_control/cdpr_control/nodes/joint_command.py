@@ -54,7 +54,7 @@ from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fa
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
-from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampJumps, StampSync, input_problem, stamp_ns
 
@@ -110,6 +110,12 @@ PARAMS = [
 ]
 
 
+def parameters(robot, offset_inputs=OFFSET_INPUTS.default) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md), with the offsets.<name>.*
+    of these offset inputs."""
+    return [*PARAMS, OFFSET_INPUTS, *(spec for name in offset_inputs for spec in offset_params(name))]
+
+
 class JointCommandNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("joint_command", **kwargs)
@@ -118,13 +124,11 @@ class JointCommandNode(CdprNode):
         self.blend_cfc = Blend(0.0, self.dt)        # bumpless transfer of Δq_CFC (offsets: self.offsets)
         self.monitor = SafetyMonitor()
         self.watch = ForceWatch(SafetyConfig(), self.dt)
-        self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
-        names = list(self.get_parameter(OFFSET_INPUTS.name).value)
+        names = list(declare(self, OFFSET_INPUTS))
         self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
         self.offset_keys = [(name, f"offset:{name}") for name in names]     # (their input names)
-        specs = PARAMS + [spec for name in names for spec in offset_params(name)]
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
-        self.params = ParameterSet(self, specs, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot, names), self._validate, self._apply)
         self.latest: dict[str, object] = {}
         self.input_times: dict[str, float] = {}      # stamp [s] of each watched topic's message in latest
         self.infeasible = 0                          # periods in a row without a feasible f_d

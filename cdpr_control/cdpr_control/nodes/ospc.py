@@ -21,13 +21,14 @@ from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+from cdpr_control.control.params import section
 from cdpr_control.control.safety import all_finite
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
 from cdpr_control.ros.mode import follow_mode
-from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
@@ -43,6 +44,11 @@ FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller wh
                              "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return [*PARAMS, FORCE_CONTROLLER]
+
+
 class OSPCNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("ospc", **kwargs)
@@ -53,11 +59,10 @@ class OSPCNode(CdprNode):
         # x_d of the last set-point pose, its list and whether it is finite: held while the pose
         # repeats (holding, a pause), as the numbers of the same pose are the same
         self._x_d_key, self._x_d = None, (None, None, False)
-        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
-        force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        force_controller = declare(self, FORCE_CONTROLLER)
         self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
         self._live = False                          # (the start-up set is not analysed: see _validate)
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self._live = True
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
         follow_mode(self, self._on_mode)
@@ -67,13 +72,8 @@ class OSPCNode(CdprNode):
         self.sync = StampSync(self, inputs, primary="pose", callback=self._cycle, mode=self.sync_mode,
                               optional=("hpfc",) if force_controller else ())
 
-    @staticmethod
-    def _ospc_params(v: dict) -> OSPCParams:
-        return OSPCParams(K_p=np.array(v["K_p"], dtype=float), T_i=np.array(v["T_i"], dtype=float),
-                          x_sat=np.array(v["x_sat"], dtype=float))
-
     def _validate(self, v: dict) -> None:
-        params = self._ospc_params(v)
+        params = section(OSPCParams, v)
         params.validate()
         # live changes only: the analysis (python-control, 0.1-0.3 s) would delay the node's start
         # and the lockstep graph's first periods; the shipped sets are stable (tests/nodes/test_stability_refusal.py)
@@ -92,7 +92,7 @@ class OSPCNode(CdprNode):
         return self._instabilities[key]
 
     def _apply(self, v: dict) -> None:
-        params = self._ospc_params(v)
+        params = section(OSPCParams, v)
         if self.controller is None:
             self.controller = OperationalSpacePositionController(params, self.dt)
         else:

@@ -64,7 +64,8 @@ MAX_CATCH_UP = 20          # periods one free-running timer tick may advance
 LATENCY_WINDOW = 1000      # free running: published states awaiting their command, at most
 
 
-def _specs(robot) -> list[ParamSpec]:
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
     tool_radius, tool_offset = default_tool(np.asarray(robot.b))
     return [
         ParamSpec("substeps", 1, "physics steps per control period (period / substeps <= 1 ms)", (1, 1000), read_only=True),
@@ -123,7 +124,7 @@ class WinchPlatformSimNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("winch_platform_sim", **kwargs)
         robot = self.robot
-        self.params = ParameterSet(self, _specs(robot), _validate, self._apply)
+        self.params = ParameterSet(self, parameters(robot), _validate, self._apply)
         self.sim = self._build_simulator(self.params.values)
         self.names = [f"cable_{i + 1}" for i in range(robot.m)]
         self.period_ns = int(round(self.dt * 1e9))
