@@ -103,3 +103,18 @@ def test_a_node_declares_exactly_its_list(node, cls_name, overrides):
             instance.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_the_loop_takes_T_MA_from_the_cable_force_controller_like_the_graph(monkeypatch):
+    """The CFC node's T_MA (its input's moving average under hybrid force control, 5.1.2) was
+    ignored by control_loop_params, which kept HPFCParams' default: equal only while the files
+    said 2.0 s."""
+    from cdpr_control.control import params
+
+    file = {"cable_force_controller": {"T_MA": 3.5}, "hybrid_force_controller": {"K_p": 1000.0}}
+    monkeypatch.setattr(params, "load_params_file", lambda name: file)
+    loop = params.control_loop_params("ipanema3_mini")
+    assert loop.hpfc.T_MA == 3.5 and loop.hpfc.K_p == 1000.0
+    del file["hybrid_force_controller"]          # no hybrid force control in the loop: nothing to set
+    assert params.control_loop_params("ipanema3_mini").hpfc is None
+    assert stage_field("cable_force_controller", "T_MA") == "hpfc.T_MA"

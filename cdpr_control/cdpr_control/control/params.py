@@ -38,8 +38,11 @@ STAGES = {
     "friction_compensation": ("friction", FrictionCompensationParams),
     "joint_command": ("safety", SafetyConfig),
 }
-# node parameters that are loop switches rather than dataclass fields
+# node parameters that are loop switches rather than fields of their node's dataclass ("stage.field":
+# a field of another stage's, set when that stage is in the loop)
 SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enabled"): "ospc_enabled",
+            # T_MA,HPFC filters the CFC's input (5.1.2): the CFC node's parameter
+            ("cable_force_controller", "T_MA"): "hpfc.T_MA",
             ("joint_command", "mode"): "mode", ("joint_command", "start_ramp"): "start_ramp",
             # the start-up calibration window of forward_kinematics and cable_force_controller
             ("/**", "calibration_window"): "calibration_window"}
@@ -107,8 +110,17 @@ def control_loop_params(robot, **switches) -> ControlLoopParams:
             loop = replace(loop, **{attr: section(cls, values)})
         for key, value in values.items():
             if (node, key) in SWITCHES:
-                loop = replace(loop, **{SWITCHES[node, key]: value})
+                loop = _set(loop, SWITCHES[node, key], value)
     return replace(loop, **switches)
+
+
+def _set(loop: ControlLoopParams, field: str, value) -> ControlLoopParams:
+    """loop with the switch or the "stage.field" set (a stage not in the loop: unchanged)."""
+    attr, _, name = field.rpartition(".")
+    if not attr:
+        return replace(loop, **{name: value})
+    stage = getattr(loop, attr)
+    return loop if stage is None else replace(loop, **{attr: replace(stage, **{name: value})})
 
 
 @dataclass
