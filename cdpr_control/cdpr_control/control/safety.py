@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_control.model.memo import Memo
+
 FORCE_LIMIT = "force_limit"
 POSITION_LAG = "position_lag"
 FK_NOT_CONVERGED = "fk_not_converged"
@@ -112,12 +114,18 @@ class Fault:
     holds: bool
 
 
+def _extreme_limits(f_min: np.ndarray, f_max: np.ndarray) -> tuple:
+    """(max f_min, min f_max) of float64 limits, (None, None) for others or empty ones."""
+    if f_min.dtype != _F64 or f_max.dtype != _F64:
+        return None, None
+    return max(f_min.ravel().tolist(), default=None), min(f_max.ravel().tolist(), default=None)
+
+
 class SafetyMonitor:
     def __init__(self, config: SafetyConfig | None = None):
         self.config = config or SafetyConfig()
         self.config.validate()
-        self._limits_key: tuple | None = None     # the raw bytes and dtypes of the last f_min, f_max
-        self._limits = (None, None)               # their max f_min, min f_max (None: not float64, or empty)
+        self._limits = Memo()    # max f_min, min f_max of the last limits' bytes and dtypes (None: not float64, or empty)
 
     def _inside(self, f: list, f_min, f_max, tolerance: float) -> bool:
         """:func:`_inside` with max f_min and min f_max kept while the limits' bytes repeat (the
@@ -127,11 +135,7 @@ class SafetyMonitor:
             return True
         if type(f_min) is np.ndarray and type(f_max) is np.ndarray:
             key = (f_min.tobytes(), f_max.tobytes(), f_min.dtype, f_max.dtype)
-            if key != self._limits_key:
-                self._limits_key = key
-                self._limits = (max(f_min.ravel().tolist(), default=None), min(f_max.ravel().tolist(), default=None)) \
-                    if f_min.dtype == _F64 and f_max.dtype == _F64 else (None, None)
-            lo, hi = self._limits
+            lo, hi = self._limits(key, _extreme_limits, f_min, f_max)
             if lo is not None and hi is not None:
                 return min(f) >= lo - tolerance and max(f) <= hi + tolerance
         return _inside(f, f_min, f_max, tolerance)
@@ -209,7 +213,7 @@ class ForceWatch:
         self._f_prev: list | None = None
         self._rate: list | None = None               # per cable, filtered df/dt [N/s]
         self._away: list | None = None               # per cable, that rate away from f_d [N/s]
-        self._bounds_key, self._bounds = None, None
+        self._bounds = Memo()    # _limits of the last limits' bytes (the configuration: cleared by configure)
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
 
@@ -221,7 +225,7 @@ class ForceWatch:
         self._rate_from = int(round(config.rate_watch_delay / self.dt))
         self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
         self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
-        self._bounds_key = None
+        self._bounds.clear()
 
     def release(self) -> None:
         """End the hold (an operator's decision): the watch starts again from the next period."""
@@ -235,14 +239,13 @@ class ForceWatch:
         """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
         while the limits' bytes repeat (the robot's, every period)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
-        key = (f_min.tobytes(), f_max.tobytes(), m)
-        if key != self._bounds_key:
-            f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
-            tol = self.config.force_band * (f_max - f_min)
-            self._bounds_key = key
-            self._bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
-                                                      self.config.max_force_rate * (f_max - f_min)))
-        return self._bounds
+        return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
+
+    def _bands(self, f_min, f_max, m: int) -> tuple:
+        f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
+        tol = self.config.force_band * (f_max - f_min)
+        return tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
+                                          self.config.max_force_rate * (f_max - f_min)))
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
         """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the

@@ -45,6 +45,7 @@ from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import parse_state
 from cdpr_control.control.params import section
+from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
@@ -102,7 +103,6 @@ class ForceDistributionNode(CdprNode):
         self.publisher = self.create_publisher(ForceDistribution, "force_distribution", CONTROL)
         self.create_service(SetTensionLevel, "force_distribution/set_tension_level", self._on_set_tension_level)
         force_controller = self.params.values[FORCE_CONTROLLER.name]
-        self._controller, self._state = None, None   # the hybrid force controller's last controller field, its state
         guiding_controller = self.params.values[GUIDING_CONTROLLER.name]
         self._w_user = None     # the user's wrench of the last period's admittance state (_user_wrench)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
@@ -114,8 +114,7 @@ class ForceDistributionNode(CdprNode):
             inputs["guide"] = (ControllerState, f"{guiding_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
                               optional=tuple(n for n in ("payload", "hpfc", "guide") if n in inputs))
-        self._setpoint_key: bytes | None = None     # the raw values of the last set-point (its _arrays)
-        self._arrays: tuple = ()                     # its (x_d, ẋ_d, ẍ_d)
+        self._arrays = Memo()    # (x_d, ẋ_d, ẍ_d) of the last set-point's raw values (to the kernels: writeable)
 
     def _validate(self, v: dict) -> None:
         p = section(ForceSetpointParams, v)
@@ -150,17 +149,13 @@ class ForceDistributionNode(CdprNode):
         v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
         key = _SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
                             a._x, a._y, a._z, al._x, al._y, al._z)
-        if key != self._setpoint_key:
-            self._setpoint_key = key
-            self._arrays = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
-        return self._arrays
+        return self._arrays(key, _setpoint_arrays, pose, velocity, acceleration)
 
-    def _contact(self, hpfc) -> tuple:
+    @staticmethod
+    def _contact(hpfc) -> tuple:
         """(state letter, F_d,0, F_vec) of the hybrid force controller's state message."""
-        controller = hpfc.controller
-        if controller != self._controller:   # the state letter changes rarely: parsed on a change
-            self._controller, self._state = controller, parse_state(controller)
-        return self._state, np.asarray(hpfc.reference[:3], dtype=float), np.asarray(hpfc.feedback[:3], dtype=float)
+        return (parse_state(hpfc.controller), np.asarray(hpfc.reference[:3], dtype=float),
+                np.asarray(hpfc.feedback[:3], dtype=float))
 
     def _user_wrench(self, guide) -> np.ndarray | None:
         """w_Adm of the admittance controller's state while it guides, else None (a feedback that is
@@ -202,6 +197,10 @@ class ForceDistributionNode(CdprNode):
             f_max=res.f_max, w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
             max_violation=max_violation, residual=float(res.residual), iterations=int(res.iterations),
             solve_time=float(res.solve_time))
+
+
+def _setpoint_arrays(pose, velocity, acceleration) -> tuple:
+    return pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
 
 
 def main(args=None):

@@ -23,6 +23,7 @@ from cdpr_control.control.friction_compensation import FrictionCompensation, Fri
 from cdpr_control import kernels
 from cdpr_control.control.params import section
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
@@ -54,7 +55,7 @@ class FrictionCompensationNode(CdprNode):
         # the last two winch commands as they came, (t, θ_d) (None before them): θ̇_d is their
         # difference quotient, computed in the periods that use it (velocity_source desired)
         self._commands: tuple = (None, None)
-        self._beta_key, self._beta = None, None     # β_np of the last set-point pose, held while it repeats
+        self._beta = Memo()     # β_np of the last set-point pose, held while it repeats (to the kernels: writeable)
         self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
         self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
@@ -95,11 +96,12 @@ class FrictionCompensationNode(CdprNode):
         """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
         never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
         pose_bytes = pose_key(pose)
-        key = (pose_bytes, kernels.ENABLED)      # (the flavour computed it: a switch recomputes)
-        if pose_bytes is None or key != self._beta_key:
-            self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
-            self._beta_key = key
-        return self._beta
+        key = None if pose_bytes is None else (pose_bytes, kernels.ENABLED)   # (a flavour switch recomputes)
+        return self._beta(key, self._wrap_angles_of, pose)
+
+    def _wrap_angles_of(self, pose) -> np.ndarray:
+        beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
+        return beta
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]

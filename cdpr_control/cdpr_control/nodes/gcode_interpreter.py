@@ -62,6 +62,7 @@ from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError, ParameterCommand
 from cdpr_control.motion.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
 from cdpr_control.model.kinematics import twist_from_pose_rates
+from cdpr_control.model.memo import Memo
 from cdpr_control.motion.program_check import check_program
 from cdpr_control.ros.message_builders import builder
 
@@ -229,7 +230,7 @@ class GCodeInterpreterNode(CdprNode):
         self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
         self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
         self._last_setpoint: OperationalSetpoint | None = None
-        self._setpoint_key, self._setpoint_body = None, {}    # see _setpoint_fields
+        self._setpoint_body = Memo()     # see _setpoint_fields
         if self.source:
             for key, msg_type in (("state", ControllerState), ("setpoint", OperationalSetpoint)):
                 self.create_subscription(msg_type, f"{self.source}/{key}", self._on_source(key), CONTROL)
@@ -523,14 +524,8 @@ class GCodeInterpreterNode(CdprNode):
         """The set-point's pose, twist, acceleration, force and line. While they do not change
         (holding a pose, a dwell) the messages of the last period are used again (subscribers do not
         modify what they receive), which spares the conversions."""
-        key = (self.q.tobytes(), self.xd.tobytes(), self.xdd.tobytes(), self.line)
-        if key != self._setpoint_key:
-            twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
-            self._setpoint_key = key
-            self._setpoint_body = dict(pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
-                                       acceleration=accel_to_msg(accel), force=vector3(self.q[6:]),
-                                       line=int(self.line))
-        return self._setpoint_body
+        q, xd, xdd, line = self.q, self.xd, self.xdd, self.line
+        return self._setpoint_body((q.tobytes(), xd.tobytes(), xdd.tobytes(), line), _setpoint_body, q, xd, xdd, line)
 
     def _publish_status(self, stamp: int, force: bool = False) -> None:
         active = self.active
@@ -559,6 +554,12 @@ class GCodeInterpreterNode(CdprNode):
     def destroy_node(self):
         self.action_server.destroy()
         return super().destroy_node()
+
+
+def _setpoint_body(q, xd, xdd, line) -> dict:
+    twist, accel = twist_from_pose_rates(q[:6], xd, xdd)
+    return dict(pose=pose_to_msg(q[:6]), velocity=twist_to_msg(twist), acceleration=accel_to_msg(accel),
+                force=vector3(q[6:]), line=int(line))
 
 
 def main(args=None):

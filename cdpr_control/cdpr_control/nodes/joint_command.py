@@ -51,6 +51,7 @@ from cdpr_control.control.joint_command import A_BRAKE, JointCommand
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
                                           SafetyMonitor, braking)
+from cdpr_control.model.memo import Memo
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
@@ -134,7 +135,7 @@ class JointCommandNode(CdprNode):
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
         self._last_cycle_ns = -1                     # stamp of the newest period commanded
-        self._x_d_key, self._x_d = None, None        # x_d of the last set-point pose (held while it repeats)
+        self._x_d = Memo()       # x_d of the last set-point pose, held while it repeats (to the IK kernel: writeable)
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -253,10 +254,7 @@ class JointCommandNode(CdprNode):
     def _setpoint_pose(self, pose) -> np.ndarray:
         """x_d of the set-point's pose; the array of the last period again (read, never written) when
         the pose repeats (holding, a pause)."""
-        key = pose_key(pose)
-        if key is None or key != self._x_d_key:
-            self._x_d_key, self._x_d = key, pose_from_msg(pose)
-        return self._x_d
+        return self._x_d(pose_key(pose), pose_from_msg, pose)
 
     def _hold_cycle(self, t_ns: int) -> None:
         """A period whose required input is stale (its producer stopped): brake on the path, so that

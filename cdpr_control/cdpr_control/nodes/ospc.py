@@ -23,6 +23,7 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_st
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.params import section
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
 
 from cdpr_control.ros.base import CdprNode, spin_node
@@ -56,9 +57,9 @@ class OSPCNode(CdprNode):
         self.enabled = True
         self.precondition: str | None = None
         self.names = list(AXES)                     # shared by the published messages (never modified)
-        # x_d of the last set-point pose, its list and whether it is finite: held while the pose
-        # repeats (holding, a pause), as the numbers of the same pose are the same
-        self._x_d_key, self._x_d = None, (None, None, False)
+        # x_d of the last set-point pose (read-only), its list and whether it is finite: held while
+        # the pose repeats (holding, a pause), as the numbers of the same pose are the same
+        self._x_d = Memo(read_only=True)
         force_controller = declare(self, FORCE_CONTROLLER)
         self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
         self._live = False                          # (the start-up set is not analysed: see _validate)
@@ -111,12 +112,7 @@ class OSPCNode(CdprNode):
     def _setpoint(self, pose) -> tuple[np.ndarray, list, bool]:
         """(x_d, x_d as a list, whether it is finite) of the set-point's pose; the same objects again
         (read, never written) while the pose repeats."""
-        key = pose_key(pose)
-        if key is None or key != self._x_d_key:
-            x_d = pose_from_msg(pose)
-            reference = x_d.tolist()
-            self._x_d_key, self._x_d = key, (x_d, reference, all_finite(reference))
-        return self._x_d
+        return self._x_d(pose_key(pose), _reference, pose)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d, reference, reference_finite = self._setpoint(msgs["setpoint"].pose)
@@ -141,6 +137,12 @@ class OSPCNode(CdprNode):
         self.publisher.publish(self.message_factory(ControllerState)(
             header=self.header(t_ns), controller="ospc", enabled=self.enabled, names=self.names,
             reference=reference, feedback=feedback, error=[a - b for a, b in zip(reference, feedback)], **output))
+
+
+def _reference(pose) -> tuple[np.ndarray, list, bool]:
+    x_d = pose_from_msg(pose)
+    reference = x_d.tolist()
+    return x_d, reference, all_finite(reference)
 
 
 def main(args=None):
