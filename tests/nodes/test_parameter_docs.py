@@ -118,3 +118,39 @@ def test_the_loop_takes_T_MA_from_the_cable_force_controller_like_the_graph(monk
     del file["hybrid_force_controller"]          # no hybrid force control in the loop: nothing to set
     assert params.control_loop_params("ipanema3_mini").hpfc is None
     assert stage_field("cable_force_controller", "T_MA") == "hpfc.T_MA"
+
+
+def test_the_set_refuses_what_the_declarations_exclude():
+    """Sizes and finite floats come from the declarations (ParameterSet), for every node: a refused
+    change says why and keeps the old value."""
+    from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+
+    rclpy.init()
+    try:
+        node = rclpy.create_node("declarations")
+        applied = []
+        ParameterSet(node, [ParamSpec("v", [0.0, 0.0, 1.0], "a direction [-]", size=3),
+                            ParamSpec("h", 0.0, "a height without a range [m]")], lambda v: None, applied.append)
+        for name, value, reason in (("v", [0.0, 1.0], "needs 3 values"), ("v", [0.0, float("nan"), 1.0], "finite"),
+                                    ("h", float("inf"), "finite"), ("h", float("nan"), "finite")):
+            result = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not result.successful and reason in result.reason, (name, value, result.reason)
+        assert list(node.get_parameter("v").value) == [0.0, 0.0, 1.0] and node.get_parameter("h").value == 0.0
+        assert node.set_parameters([Parameter("h", value=-2.5)])[0].successful and applied[-1]["h"] == -2.5
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()
+
+
+ROBOT_FILE = {"f_min", "f_max", "mu", "sigma", "F_pv"}      # defaults of the robot file, not of a dataclass
+
+
+@pytest.mark.parametrize("node", sorted(MODULES))
+def test_every_parameter_that_sets_a_field_has_its_default(node):
+    """One place per default: a parameter that sets a configuration field (a stage's or a loop
+    switch) declares that field's default (control.params.default)."""
+    from cdpr_control.control.params import default
+
+    for spec in MODULES[node].parameters(MINI):
+        if stage_field(node, spec.name) and spec.name not in ROBOT_FILE:
+            assert spec.default == default(node, spec.name), (node, spec.name)

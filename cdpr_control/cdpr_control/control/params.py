@@ -44,6 +44,7 @@ SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enab
             # T_MA,HPFC filters the CFC's input (5.1.2): the CFC node's parameter
             ("cable_force_controller", "T_MA"): "hpfc.T_MA",
             ("joint_command", "mode"): "mode", ("joint_command", "start_ramp"): "start_ramp",
+            ("joint_command", "transfer_time"): "transfer_time", ("hybrid_force_controller", "enabled"): "hpfc_enabled",
             # the start-up calibration window of forward_kinematics and cable_force_controller
             ("/**", "calibration_window"): "calibration_window"}
 
@@ -52,11 +53,19 @@ SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enab
 SECTIONS = {**STAGES, "hybrid_force_controller": ("hpfc", HPFCParams),
             "load_compensation": ("load_compensation", LoadCompensationParams)}
 DEFAULTS = {node: cls() for node, (_, cls) in SECTIONS.items()}
+_BY_ATTR = {attr: DEFAULTS[node] for node, (attr, _) in SECTIONS.items()}    # "hpfc" -> HPFCParams()
+_LOOP = ControlLoopParams()
 
 
 def default(node: str, name: str):
-    """The library default of a node parameter, as a ROS parameter value (lists for arrays)."""
-    value = getattr(DEFAULTS[node], name)
+    """The library default of a node parameter, as a ROS parameter value (lists for arrays): its
+    stage dataclass field's, or for a loop switch (SWITCHES) ControlLoopParams' field."""
+    field = SWITCHES.get((node, name)) or SWITCHES.get(("/**", name))
+    if field is None:
+        value = getattr(DEFAULTS[node], name)
+    else:
+        attr, _, field = field.rpartition(".")
+        value = getattr(_BY_ATTR[attr] if attr else _LOOP, field)
     return value.tolist() if isinstance(value, np.ndarray) else value
 
 
@@ -103,7 +112,7 @@ def control_loop_params(robot, **switches) -> ControlLoopParams:
     file = load_params_file(name)
     if "hybrid_force_controller" in file:
         values = file["hybrid_force_controller"]
-        loop = replace(loop, hpfc=section(HPFCParams, values), hpfc_enabled=bool(values.get("enabled", False)))
+        loop = replace(loop, hpfc=section(HPFCParams, values))     # (its enabled: SWITCHES)
     for node, values in file.items():
         if node in STAGES:
             attr, cls = STAGES[node]

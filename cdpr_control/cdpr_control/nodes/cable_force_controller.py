@@ -45,8 +45,8 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
 _D = CFCParams()      # the defaults live in the dataclass (one source of truth)
-PARAMS = [  # the live parameters; the stage's of CFCParams' field names (section)
-    ParamSpec("enabled", True, "cable force control on; off = IK-only reference control (2.3.2)"),
+PARAMS = [
+    ParamSpec("enabled", default("cable_force_controller", "enabled"), "cable force control on; off = IK-only reference control (2.3.2)"),
     ParamSpec("K_p", _D.K_p, "proportional gain K_p,CFC [-] (3.19), table 3.1", range=(0.0, 10.0)),
     ParamSpec("T_i", _D.T_i, "integrator reset time T_i,CFC [s] (3.19), table 3.1", range=(1e-3, 100.0)),
     ParamSpec("T_filter", _D.T_filter, "PT1 time constant of the force feedback T_1,r [s] (3.20), table 3.1", range=(0.0, 1.0)),

@@ -41,7 +41,7 @@ from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAME
     format_state)
 from cdpr_control.control.ospc import AXES
 
-from cdpr_control.control.params import section
+from cdpr_control.control.params import default, section
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
@@ -52,7 +52,7 @@ NAME = "hybrid_force_controller"
 _ZERO3, _ZEROS = [0.0] * 3, [0.0] * 6     # (the message constructor copies them)
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
-    ParamSpec("enabled", False, "hybrid position/force control on (M103) or off (M104; releases the contact)"),
+    ParamSpec("enabled", default("hybrid_force_controller", "enabled"), "hybrid position/force control on (M103) or off (M104; releases the contact)"),
     ParamSpec("K_p", _D.K_p, "proportional gain K_p,HPFC (effective stiffness) [N/m], output e_F / K_p (5.3), "
               "table 5.1", range=(1.0, 1e9)),
     ParamSpec("T_i", _D.T_i, "integrator reset time T_i,HPFC [s] (5.3), table 5.1", range=(1e-3, 1e4)),

@@ -46,8 +46,8 @@ from std_srvs.srv import Trigger
 
 from cdpr_control.control.bumpless import Blend
 from cdpr_control.force_distribution import Status
-from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
+from cdpr_control.control.params import default
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
                                           SafetyMonitor, braking)
@@ -79,7 +79,7 @@ def offset_params(name: str) -> list[ParamSpec]:
 
 _S = SafetyConfig()   # the defaults live in the dataclass (one source of truth)
 PARAMS = [
-    ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
+    ParamSpec("mode", default("joint_command", "mode"), "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
               "(2.3.2), the offsets ramped out", choices=("force_control", "ik_only")),
     ParamSpec("v_max", 0.0, "rate limit of θ_d [m/s]; 0 = the robot's drive v_max", range=(0.0, 100.0)),
     ParamSpec("force_tolerance", _S.force_tolerance, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
@@ -102,10 +102,10 @@ PARAMS = [
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
     ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
               "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
-    ParamSpec("start_ramp", ControlLoopParams.start_ramp, "the drives take the controllers' command over from the "
+    ParamSpec("start_ramp", default("joint_command", "start_ramp"), "the drives take the controllers' command over from the "
               "lengths measured at start in this time: the first command's gap is ramped out along a cosine "
               "(docs/control.md, \"A start ramp\") [s]", range=(0.0, 10.0), read_only=True),
-    ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
+    ParamSpec("transfer_time", default("joint_command", "transfer_time"), "bumpless transfer: Δq_CFC and every offset "
               "input are blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
               range=(0.0, 10.0)),
 ]
@@ -126,7 +126,7 @@ class JointCommandNode(CdprNode):
         self.monitor = SafetyMonitor()
         self.watch = ForceWatch(SafetyConfig(), self.dt)
         names = list(declare(self, OFFSET_INPUTS))
-        self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
+        self.offsets = OffsetInputs(names, self.dt, default("joint_command", "transfer_time"))
         self.offset_keys = [(name, f"offset:{name}") for name in names]     # (their input names)
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
         self.params = ParameterSet(self, parameters(self.robot, names), self._validate, self._apply)

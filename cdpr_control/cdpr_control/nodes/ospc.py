@@ -21,7 +21,7 @@ from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
-from cdpr_control.control.params import section
+from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
 from cdpr_control.model.memo import Memo
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
@@ -35,7 +35,7 @@ from cdpr_control.ros.sync import StampSync
 
 _D = OSPCParams()     # the defaults live in the dataclass (one source of truth)
 PARAMS = [
-    ParamSpec("enabled", True, "operational-space position control on; off = x_OSPC held at 0"),
+    ParamSpec("enabled", default("ospc", "enabled"), "operational-space position control on; off = x_OSPC held at 0"),
     ParamSpec("K_p", _D.K_p.tolist(), "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),

@@ -18,6 +18,7 @@ again. docs/parameters.md is generated from the same lists (:func:`markdown_tabl
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Callable
@@ -38,6 +39,7 @@ class ParamSpec:
     range: tuple | None = None           # (min, max) for float or int parameters
     choices: tuple | None = None         # allowed strings
     read_only: bool = False              # fixed after start-up (e.g. the robot)
+    size: int | None = None              # the length of an array parameter, where it has one
 
     @property
     def unit(self) -> str:
@@ -96,9 +98,17 @@ class ParameterSet:
         self._apply(dict(self.values))
 
     def _check(self, values: dict) -> None:
+        """What the declarations say (choices, sizes, finite floats: no NaN reaches a stage), then
+        the node's validate."""
         for name, spec in self.specs.items():
-            if spec.choices and values[name] not in spec.choices:
-                raise ValueError(f"{name} must be one of {', '.join(spec.choices)}, got {values[name]!r}")
+            value = values[name]
+            if spec.choices and value not in spec.choices:
+                raise ValueError(f"{name} must be one of {', '.join(spec.choices)}, got {value!r}")
+            items = [value] if isinstance(value, (bool, int, float, str)) else list(value)
+            if spec.size is not None and len(items) != spec.size:
+                raise ValueError(f"{name} needs {spec.size} values, got {len(items)}")
+            if not all(math.isfinite(v) for v in items if isinstance(v, float)):
+                raise ValueError(f"{name} must be finite, got {items if len(items) > 1 else value!r}")
         self._validate(values)
 
     def _on_set(self, parameters) -> SetParametersResult:
@@ -130,7 +140,7 @@ def markdown_table(node: str, specs) -> str:
     for s in specs:
         limits = f"{s.range[0]!r} .. {s.range[1]!r}" if s.range else " / ".join(s.choices or ())
         field = stage_field(node, s.name)
-        cells = (f"`{s.name}`", s.type_name, f"`{s.default!r}`", limits, s.unit, "yes" if s.read_only else "",
+        cells = (f"`{s.name}`", s.type_name + (f"[{s.size}]" if s.size is not None else ""), f"`{s.default!r}`", limits, s.unit, "yes" if s.read_only else "",
                  f"`{field}`" if field else "", s.description)
         rows.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
     return "\n".join(rows) + "\n"
