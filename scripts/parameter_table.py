@@ -32,7 +32,18 @@ it) or the allowed strings. *unit*: the one the description gives in brackets. *
 of the single-process loop's configuration (`ControlLoopParams`, `ShippedConfiguration`) the
 parameter sets, by `cdpr_control.control.params.control_loop_params` from the same parameter file.
 Defaults read from the robot file are those of `{robot}`; the per-robot files
-`cdpr_control/params/<robot>.yaml` override them.
+`cdpr_control/params/<robot>.yaml` override them. An array's size, where it is fixed, follows its
+type (`double_array[3]`); every float must be finite.
+
+As with ros2_controllers' generate_parameter_library (one YAML file per node from which the
+declaration, the validation, the parameter struct and a Markdown page are generated), each
+parameter is declared once; here the declaration is Python (`ParamSpec`), the "struct" is the
+stage dataclass, built by `control.params.section` from the parameters of its field names, and a
+live change goes through `ParameterSet` (choices, sizes, finite floats, then the node's own
+check of the combination: the dataclass' `validate`, the stability analysis of new gains). The
+single-process loop (`control_loop_params`) reads the same parameter files into the same
+dataclasses and their `validate`, but not the nodes' ranges: a value outside a range is refused
+by the node graph only.
 """
 
 

@@ -75,6 +75,10 @@ def test_units_are_read_from_the_description():
     specs = {s.name: s for s in MODULES["friction_compensation"].parameters(MINI)}
     assert specs["F_pv"].unit == "N s/m" and specs["enabled"].unit == ""
     assert specs["mu"].type_name == "double_array" and specs["enabled"].type_name == "bool"
+    sim = {s.name: s for s in MODULES["winch_platform_sim"].parameters(MINI)}
+    assert sim["initial_pose"].unit == "m, rad"              # "x0 = [x, y, z, a, b, c] [m, rad]": the last brackets
+    jc = {s.name: s for s in MODULES["joint_command"].parameters(MINI)}
+    assert jc["force_tolerance"].unit == "N"                 # "beyond [f_min, f_max] tolerated ... [N]"
 
 
 @pytest.mark.parametrize("node, cls_name, overrides", [

@@ -43,9 +43,10 @@ class ParamSpec:
 
     @property
     def unit(self) -> str:
-        """The unit the description gives in brackets, "" where it gives none (a switch, a name)."""
-        match = _UNIT.search(self.description)
-        return match.group(1) if match else ""
+        """The unit the description gives in its last brackets ("[-]" for none), "" where it gives
+        none (a switch, a name); earlier brackets are the quantity's ("[x, y, z, a, b, c] [m, rad]")."""
+        units = _UNIT.findall(self.description)
+        return units[-1] if units else ""
 
     @property
     def type_name(self) -> str:
