@@ -6,7 +6,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-stress bench fault-table clean
+.PHONY: setup demo test test-stress bench fault-table parameter-table clean
 
 setup:
 	@bash scripts/setup.sh
@@ -24,6 +24,9 @@ test-stress: setup
 # docs/faults.md: the faults the suite injects, tries, held and lost
 fault-table: setup
 	@$(PY) scripts/fault_table.py
+
+parameter-table: setup
+	@$(PY) scripts/parameter_table.py
 
 bench: setup
 	@$(VENV)/bin/cdpr bench

@@ -158,7 +158,8 @@ def test_the_node_hands_w_adm_of_t_k_to_the_force_setpoint_of_period_k_plus_1():
     from geometry_msgs.msg import WrenchStamped
     from rclpy.parameter import Parameter
 
-    from cdpr_control.control.force_setpoint import ForceSetpoint
+    from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
+    from cdpr_control.control.params import section
     from cdpr_control.model.dynamics import platform_wrench
     from cdpr_control.nodes.force_distribution import ForceDistributionNode
     from cdpr_control.ros.base import CdprNode
@@ -173,7 +174,7 @@ def test_the_node_hands_w_adm_of_t_k_to_the_force_setpoint_of_period_k_plus_1():
     with node_graph(make_nodes) as ((node,), probe, executor):
         x, zero = np.asarray(MINI.home, dtype=float), np.zeros(6)
         w = platform_wrench(MINI, x, zero, zero)
-        reference = ForceSetpoint(MINI, node.dt, node._stage_params(node.params.values))
+        reference = ForceSetpoint(MINI, node.dt, section(ForceSetpointParams, node.params.values))
         pubs = {name: probe.create_publisher(t, topic, CONTROL) for name, t, topic in (
             ("sp", OperationalSetpoint, "setpoint"), ("wrench", WrenchStamped, "platform/wrench"),
             ("guide", ControllerState, "admittance_controller/state"))}

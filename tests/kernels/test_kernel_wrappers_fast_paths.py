@@ -15,7 +15,7 @@ kfriction = sys.modules["cdpr_control.kernels.friction"]
 
 
 def _forget_tables():
-    kfriction._last_tables = (None, b"", (), None, None)
+    kfriction._tables_memo.clear()
 
 
 def _betas(robot, rng):
@@ -44,13 +44,14 @@ def test_friction_tables_kept_while_beta_repeats_bit_for_bit(robot):
         thetadot = rng.normal(scale=0.01, size=robot.m) * (k % 3 != 0)
         if k % 5 == 4:
             kernels.friction_platform_force(between, f_w, theta, thetadot, beta)
-        hits_before = kfriction._last_tables
+        memo = kfriction._tables_memo
+        hits_before = memo.value
         out = kernels.friction_platform_force(kept, f_w, theta, thetadot, beta)
-        hits += kfriction._last_tables is hits_before
-        kept_tables = kfriction._last_tables
+        hits += memo.value is hits_before
+        kept_tables = memo.key, memo.value
         _forget_tables()
         ref = kernels.friction_platform_force(fresh, f_w, theta, thetadot, beta)
-        kfriction._last_tables = kept_tables
+        memo.key, memo.value = kept_tables
         assert out.tobytes() == ref.tobytes()
         assert kept.dahl.state.tobytes() == fresh.dahl.state.tobytes()
     assert hits >= 8                        # the kept tables did serve the repeats
@@ -67,7 +68,7 @@ def test_friction_tables_follow_sign_of_zero_and_values():
         _forget_tables()
         alpha_ref, gamma_ref = kfriction._series_tables(series, b)
         assert alpha.tobytes() == alpha_ref.tobytes() and gamma.tobytes() == gamma_ref.tobytes()
-        assert kfriction._last_tables[1] == np.asarray(b, dtype=float).tobytes()
+        assert kfriction._tables_memo.key[1] == np.asarray(b, dtype=float).tobytes()
 
 
 def test_vector_passes_a_kernel_array_and_copies_the_rest():

@@ -3,7 +3,8 @@ files ``params/<robot>.yaml`` (ROS 2 layout, the files the node graph loads) hol
 tuning on top of them.
 
 One source of truth per value: the nodes declare their parameters with the dataclass defaults
-(:data:`DEFAULTS`), and :func:`control_loop_params` reads the same robot file into the
+(:func:`default`) and build the dataclass from the parameters of its field names (:func:`section`;
+:func:`stage_field` names the field a node parameter sets, docs/parameters.md shows it), and :func:`control_loop_params` reads the same robot file into the
 :class:`~cdpr_control.control.loop.ControlLoopParams` of the single-process loop, so the closed-loop
 tests, the benchmarks and the node graph run one configuration. :func:`shipped_configuration`
 adds the sections that are not stages of :class:`~cdpr_control.control.loop.ControlLoopParams`:
@@ -37,19 +38,44 @@ STAGES = {
     "friction_compensation": ("friction", FrictionCompensationParams),
     "joint_command": ("safety", SafetyConfig),
 }
-# node parameters that are loop switches rather than dataclass fields
+# node parameters that are loop switches rather than fields of their node's dataclass ("stage.field":
+# a field of another stage's, set when that stage is in the loop)
 SWITCHES = {("cable_force_controller", "enabled"): "cfc_enabled", ("ospc", "enabled"): "ospc_enabled",
+            # T_MA,HPFC filters the CFC's input (5.1.2): the CFC node's parameter
+            ("cable_force_controller", "T_MA"): "hpfc.T_MA",
             ("joint_command", "mode"): "mode", ("joint_command", "start_ramp"): "start_ramp",
+            ("joint_command", "transfer_time"): "transfer_time", ("hybrid_force_controller", "enabled"): "hpfc_enabled",
             # the start-up calibration window of forward_kinematics and cable_force_controller
             ("/**", "calibration_window"): "calibration_window"}
 
-DEFAULTS = {node: cls() for node, (_, cls) in STAGES.items()}
+# the stages of the shipped configuration outside ControlLoopParams' STAGES (ShippedConfiguration,
+# ControlLoopParams.hpfc), likewise set by the node parameters of their field names
+SECTIONS = {**STAGES, "hybrid_force_controller": ("hpfc", HPFCParams),
+            "load_compensation": ("load_compensation", LoadCompensationParams)}
+DEFAULTS = {node: cls() for node, (_, cls) in SECTIONS.items()}
+_BY_ATTR = {attr: DEFAULTS[node] for node, (attr, _) in SECTIONS.items()}    # "hpfc" -> HPFCParams()
+_LOOP = ControlLoopParams()
 
 
 def default(node: str, name: str):
-    """The library default of a node parameter, as a ROS parameter value (lists for arrays)."""
-    value = getattr(DEFAULTS[node], name)
+    """The library default of a node parameter, as a ROS parameter value (lists for arrays): its
+    stage dataclass field's, or for a loop switch (SWITCHES) ControlLoopParams' field."""
+    field = SWITCHES.get((node, name)) or SWITCHES.get(("/**", name))
+    if field is None:
+        value = getattr(DEFAULTS[node], name)
+    else:
+        attr, _, field = field.rpartition(".")
+        value = getattr(_BY_ATTR[attr] if attr else _LOOP, field)
     return value.tolist() if isinstance(value, np.ndarray) else value
+
+
+def stage_field(node: str, name: str) -> str:
+    """The configuration field a node parameter sets ("cfc.K_p", "cfc_enabled"), "" for none."""
+    switch = SWITCHES.get((node, name)) or SWITCHES.get(("/**", name))
+    if switch:
+        return switch
+    attr, cls = SECTIONS.get(node, (None, None))
+    return f"{attr}.{name}" if cls is not None and name in {f.name for f in fields(cls)} else ""
 
 
 def params_file(robot_name: str):
@@ -67,8 +93,9 @@ def load_params_file(robot_name: str) -> dict:
     return {node: (entry or {}).get("ros__parameters", {}) or {} for node, entry in doc.items()}
 
 
-def _section(cls, values: dict):
-    """An instance of the dataclass cls from the parameters of its node that it has fields for."""
+def section(cls, values: dict):
+    """An instance of the dataclass cls from the parameters of its node that it has fields for
+    (lists as float arrays); the node's other parameters are left out."""
     known = {f.name for f in fields(cls)}
     return cls(**{k: (np.asarray(v, dtype=float) if isinstance(v, list) else v) for k, v in values.items() if k in known})
 
@@ -85,15 +112,24 @@ def control_loop_params(robot, **switches) -> ControlLoopParams:
     file = load_params_file(name)
     if "hybrid_force_controller" in file:
         values = file["hybrid_force_controller"]
-        loop = replace(loop, hpfc=_section(HPFCParams, values), hpfc_enabled=bool(values.get("enabled", False)))
+        loop = replace(loop, hpfc=section(HPFCParams, values))     # (its enabled: SWITCHES)
     for node, values in file.items():
         if node in STAGES:
             attr, cls = STAGES[node]
-            loop = replace(loop, **{attr: _section(cls, values)})
+            loop = replace(loop, **{attr: section(cls, values)})
         for key, value in values.items():
             if (node, key) in SWITCHES:
-                loop = replace(loop, **{SWITCHES[node, key]: value})
+                loop = _set(loop, SWITCHES[node, key], value)
     return replace(loop, **switches)
+
+
+def _set(loop: ControlLoopParams, field: str, value) -> ControlLoopParams:
+    """loop with the switch or the "stage.field" set (a stage not in the loop: unchanged)."""
+    attr, _, name = field.rpartition(".")
+    if not attr:
+        return replace(loop, **{name: value})
+    stage = getattr(loop, attr)
+    return loop if stage is None else replace(loop, **{attr: replace(stage, **{name: value})})
 
 
 @dataclass
@@ -128,7 +164,7 @@ def shipped_configuration(robot, **switches) -> ShippedConfiguration:
     return ShippedConfiguration(
         dt=float(file.get("/**", {}).get("control_period", 1e-3)),
         loop=control_loop_params(robot, **switches),
-        load_compensation=_section(LoadCompensationParams, file.get("load_compensation", {})),
+        load_compensation=section(LoadCompensationParams, file.get("load_compensation", {})),
         payload_input=bool(file.get("force_distribution", {}).get("payload_input", False)),
         admittance={k: v for k, v in admittance.items() if k != "hand_guiding"},
         hand_guiding=bool(admittance.get("hand_guiding", False)))

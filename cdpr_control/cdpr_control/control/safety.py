@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_control import kernels
+from cdpr_control.model.memo import Memo
 
 FORCE_LIMIT = "force_limit"
 POSITION_LAG = "position_lag"
@@ -114,12 +115,18 @@ class Fault:
     holds: bool
 
 
+def _extreme_limits(f_min: np.ndarray, f_max: np.ndarray) -> tuple:
+    """(max f_min, min f_max) of float64 limits, (None, None) for others or empty ones."""
+    if f_min.dtype != _F64 or f_max.dtype != _F64:
+        return None, None
+    return max(f_min.ravel().tolist(), default=None), min(f_max.ravel().tolist(), default=None)
+
+
 class SafetyMonitor:
     def __init__(self, config: SafetyConfig | None = None):
         self.config = config or SafetyConfig()
         self.config.validate()
-        self._limits_key: tuple | None = None     # the raw bytes and dtypes of the last f_min, f_max
-        self._limits = (None, None)               # their max f_min, min f_max (None: not float64, or empty)
+        self._limits = Memo()    # max f_min, min f_max of the last limits' bytes and dtypes (None: not float64, or empty)
 
     def _inside(self, f: list, f_min, f_max, tolerance: float) -> bool:
         """:func:`_inside` with max f_min and min f_max kept while the limits' bytes repeat (the
@@ -129,11 +136,7 @@ class SafetyMonitor:
             return True
         if type(f_min) is np.ndarray and type(f_max) is np.ndarray:
             key = (f_min.tobytes(), f_max.tobytes(), f_min.dtype, f_max.dtype)
-            if key != self._limits_key:
-                self._limits_key = key
-                self._limits = (max(f_min.ravel().tolist(), default=None), min(f_max.ravel().tolist(), default=None)) \
-                    if f_min.dtype == _F64 and f_max.dtype == _F64 else (None, None)
-            lo, hi = self._limits
+            lo, hi = self._limits(key, _extreme_limits, f_min, f_max)
             if lo is not None and hi is not None:
                 return min(f) >= lo - tolerance and max(f) <= hi + tolerance
         return _inside(f, f_min, f_max, tolerance)
@@ -211,7 +214,7 @@ class ForceWatch:
         # [N/s], the last force [N] (force_watch_period's state; None until a finite period)
         self._state: np.ndarray | None = None
         self._out = np.empty(5)                      # force_watch_period's summary of the period
-        self._bounds_key, self._bounds, self._bounds_array = None, None, None
+        self._bounds = Memo()    # _bands of the last limits' bytes (the configuration: cleared by configure)
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
         kernels.warm_up()                            # force_watch_period loaded now, not in the first period
@@ -224,7 +227,7 @@ class ForceWatch:
         self._rate_from = int(round(config.rate_watch_delay / self.dt))
         self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
         self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
-        self._bounds_key = None
+        self._bounds.clear()
 
     def release(self) -> None:
         """End the hold (an operator's decision): the watch starts again from the next period."""
@@ -236,18 +239,17 @@ class ForceWatch:
 
     def _limits(self, f_min, f_max, m: int) -> tuple:
         """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
-        while the limits' bytes repeat (the robot's, every period); the last three as the rows of
-        :attr:`_bounds_array` (force_watch_period's bounds)."""
+        while the limits' bytes repeat (the robot's, every period), and the last three as the rows of
+        an array (force_watch_period's bounds)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
-        key = (f_min.tobytes(), f_max.tobytes(), m)
-        if key != self._bounds_key:
-            f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
-            tol = self.config.force_band * (f_max - f_min)
-            self._bounds_key = key
-            self._bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
-                                                      self.config.max_force_rate * (f_max - f_min)))
-            self._bounds_array = np.array(self._bounds[3:])
-        return self._bounds
+        return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
+
+    def _bands(self, f_min, f_max, m: int) -> tuple:
+        f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
+        tol = self.config.force_band * (f_max - f_min)
+        bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
+                                            self.config.max_force_rate * (f_max - f_min)))
+        return bounds, np.array(bounds[3:])
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
         """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
@@ -264,14 +266,14 @@ class ForceWatch:
         if values is None or (fresh and not all_finite(values)):
             self._clean = 0
             return None
-        bounds = self._limits(f_min, f_max, m)
+        bounds, bounds_array = self._limits(f_min, f_max, m)
         if fresh:
             self._state = np.zeros((4, m))
             self._state[3] = values
         targets = values if f_d is None else _vector(f_d)
         if targets.shape != (m,):
             raise ValueError(f"f_d needs {m} forces like f, got {targets.shape[0]}")
-        if not force_watch_period(values, targets, f_d is not None, self._bounds_array, self._state, self._alpha,
+        if not force_watch_period(values, targets, f_d is not None, bounds_array, self._state, self._alpha,
                                   1.0 / self.dt, self._out):
             self._clean = 0
             return None

@@ -34,6 +34,7 @@ import numpy as np
 from cdpr_control.model import cable as np_cable
 from cdpr_control.model import dynamics as np_dynamics
 from cdpr_control.model import kinematics as np_kinematics
+from cdpr_control.model.memo import Memo
 from cdpr_control.kernels.control import CFC_CONSTANTS, cfc_constants
 from cdpr_control.kernels.control import cfc_period as _cfc_period
 from cdpr_control.kernels.control import force_watch_period
@@ -132,7 +133,9 @@ def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
     return tuple(ik.c.T if name == "cT" else getattr(ik, name) for name in names)
 
 
-_last_packed: tuple = (None, b"", None)      # (robot, pose bytes, packed IK) of the last _packed call
+# (robot, packed IK) of the last _packed call's robot and pose bytes (the robot kept in the value:
+# its id cannot be taken by another robot while the memo holds it)
+_packed_memo = Memo()
 
 
 def _packed(robot, x) -> np.ndarray | None:
@@ -140,19 +143,17 @@ def _packed(robot, x) -> np.ndarray | None:
     kept and returned again for the same robot and pose: the stages of a composed graph (friction
     compensation, forward kinematics, force set-point, load compensation) all take the IK of the
     period's x_d, which one computation then serves."""
-    global _last_packed
     x = vector(x)
-    key = x.tobytes()
-    last_robot, last_key, P = _last_packed
-    if last_robot is robot and last_key == key:
-        return P
+    return _packed_memo((id(robot), x.tobytes()), _compute_packed, robot, x)[1]
+
+
+def _compute_packed(robot, x) -> tuple:
     d = robot_data(robot)
     if d.a.shape[0] < 3:
-        return None
+        return robot, None
     P = np.empty((_ROWS + 3, d.a.shape[0]))
     ik_packed(x, d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
-    _last_packed = (robot, key, P)
-    return P
+    return robot, P
 
 
 def compiled_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):

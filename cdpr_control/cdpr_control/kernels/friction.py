@@ -25,6 +25,7 @@ import numpy as np
 from cdpr_control.kernels.jit import njit
 
 from cdpr_control.model import friction as np_friction
+from cdpr_control.model.memo import Memo
 from cdpr_control.kernels.robot_data import vector
 
 _tables = njit(np_friction.last_pulley_tables)
@@ -76,22 +77,22 @@ def platform_force_kernel(f_w, theta, thetadot, alpha_table, gamma_table, sigma,
         state[_F_D, i] = F_D
         f[i] = f_w[i] + F_D
 
-_last_tables: tuple = (None, b"", (), None, None)    # (series, β bytes, β shape, alpha, gamma) of the last call
+# (series, alpha, gamma) of the last call's series, β bytes and shape (the series kept in the value:
+# its id cannot be taken by another series while the memo holds it)
+_tables_memo = Memo()
 
 
 def _series_tables(series, beta_last) -> tuple[np.ndarray, np.ndarray]:
     """The compiled PulleySeries.tables of beta_last, computed again only when the series or β's
     bytes differ from the last call's (the step only reads them)."""
-    global _last_tables
     beta = vector(beta_last)
-    key = beta.tobytes()
-    last_series, last_key, last_shape, alpha, gamma = _last_tables
-    if last_series is series and last_key == key and last_shape == beta.shape:
-        return alpha, gamma
-    alpha_in, gamma_in = series.inner
-    alpha, gamma = _tables(beta, series.mu, series.F_pv, series.has_last, alpha_in, gamma_in)
-    _last_tables = (series, key, beta.shape, alpha, gamma)
+    _, alpha, gamma = _tables_memo((id(series), beta.tobytes(), beta.shape), _compute_tables, series, beta)
     return alpha, gamma
+
+
+def _compute_tables(series, beta) -> tuple:
+    alpha_in, gamma_in = series.inner
+    return (series, *_tables(beta, series.mu, series.F_pv, series.has_last, alpha_in, gamma_in))
 
 
 def friction_platform_force(model, f_w, theta, thetadot, beta_last) -> np.ndarray:

@@ -67,6 +67,11 @@ _DESCRIPTIONS = {
 }
 PARAMS = [ParamSpec("hand_guiding", False, "hand guiding on: this node is the set-point source")] + [
     ParamSpec(name, _D[name], *_DESCRIPTIONS[name][:1], range=_DESCRIPTIONS[name][1]) for name in _D]
+
+
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
 _BUSY = (ProgramStatus.RUNNING, ProgramStatus.STOPPING, ProgramStatus.PAUSED)
 _ZEROS = [0.0] * 6
 _ZERO_TWIST, _ZERO_ACCEL = twist_to_msg(_ZEROS), accel_to_msg(_ZEROS)  # shared: messages are never modified
@@ -82,7 +87,7 @@ class AdmittanceControllerNode(CdprNode):
         self.clipping_note = ""          # how the zones were shrunk to fit the WFW (fitted_settings), reported while guiding
         self.program_state = ProgramStatus.IDLE
         self.create_subscription(ProgramStatus, "program_status", self._on_status, STATUS)
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.setpoint_pub = self.create_publisher(OperationalSetpoint, "admittance_controller/setpoint", CONTROL)
         self.state_pub = self.create_publisher(ControllerState, "admittance_controller/state", CONTROL)
         self.create_service(SetBool, "~/hand_guiding", self._on_switch)

@@ -33,19 +33,20 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from cdpr_control.control.cable_force_control import CableForceControl, CFCParams
-from cdpr_control.control.hybrid_force_control import ContactCableForceControl, HPFCParams, parse_state
+from cdpr_control.control.hybrid_force_control import ContactCableForceControl, parse_state
+from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg
 from cdpr_control.ros.mode import follow_mode
-from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, declare, startup_calibration
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
 _D = CFCParams()      # the defaults live in the dataclass (one source of truth)
 PARAMS = [
-    ParamSpec("enabled", True, "cable force control on; off = IK-only reference control (2.3.2)"),
+    ParamSpec("enabled", default("cable_force_controller", "enabled"), "cable force control on; off = IK-only reference control (2.3.2)"),
     ParamSpec("K_p", _D.K_p, "proportional gain K_p,CFC [-] (3.19), table 3.1", range=(0.0, 10.0)),
     ParamSpec("T_i", _D.T_i, "integrator reset time T_i,CFC [s] (3.19), table 3.1", range=(1e-3, 100.0)),
     ParamSpec("T_filter", _D.T_filter, "PT1 time constant of the force feedback T_1,r [s] (3.20), table 3.1", range=(0.0, 1.0)),
@@ -55,13 +56,18 @@ PARAMS = [
     ParamSpec("widen_factor", _D.widen_factor, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
     ParamSpec("stiffness_model", _D.stiffness_model, "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
               "nonlinear (secant of (2.16)-(2.17))", choices=("linear", "nonlinear")),
-    ParamSpec("T_MA", HPFCParams().T_MA, "moving average T_MA,HPFC of the set-point after a contact [s], "
+    ParamSpec("T_MA", default("hybrid_force_controller", "T_MA"), "moving average T_MA,HPFC of the set-point after a contact [s], "
               "table 5.1 (section 5.1.2)", range=(0.0, 60.0)),
     ParamSpec("allow_unstable", False, "accept gains that the stability analysis (thesis 3.4) calls unstable"),
 ]
 HAND_OVER_NAMES = ["x", "y", "z", "a", "b", "c"]
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose <name>/state pauses this "
                              "controller in contact (5.1.2); empty: none", read_only=True)
+
+
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return [*PARAMS, FORCE_CONTROLLER, *calibration_params(robot.m)]
 
 
 class CableForceControllerNode(CdprNode):
@@ -71,11 +77,10 @@ class CableForceControllerNode(CdprNode):
         self.stage: CableForceControl | None = None
         self.contact: ContactCableForceControl | None = None   # the stage under hybrid force control
         self.dq_held = np.zeros(self.robot.m)
-        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
-        self.force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        self.force_controller = declare(self, FORCE_CONTROLLER)
         self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
         self._live = False                          # (the start-up set is not analysed: see _validate)
-        self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m), self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self._live = True
         self.stage.calibration = startup_calibration(self.robot, self.params.values)   # Δq_0 of (3.23)
         self.publisher = self.create_publisher(ControllerState, "cable_force_controller/state", CONTROL)
@@ -93,14 +98,8 @@ class CableForceControllerNode(CdprNode):
                               optional=("hpfc", "setpoint") if self.force_controller else (),
                               urgent=("f",))     # the command path (intraprocess.py)
 
-    @staticmethod
-    def _cfc_params(v: dict) -> CFCParams:
-        return CFCParams(K_p=v["K_p"], T_i=v["T_i"], T_filter=v["T_filter"], F_sat_n=v["F_sat_n"],
-                         F_sat_p=v["F_sat_p"], widen_band=v["widen_band"], widen_factor=v["widen_factor"],
-                         stiffness_model=v["stiffness_model"])
-
     def _validate(self, v: dict) -> None:
-        params = self._cfc_params(v)
+        params = section(CFCParams, v)
         params.validate()
         startup_calibration(self.robot, v)
         # live changes only: the analysis (python-control, 0.1-0.3 s) would delay the node's start
@@ -121,10 +120,10 @@ class CableForceControllerNode(CdprNode):
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = CableForceControl(self.robot, self.dt, self._cfc_params(v), enabled=v["enabled"],
+            self.stage = CableForceControl(self.robot, self.dt, section(CFCParams, v), enabled=v["enabled"],
                                            start_ramp=True)
         else:
-            self.stage.set_params(self._cfc_params(v), enabled=v["enabled"])
+            self.stage.set_params(section(CFCParams, v), enabled=v["enabled"])
         if self.contact is None:
             self.contact = ContactCableForceControl(self.robot, self.stage, v["T_MA"], self.dt)
         else:

@@ -44,6 +44,8 @@ from rclpy.parameter import Parameter
 from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import parse_state
+from cdpr_control.control.params import section
+from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
@@ -53,6 +55,8 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
 
+PAYLOAD_INPUT = ParamSpec("payload_input", False, "add the payload identified by load_compensation "
+                          "(load_compensation/payload) to the model wrench w_dyn", read_only=True)
 FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller whose desired contact force "
                              "replaces the measured one in the distributed wrench (5.1.2); empty: none",
                              read_only=True)
@@ -66,41 +70,40 @@ _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatu
 _INFEASIBLE, _OVERLOADED = Status.INFEASIBLE, Status.OVERLOADED
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md); the stage's of
+    ForceSetpointParams' field names (section), the force limits the robot file's."""
+    c, d = robot.cable, ForceSetpointParams()       # the defaults live in the dataclass (one source of truth)
+    return [
+        ParamSpec("method", d.method, "cable force algorithm: " + ", ".join(sorted(METHODS)), choices=tuple(sorted(METHODS))),
+        ParamSpec("backend", d.backend, "QP solver: " + ", ".join(BACKENDS), choices=tuple(BACKENDS)),
+        ParamSpec("tension_level", d.tension_level, "f_ref = f_min + level (f_max - f_min) (3.27) [0..1]", range=(0.0, 1.0)),
+        ParamSpec("tension_rate", d.tension_rate, "ramp of the tension level [1/s]; 0 = step", range=(0.0, 1e3)),
+        ParamSpec("f_min", c.f_min.tolist(), "minimum cable force per cable [N] (2.39)"),
+        ParamSpec("f_max", c.f_max.tolist(), "maximum cable force per cable [N] (2.39)"),
+        ParamSpec("overload_factor", d.overload_factor, "f_max may rise to this multiple at the workspace border (3.6.2) [-]", range=(1.0, 5.0)),
+        ParamSpec("overload_rate", d.overload_rate, "max rate of the overload raise [1/s]; 0 = instant", range=(0.0, 1e3)),
+        ParamSpec("wrench_source", d.wrench_source, "measured: w_d = w + (I - G_w) w_dyn (3.26); model: w_d = w_dyn (3.1)",
+                  choices=("measured", "model")),
+        ParamSpec("T_d_w", d.T_d_w, "transfer delay T_d,w of the Smith predictor (3.25) [s]", range=(0.0, 0.5)),
+        ParamSpec("wrench_deviation_max", d.wrench_deviation_max, "saturation of the measured disturbance wrench (3.24) relative "
+                  "to the platform weight m g (torques: times the mean platform radius) [-] (section 3.6.1)",
+                  range=(0.0, 100.0)),
+        ParamSpec("T_wrench_filter", d.T_wrench_filter, "PT1 time constant on the disturbance w - w_dyn(t - T_d,w) of (3.24) [s]", range=(0.0, 1.0)),
+        PAYLOAD_INPUT, FORCE_CONTROLLER, GUIDING_CONTROLLER,
+    ]
+
+
 class ForceDistributionNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("force_distribution", **kwargs)
-        c = self.robot.cable
-        d = ForceSetpointParams()       # the defaults live in the dataclass (one source of truth)
-        specs = [
-            ParamSpec("method", d.method, "cable force algorithm: " + ", ".join(sorted(METHODS)), choices=tuple(sorted(METHODS))),
-            ParamSpec("backend", d.backend, "QP solver: " + ", ".join(BACKENDS), choices=tuple(BACKENDS)),
-            ParamSpec("tension_level", d.tension_level, "f_ref = f_min + level (f_max - f_min) (3.27) [0..1]", range=(0.0, 1.0)),
-            ParamSpec("tension_rate", d.tension_rate, "ramp of the tension level [1/s]; 0 = step", range=(0.0, 1e3)),
-            ParamSpec("f_min", c.f_min.tolist(), "minimum cable force per cable [N] (2.39)"),
-            ParamSpec("f_max", c.f_max.tolist(), "maximum cable force per cable [N] (2.39)"),
-            ParamSpec("overload_factor", d.overload_factor, "f_max may rise to this multiple at the workspace border (3.6.2) [-]", range=(1.0, 5.0)),
-            ParamSpec("overload_rate", d.overload_rate, "max rate of the overload raise [1/s]; 0 = instant", range=(0.0, 1e3)),
-            ParamSpec("wrench_source", d.wrench_source, "measured: w_d = w + (I - G_w) w_dyn (3.26); model: w_d = w_dyn (3.1)",
-                      choices=("measured", "model")),
-            ParamSpec("T_d_w", d.T_d_w, "transfer delay T_d,w of the Smith predictor (3.25) [s]", range=(0.0, 0.5)),
-            ParamSpec("wrench_deviation_max", d.wrench_deviation_max, "saturation of the measured disturbance wrench (3.24) relative "
-                      "to the platform weight m g (torques: times the mean platform radius) [-] (section 3.6.1)",
-                      range=(0.0, 100.0)),
-            ParamSpec("T_wrench_filter", d.T_wrench_filter, "PT1 time constant on the disturbance w - w_dyn(t - T_d,w) of (3.24) [s]", range=(0.0, 1.0)),
-        ]
         self.stage: ForceSetpoint | None = None
-        self.params = ParameterSet(self, specs, self._validate, self._apply)
-        payload = ParamSpec("payload_input", False, "add the payload identified by load_compensation "
-                            "(load_compensation/payload) to the model wrench w_dyn", read_only=True)
-        self.declare_parameter(payload.name, payload.default, payload.descriptor())
-        self.payload_input = bool(self.get_parameter(payload.name).value)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
+        self.payload_input = bool(self.params.values[PAYLOAD_INPUT.name])
         self.publisher = self.create_publisher(ForceDistribution, "force_distribution", CONTROL)
         self.create_service(SetTensionLevel, "force_distribution/set_tension_level", self._on_set_tension_level)
-        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
-        force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
-        self._controller, self._state = None, None   # the hybrid force controller's last controller field, its state
-        self.declare_parameter(GUIDING_CONTROLLER.name, GUIDING_CONTROLLER.default, GUIDING_CONTROLLER.descriptor())
-        guiding_controller = self.get_parameter(GUIDING_CONTROLLER.name).value
+        force_controller = self.params.values[FORCE_CONTROLLER.name]
+        guiding_controller = self.params.values[GUIDING_CONTROLLER.name]
         self._w_user = None     # the user's wrench of the last period's admittance state (_user_wrench)
         inputs = {"setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
         if self.payload_input:
@@ -111,28 +114,19 @@ class ForceDistributionNode(CdprNode):
             inputs["guide"] = (ControllerState, f"{guiding_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
                               optional=tuple(n for n in ("payload", "hpfc", "guide") if n in inputs))
-        self._setpoint_key: bytes | None = None     # the raw values of the last set-point (its _arrays)
-        self._arrays: tuple = ()                     # its (x_d, ẋ_d, ẍ_d)
-
-    @staticmethod
-    def _stage_params(v: dict) -> ForceSetpointParams:
-        return ForceSetpointParams(
-            method=v["method"], backend=v["backend"], tension_level=v["tension_level"], tension_rate=v["tension_rate"],
-            f_min=np.asarray(v["f_min"], dtype=float), f_max=np.asarray(v["f_max"], dtype=float),
-            overload_factor=v["overload_factor"], overload_rate=v["overload_rate"], wrench_source=v["wrench_source"],
-            T_d_w=v["T_d_w"], wrench_deviation_max=v["wrench_deviation_max"], T_wrench_filter=v["T_wrench_filter"])
+        self._arrays = Memo()    # (x_d, ẋ_d, ẍ_d) of the last set-point's raw values (to the kernels: writeable)
 
     def _validate(self, v: dict) -> None:
-        p = self._stage_params(v)
+        p = section(ForceSetpointParams, v)
         p.validate(self.robot.m)
         if np.any(p.f_min < 0) or np.any(p.f_min >= p.f_max):
             raise ValueError("force limits need 0 <= f_min < f_max for every cable")
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = ForceSetpoint(self.robot, self.dt, self._stage_params(v))
+            self.stage = ForceSetpoint(self.robot, self.dt, section(ForceSetpointParams, v))
         else:
-            self.stage.set_params(self._stage_params(v))
+            self.stage.set_params(section(ForceSetpointParams, v))
 
     def _on_set_tension_level(self, request, response):
         if len(request.f_ref):
@@ -155,17 +149,13 @@ class ForceDistributionNode(CdprNode):
         v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
         key = _SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
                             a._x, a._y, a._z, al._x, al._y, al._z)
-        if key != self._setpoint_key:
-            self._setpoint_key = key
-            self._arrays = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
-        return self._arrays
+        return self._arrays(key, _setpoint_arrays, pose, velocity, acceleration)
 
-    def _contact(self, hpfc) -> tuple:
+    @staticmethod
+    def _contact(hpfc) -> tuple:
         """(state letter, F_d,0, F_vec) of the hybrid force controller's state message."""
-        controller = hpfc.controller
-        if controller != self._controller:   # the state letter changes rarely: parsed on a change
-            self._controller, self._state = controller, parse_state(controller)
-        return self._state, np.asarray(hpfc.reference[:3], dtype=float), np.asarray(hpfc.feedback[:3], dtype=float)
+        return (parse_state(hpfc.controller), np.asarray(hpfc.reference[:3], dtype=float),
+                np.asarray(hpfc.feedback[:3], dtype=float))
 
     def _user_wrench(self, guide) -> np.ndarray | None:
         """w_Adm of the admittance controller's state while it guides, else None (a feedback that is
@@ -207,6 +197,10 @@ class ForceDistributionNode(CdprNode):
             f_max=res.f_max, w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
             max_violation=max_violation, residual=float(res.residual), iterations=int(res.iterations),
             solve_time=float(res.solve_time))
+
+
+def _setpoint_arrays(pose, velocity, acceleration) -> tuple:
+    return pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
 
 
 def main(args=None):

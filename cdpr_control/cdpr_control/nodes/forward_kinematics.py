@@ -24,6 +24,7 @@ from sensor_msgs.msg import JointState
 from cdpr_control.model import forward_kinematics as fk
 from cdpr_control.control.pose_estimator import PoseEstimator
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
@@ -48,14 +49,19 @@ PARAMS = [
 ]
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return [*PARAMS, *calibration_params(robot.m)]
+
+
 class ForwardKinematicsNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("forward_kinematics", **kwargs)
         self.estimator = PoseEstimator(self.robot)
-        self.params = ParameterSet(self, PARAMS + calibration_params(self.robot.m),
+        self.params = ParameterSet(self, parameters(self.robot),
                                    lambda v: startup_calibration(self.robot, v), self._apply)
         self.estimator.calibration = startup_calibration(self.robot, self.params.values)
-        self._x_d_key, self._x_d = None, (None, False)   # (x_d, finite) of the last set-point pose
+        self._x_d = Memo()          # (x_d, finite) of the last set-point pose (x_d to the kernels: writeable)
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
@@ -74,11 +80,7 @@ class ForwardKinematicsNode(CdprNode):
     def _setpoint_pose(self, pose) -> tuple[np.ndarray, bool]:
         """(x_d, whether it is finite) of the set-point's pose; the same array again (read, never
         written) while the pose repeats (holding, a pause)."""
-        key = pose_key(pose)
-        if key is None or key != self._x_d_key:
-            x_d = pose_from_msg(pose)
-            self._x_d_key, self._x_d = key, (x_d, all_finite(x_d))
-        return self._x_d
+        return self._x_d(pose_key(pose), _setpoint_values, pose)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         position, forces = msgs["theta"].position, msgs["f"].f
@@ -106,6 +108,11 @@ class ForwardKinematicsNode(CdprNode):
             self.report(DiagnosticStatus.WARN, f"not converged ({result.termination})", stamp_ns=t_ns)
         self.pose_pub.publish(builder(PoseStamped)(header=header, pose=pose_to_msg(x)))
         self.wrench_pub.publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(w)))
+
+
+def _setpoint_values(pose) -> tuple[np.ndarray, bool]:
+    x_d = pose_from_msg(pose)
+    return x_d, all_finite(x_d)
 
 
 def main(args=None):

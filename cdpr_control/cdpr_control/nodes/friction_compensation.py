@@ -21,7 +21,9 @@ from sensor_msgs.msg import JointState
 
 from cdpr_control.control.friction_compensation import FrictionCompensation, FrictionCompensationParams
 from cdpr_control import kernels
+from cdpr_control.control.params import section
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
@@ -30,28 +32,31 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md); the stage's of
+    FrictionCompensationParams' field names (section), the friction model the robot file's."""
+    fr, d = robot.friction, FrictionCompensationParams()   # the defaults live in the dataclass
+    return [
+        ParamSpec("enabled", d.enabled, "compensate pulley friction; off = f = f_w (3.40)"),
+        ParamSpec("velocity_source", "measured", "θ, θ̇ driving the friction model: measured (encoders) "
+                  "or desired (θ_d as in section 3.7.3)", choices=("measured", "desired")),
+        ParamSpec("time_shift", d.time_shift, "delay of the Dahl output [s]; the thesis uses 0.05 with desired",
+                  range=(0.0, 1.0)),
+        ParamSpec("mu", fr.mu.tolist(), "Coulomb coefficient per cable [-] (3.31)"),
+        ParamSpec("sigma", fr.sigma.tolist(), "Dahl stiffness per cable [N/m] (3.43)"),
+        ParamSpec("F_pv", fr.F_pv.tolist(), "viscous parameter per cable [N s/m] (3.31)"),
+    ]
+
 
 class FrictionCompensationNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("friction_compensation", **kwargs)
-        fr = self.robot.friction
-        d = FrictionCompensationParams()   # the defaults live in the dataclass
-        specs = [
-            ParamSpec("enabled", d.enabled, "compensate pulley friction; off = f = f_w (3.40)"),
-            ParamSpec("velocity_source", "measured", "θ, θ̇ driving the friction model: measured (encoders) "
-                      "or desired (θ_d as in section 3.7.3)", choices=("measured", "desired")),
-            ParamSpec("time_shift", d.time_shift, "delay of the Dahl output [s]; the thesis uses 0.05 with desired",
-                      range=(0.0, 1.0)),
-            ParamSpec("mu", fr.mu.tolist(), "Coulomb coefficient per cable [-] (3.31)"),
-            ParamSpec("sigma", fr.sigma.tolist(), "Dahl stiffness per cable [N/m] (3.43)"),
-            ParamSpec("F_pv", fr.F_pv.tolist(), "viscous parameter per cable [N s/m] (3.31)"),
-        ]
         self.stage = None
         # the last two winch commands as they came, (t, θ_d) (None before them): θ̇_d is their
         # difference quotient, computed in the periods that use it (velocity_source desired)
         self._commands: tuple = (None, None)
-        self._beta_key, self._beta = None, None     # β_np of the last set-point pose, held while it repeats
-        self.params = ParameterSet(self, specs, self._validate, self._apply)
+        self._beta = Memo()     # β_np of the last set-point pose, held while it repeats (to the kernels: writeable)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
         self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
         self.create_subscription(JointState, "winch/command", self._keep_command, CONTROL, adapted=True)
@@ -60,20 +65,15 @@ class FrictionCompensationNode(CdprNode):
             "setpoint": (OperationalSetpoint, "setpoint"),
         }, primary="state", callback=self._cycle, mode=self.sync_mode, urgent=("state",))   # the command path
 
-    @staticmethod
-    def _stage_params(v: dict) -> FrictionCompensationParams:
-        return FrictionCompensationParams(v["enabled"], v["time_shift"], np.asarray(v["mu"], dtype=float),
-                                          np.asarray(v["sigma"], dtype=float), np.asarray(v["F_pv"], dtype=float))
-
     def _validate(self, v: dict) -> None:
-        self._stage_params(v).resolved(self.robot)
+        section(FrictionCompensationParams, v).resolved(self.robot)
 
     def _apply(self, v: dict) -> None:
         self.velocity_source = v["velocity_source"]
         if self.stage is None:
-            self.stage = FrictionCompensation(self.robot, self.dt, self._stage_params(v))
+            self.stage = FrictionCompensation(self.robot, self.dt, section(FrictionCompensationParams, v))
         else:
-            self.stage.set_params(self._stage_params(v))
+            self.stage.set_params(section(FrictionCompensationParams, v))
 
     def _keep_command(self, msg: JointState) -> None:
         stamp = msg.header.stamp
@@ -96,11 +96,12 @@ class FrictionCompensationNode(CdprNode):
         """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
         never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
         pose_bytes = pose_key(pose)
-        key = (pose_bytes, kernels.ENABLED)      # (the flavour computed it: a switch recomputes)
-        if pose_bytes is None or key != self._beta_key:
-            self._beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
-            self._beta_key = key
-        return self._beta
+        key = None if pose_bytes is None else (pose_bytes, kernels.ENABLED)   # (a flavour switch recomputes)
+        return self._beta(key, self._wrap_angles_of, pose)
+
+    def _wrap_angles_of(self, pose) -> np.ndarray:
+        beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
+        return beta
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]

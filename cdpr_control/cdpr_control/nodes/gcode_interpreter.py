@@ -62,6 +62,7 @@ from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError, ParameterCommand
 from cdpr_control.motion.interpolation import AxisLimits, Interpolator, Limits, ProgramState, TERMINAL_STATES
 from cdpr_control.model.kinematics import twist_from_pose_rates
+from cdpr_control.model.memo import Memo
 from cdpr_control.motion.program_check import check_program
 from cdpr_control.ros.message_builders import builder
 
@@ -97,6 +98,11 @@ PARAMS = [
     ParamSpec("state_timeout", 5.0, "lockstep: wall time without a winch/state that fails the running program [s]",
               range=(1e-2, 600.0)),
 ]
+
+
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
 
 SOURCE_START_TOLERANCE = 1e-3   # m, rad: a source must take over at the held set-point (no jump)
 
@@ -200,7 +206,7 @@ class GCodeInterpreterNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("gcode_interpreter", **kwargs)
         self.limits = Limits()
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.frame_id = self.params.values["frame_id"]
         self.q = np.r_[self.robot.home, np.zeros(3)]  # held set-point [x (6), F_d,0 (3)]
         self.xd = np.zeros(6)
@@ -224,7 +230,7 @@ class GCodeInterpreterNode(CdprNode):
         self.guided: OperationalSetpoint | None = None  # the forwarded set-point of this period
         self._waiting_ns: int | None = None            # lockstep: a tick waiting for the source
         self._last_setpoint: OperationalSetpoint | None = None
-        self._setpoint_key, self._setpoint_body = None, {}    # see _setpoint_fields
+        self._setpoint_body = Memo()     # see _setpoint_fields
         if self.source:
             # adapted: _forward only reads their fields, so the source's state payload (published every
             # period, guiding or not) is not built into a message for this node (issue 26)
@@ -521,14 +527,8 @@ class GCodeInterpreterNode(CdprNode):
         """The set-point's pose, twist, acceleration, force and line. While they do not change
         (holding a pose, a dwell) the messages of the last period are used again (subscribers do not
         modify what they receive), which spares the conversions."""
-        key = (self.q.tobytes(), self.xd.tobytes(), self.xdd.tobytes(), self.line)
-        if key != self._setpoint_key:
-            twist, accel = twist_from_pose_rates(self.q[:6], self.xd, self.xdd)
-            self._setpoint_key = key
-            self._setpoint_body = dict(pose=pose_to_msg(self.q[:6]), velocity=twist_to_msg(twist),
-                                       acceleration=accel_to_msg(accel), force=vector3(self.q[6:]),
-                                       line=int(self.line))
-        return self._setpoint_body
+        q, xd, xdd, line = self.q, self.xd, self.xdd, self.line
+        return self._setpoint_body((q.tobytes(), xd.tobytes(), xdd.tobytes(), line), _setpoint_body, q, xd, xdd, line)
 
     def _publish_status(self, stamp: int, force: bool = False) -> None:
         active = self.active
@@ -557,6 +557,12 @@ class GCodeInterpreterNode(CdprNode):
     def destroy_node(self):
         self.action_server.destroy()
         return super().destroy_node()
+
+
+def _setpoint_body(q, xd, xdd, line) -> dict:
+    twist, accel = twist_from_pose_rates(q[:6], xd, xdd)
+    return dict(pose=pose_to_msg(q[:6]), velocity=twist_to_msg(twist), acceleration=accel_to_msg(accel),
+                force=vector3(q[6:]), line=int(line))
 
 
 def main(args=None):

@@ -41,6 +41,7 @@ from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAME
     format_state)
 from cdpr_control.control.ospc import AXES
 
+from cdpr_control.control.params import default, section
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
@@ -51,7 +52,7 @@ NAME = "hybrid_force_controller"
 _ZERO3, _ZEROS = [0.0] * 3, [0.0] * 6     # (the message constructor copies them)
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
-    ParamSpec("enabled", False, "hybrid position/force control on (M103) or off (M104; releases the contact)"),
+    ParamSpec("enabled", default("hybrid_force_controller", "enabled"), "hybrid position/force control on (M103) or off (M104; releases the contact)"),
     ParamSpec("K_p", _D.K_p, "proportional gain K_p,HPFC (effective stiffness) [N/m], output e_F / K_p (5.3), "
               "table 5.1", range=(1.0, 1e9)),
     ParamSpec("T_i", _D.T_i, "integrator reset time T_i,HPFC [s] (5.3), table 5.1", range=(1e-3, 1e4)),
@@ -76,13 +77,18 @@ PARAMS = [
 ]
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
+
+
 class HybridForceControllerNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__(NAME, **kwargs)
         self.stage: HybridForceStage | None = None
         self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
         self.hand_overs: list = []         # hand-overs not yet taken on x_t
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
         self.sync = StampSync(self, {
             "setpoint": (OperationalSetpoint, "setpoint"),
@@ -93,26 +99,20 @@ class HybridForceControllerNode(CdprNode):
         self.create_subscription(ControllerState, "cable_force_controller/hand_over", self._on_hand_over, CONTROL,
                                  adapted=True)
 
-    @staticmethod
-    def _hpfc_params(v: dict) -> HPFCParams:
-        # T_MA filters the CFC's input: a parameter of cable_force_controller
-        return HPFCParams(**{name: (bool(v[name]) if name == "tare" else float(v[name]))
-                             for name in HPFCParams.__dataclass_fields__ if name != "T_MA"})
-
     def _on_hand_over(self, msg) -> None:
         self.cfc_on = bool(msg.enabled)
         if msg.enabled and len(msg.output) == 6 and len(self.hand_overs) < 100:
             self.hand_overs.append(msg)
 
     def _validate(self, v: dict) -> None:
-        self._hpfc_params(v).validate()
+        section(HPFCParams, v).validate()
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = HybridForceStage(self.robot, self.dt, self._hpfc_params(v), v["T_wrench_filter"],
+            self.stage = HybridForceStage(self.robot, self.dt, section(HPFCParams, v), v["T_wrench_filter"],
                                           enabled=v["enabled"])
         else:
-            self.stage.control.set_params(self._hpfc_params(v))
+            self.stage.control.set_params(section(HPFCParams, v))
             self.stage.control.enabled = v["enabled"]
             self.stage.hand_over.set_time_constant(v["T_wrench_filter"])
 

@@ -46,15 +46,16 @@ from std_srvs.srv import Trigger
 
 from cdpr_control.control.bumpless import Blend
 from cdpr_control.force_distribution import Status
-from cdpr_control.control.loop import ControlLoopParams
 from cdpr_control.control.joint_command import A_BRAKE, JointCommand
+from cdpr_control.control.params import default
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
                                           SafetyMonitor, braking)
+from cdpr_control.model.memo import Memo
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import pose_from_msg, pose_key
 from cdpr_control.ros.mode import mode_publisher, publish_mode
-from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampJumps, StampSync, input_problem, stamp_ns
 
@@ -78,7 +79,7 @@ def offset_params(name: str) -> list[ParamSpec]:
 
 _S = SafetyConfig()   # the defaults live in the dataclass (one source of truth)
 PARAMS = [
-    ParamSpec("mode", "force_control", "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
+    ParamSpec("mode", default("joint_command", "mode"), "force_control: θ_d = IK(x_d + Σ offsets) - Δq_CFC; ik_only: θ_d = IK(x_d) "
               "(2.3.2), the offsets ramped out", choices=("force_control", "ik_only")),
     ParamSpec("v_max", 0.0, "rate limit of θ_d [m/s]; 0 = the robot's drive v_max", range=(0.0, 100.0)),
     ParamSpec("force_tolerance", _S.force_tolerance, "force beyond [f_min, f_max] tolerated before a fault [N]", range=(0.0, 1e5)),
@@ -101,13 +102,19 @@ PARAMS = [
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
     ParamSpec("infeasible_periods", 20, "periods in a row without a feasible force distribution (set-point outside "
               "the wrench-feasible workspace) that hold θ_d [-]", range=(1, 1_000_000)),
-    ParamSpec("start_ramp", ControlLoopParams.start_ramp, "the drives take the controllers' command over from the "
+    ParamSpec("start_ramp", default("joint_command", "start_ramp"), "the drives take the controllers' command over from the "
               "lengths measured at start in this time: the first command's gap is ramped out along a cosine "
               "(docs/control.md, \"A start ramp\") [s]", range=(0.0, 10.0), read_only=True),
-    ParamSpec("transfer_time", ControlLoopParams.transfer_time, "bumpless transfer: Δq_CFC and every offset "
+    ParamSpec("transfer_time", default("joint_command", "transfer_time"), "bumpless transfer: Δq_CFC and every offset "
               "input are blended in and out over this time on a mode switch or a controller enabled/disabled [s]",
               range=(0.0, 10.0)),
 ]
+
+
+def parameters(robot, offset_inputs=OFFSET_INPUTS.default) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md), with the offsets.<name>.*
+    of these offset inputs."""
+    return [*PARAMS, OFFSET_INPUTS, *(spec for name in offset_inputs for spec in offset_params(name))]
 
 
 class JointCommandNode(CdprNode):
@@ -118,19 +125,17 @@ class JointCommandNode(CdprNode):
         self.blend_cfc = Blend(0.0, self.dt)        # bumpless transfer of Δq_CFC (offsets: self.offsets)
         self.monitor = SafetyMonitor()
         self.watch = ForceWatch(SafetyConfig(), self.dt)
-        self.declare_parameter(OFFSET_INPUTS.name, OFFSET_INPUTS.default, OFFSET_INPUTS.descriptor())
-        names = list(self.get_parameter(OFFSET_INPUTS.name).value)
-        self.offsets = OffsetInputs(names, self.dt, ControlLoopParams.transfer_time)
+        names = list(declare(self, OFFSET_INPUTS))
+        self.offsets = OffsetInputs(names, self.dt, default("joint_command", "transfer_time"))
         self.offset_keys = [(name, f"offset:{name}") for name in names]     # (their input names)
-        specs = PARAMS + [spec for name in names for spec in offset_params(name)]
         self.mode, self.mode_pub = None, mode_publisher(self)     # the OSPC and CFC nodes follow it
-        self.params = ParameterSet(self, specs, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot, names), self._validate, self._apply)
         self.latest: dict[str, object] = {}
         self.input_times: dict[str, float] = {}      # stamp [s] of each watched topic's message in latest
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
         self._last_cycle_ns = -1                     # stamp of the newest period commanded
-        self._x_d_key, self._x_d = None, None        # x_d of the last set-point pose (held while it repeats)
+        self._x_d = Memo()       # x_d of the last set-point pose, held while it repeats (to the IK kernel: writeable)
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -251,10 +256,7 @@ class JointCommandNode(CdprNode):
     def _setpoint_pose(self, pose) -> np.ndarray:
         """x_d of the set-point's pose; the array of the last period again (read, never written) when
         the pose repeats (holding, a pause)."""
-        key = pose_key(pose)
-        if key is None or key != self._x_d_key:
-            self._x_d_key, self._x_d = key, pose_from_msg(pose)
-        return self._x_d
+        return self._x_d(pose_key(pose), pose_from_msg, pose)
 
     def _hold_cycle(self, t_ns: int) -> None:
         """A period whose required input is stale (its producer stopped): brake on the path, so that

@@ -33,6 +33,7 @@ from cdpr_control.control.safety import all_finite
 from cdpr_control.control.ospc import AXES
 from cdpr_control.ros.message_builders import builder
 
+from cdpr_control.control.params import section
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
@@ -72,11 +73,16 @@ PARAMS = [
 ]
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
+
+
 class LoadCompensationNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("load_compensation", **kwargs)
         self.stage: LoadCompensation | None = None
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.state_pub = self.create_publisher(ControllerState, "load_compensation/state", CONTROL)
         self.payload_pub = self.create_publisher(InertiaStamped, "load_compensation/payload", CONTROL)
         self.sync = StampSync(self, {
@@ -94,18 +100,14 @@ class LoadCompensationNode(CdprNode):
                              else "estimate held or not yet available: not tared")
         return response
 
-    @staticmethod
-    def _stage_params(v: dict) -> LoadCompensationParams:
-        return LoadCompensationParams(**{spec.name: v[spec.name] for spec in PARAMS})
-
     def _validate(self, v: dict) -> None:
-        self._stage_params(v).validate()
+        section(LoadCompensationParams, v).validate()
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
-            self.stage = LoadCompensation(self.robot, self.dt, self._stage_params(v))
+            self.stage = LoadCompensation(self.robot, self.dt, section(LoadCompensationParams, v))
         else:
-            self.stage.set_params(self._stage_params(v))
+            self.stage.set_params(section(LoadCompensationParams, v))
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         sp = msgs["setpoint"]

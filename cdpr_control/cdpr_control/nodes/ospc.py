@@ -21,19 +21,21 @@ from geometry_msgs.msg import PoseStamped
 
 from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_state, select_position_feedback
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
+from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
 from cdpr_control.ros.mode import follow_mode
-from cdpr_control.ros.parameters import ParameterSet, ParamSpec
+from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
 
 _D = OSPCParams()     # the defaults live in the dataclass (one source of truth)
 PARAMS = [
-    ParamSpec("enabled", True, "operational-space position control on; off = x_OSPC held at 0"),
+    ParamSpec("enabled", default("ospc", "enabled"), "operational-space position control on; off = x_OSPC held at 0"),
     ParamSpec("K_p", _D.K_p.tolist(), "proportional gains K_p,OSPC per DOF x y z a b c [-] (3.16); table 3.1 gives z"),
     ParamSpec("T_i", _D.T_i.tolist(), "integrator reset times T_i,OSPC per DOF [s] (3.16); table 3.1 gives z"),
     ParamSpec("x_sat", _D.x_sat.tolist(), "output saturation per DOF [m, m, m, rad, rad, rad]"),
@@ -43,6 +45,11 @@ FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller wh
                              "position-controlled while it is in contact (Fig. 5.2); empty: none", read_only=True)
 
 
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return [*PARAMS, FORCE_CONTROLLER]
+
+
 class OSPCNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("ospc", **kwargs)
@@ -50,14 +57,13 @@ class OSPCNode(CdprNode):
         self.enabled = True
         self.precondition: str | None = None
         self.names = list(AXES)                     # shared by the published messages (never modified)
-        # x_d of the last set-point pose, its list and whether it is finite: held while the pose
-        # repeats (holding, a pause), as the numbers of the same pose are the same
-        self._x_d_key, self._x_d = None, (None, None, False)
-        self.declare_parameter(FORCE_CONTROLLER.name, FORCE_CONTROLLER.default, FORCE_CONTROLLER.descriptor())
-        force_controller = self.get_parameter(FORCE_CONTROLLER.name).value
+        # x_d of the last set-point pose (read-only), its list and whether it is finite: held while
+        # the pose repeats (holding, a pause), as the numbers of the same pose are the same
+        self._x_d = Memo(read_only=True)
+        force_controller = declare(self, FORCE_CONTROLLER)
         self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
         self._live = False                          # (the start-up set is not analysed: see _validate)
-        self.params = ParameterSet(self, PARAMS, self._validate, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self._live = True
         self.publisher = self.create_publisher(ControllerState, "ospc/state", CONTROL)
         follow_mode(self, self._on_mode)
@@ -67,13 +73,8 @@ class OSPCNode(CdprNode):
         self.sync = StampSync(self, inputs, primary="pose", callback=self._cycle, mode=self.sync_mode,
                               optional=("hpfc",) if force_controller else ())
 
-    @staticmethod
-    def _ospc_params(v: dict) -> OSPCParams:
-        return OSPCParams(K_p=np.array(v["K_p"], dtype=float), T_i=np.array(v["T_i"], dtype=float),
-                          x_sat=np.array(v["x_sat"], dtype=float))
-
     def _validate(self, v: dict) -> None:
-        params = self._ospc_params(v)
+        params = section(OSPCParams, v)
         params.validate()
         # live changes only: the analysis (python-control, 0.1-0.3 s) would delay the node's start
         # and the lockstep graph's first periods; the shipped sets are stable (tests/nodes/test_stability_refusal.py)
@@ -92,7 +93,7 @@ class OSPCNode(CdprNode):
         return self._instabilities[key]
 
     def _apply(self, v: dict) -> None:
-        params = self._ospc_params(v)
+        params = section(OSPCParams, v)
         if self.controller is None:
             self.controller = OperationalSpacePositionController(params, self.dt)
         else:
@@ -111,12 +112,7 @@ class OSPCNode(CdprNode):
     def _setpoint(self, pose) -> tuple[np.ndarray, list, bool]:
         """(x_d, x_d as a list, whether it is finite) of the set-point's pose; the same objects again
         (read, never written) while the pose repeats."""
-        key = pose_key(pose)
-        if key is None or key != self._x_d_key:
-            x_d = pose_from_msg(pose)
-            reference = x_d.tolist()
-            self._x_d_key, self._x_d = key, (x_d, reference, all_finite(reference))
-        return self._x_d
+        return self._x_d(pose_key(pose), _reference, pose)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         x_d, reference, reference_finite = self._setpoint(msgs["setpoint"].pose)
@@ -141,6 +137,12 @@ class OSPCNode(CdprNode):
         self.publisher.publish(self.message_factory(ControllerState)(
             header=self.header(t_ns), controller="ospc", enabled=self.enabled, names=self.names,
             reference=reference, feedback=feedback, error=[a - b for a, b in zip(reference, feedback)], **output))
+
+
+def _reference(pose) -> tuple[np.ndarray, list, bool]:
+    x_d = pose_from_msg(pose)
+    reference = x_d.tolist()
+    return x_d, reference, all_finite(reference)
 
 
 def main(args=None):

@@ -42,6 +42,11 @@ PARAMS = [
     ParamSpec("force_scale", 0.0, "length of the force arrow per newton [m/N]; 0: a tenth of the frame "
               "diagonal for the mean f_max", range=(0.0, 10.0)),
 ]
+
+
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
+    return list(PARAMS)
 INPUTS = {"pose": (PoseStamped, "platform/pose"), "forces": (CableForces, "cable_forces"),
           "setpoint": (OperationalSetpoint, "setpoint"), "wrench": (WrenchStamped, "platform/wrench")}
 SAMPLED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)  # only the newest message is kept
@@ -50,7 +55,7 @@ SAMPLED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)  # only th
 class VisualizationNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("visualization", **kwargs)
-        self.params = ParameterSet(self, PARAMS, lambda v: None, self._apply)
+        self.params = ParameterSet(self, parameters(self.robot), lambda v: None, self._apply)
         self.marker_pub = self.create_publisher(MarkerArray, "visualization/markers", CONTROL)
         self.latest: dict = {}
         for key, (cls, topic) in INPUTS.items():

@@ -30,7 +30,6 @@ unstretched cable length.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -64,7 +63,8 @@ MAX_CATCH_UP = 20          # periods one free-running timer tick may advance
 LATENCY_WINDOW = 1000      # free running: published states awaiting their command, at most
 
 
-def _specs(robot) -> list[ParamSpec]:
+def parameters(robot) -> list[ParamSpec]:
+    """Every parameter of the node besides CdprNode's (docs/parameters.md)."""
     tool_radius, tool_offset = default_tool(np.asarray(robot.b))
     return [
         ParamSpec("substeps", 1, "physics steps per control period (period / substeps <= 1 ms)", (1, 1000), read_only=True),
@@ -78,18 +78,18 @@ def _specs(robot) -> list[ParamSpec]:
         ParamSpec("noise_scale", 1.0, "force sensor noise as a multiple of the robot file's noise_std [-]", (0.0, 100.0), read_only=True),
         ParamSpec("encoder_counts", 2**20, "motor encoder counts per revolution; 0 = ideal", (0, 2**31 - 1), read_only=True),
         ParamSpec("ik_refresh_distance", 5e-3, "anchor motion before the pulley IK is re-evaluated [m]", (1e-6, 0.1), read_only=True),
-        ParamSpec("initial_pose", robot.home.tolist(), "start pose x0 = [x, y, z, a, b, c] [m, rad]", read_only=True),
+        ParamSpec("initial_pose", robot.home.tolist(), "start pose x0 = [x, y, z, a, b, c] [m, rad]", read_only=True, size=6),
         ParamSpec("initial_tension_level", 0.5, "tension level of the start-up force distribution [0..1]", (0.0, 1.0), read_only=True),
         ParamSpec("encoder_calibration", "home_tension", "home_tension: theta = IK{home} at home under the start-up "
                   "tension (2.3.2); none: theta = unstretched length", choices=("home_tension", "none"), read_only=True),
         ParamSpec("floor", False, "a floor plane", read_only=True),
         ParamSpec("floor_height", float(robot.workspace_min[2]) - 0.5, "floor height [m]; live: moves the floor"),
         ParamSpec("wall", False, "a wall plane", read_only=True),
-        ParamSpec("wall_point", [float(robot.workspace_max[0]) + 0.5, 0.0, 0.0], "a point of the wall [m]; live: moves the wall"),
-        ParamSpec("wall_normal", [-1.0, 0.0, 0.0], "outward wall normal [-]", read_only=True),
+        ParamSpec("wall_point", [float(robot.workspace_max[0]) + 0.5, 0.0, 0.0], "a point of the wall [m]; live: moves the wall", size=3),
+        ParamSpec("wall_normal", [-1.0, 0.0, 0.0], "outward wall normal [-]", read_only=True, size=3),
         ParamSpec("cylinder", False, "a cylinder (the oil barrel of section 5.1.3)", read_only=True),
-        ParamSpec("cylinder_center", [0.0, 0.0, float(robot.workspace_min[2])], "cylinder centre [m]; live: moves the cylinder"),
-        ParamSpec("cylinder_axis", [0.0, 1.0, 0.0], "cylinder axis direction [-]", read_only=True),
+        ParamSpec("cylinder_center", [0.0, 0.0, float(robot.workspace_min[2])], "cylinder centre [m]; live: moves the cylinder", size=3),
+        ParamSpec("cylinder_axis", [0.0, 1.0, 0.0], "cylinder axis direction [-]", read_only=True, size=3),
         ParamSpec("cylinder_radius", 0.3, "cylinder radius [m]", (1e-4, 100.0), read_only=True),
         ParamSpec("cylinder_length", 0.9, "cylinder length [m]", (1e-4, 100.0), read_only=True),
         ParamSpec("contact_stiffness", 1e5, "obstacle stiffness per contact point [N/m]", (1.0, 1e10)),
@@ -98,7 +98,7 @@ def _specs(robot) -> list[ParamSpec]:
         ParamSpec("platform_shape", "sphere", "platform contact shape: sphere (tool tip) or box (spanning b_i)",
                   choices=("sphere", "box"), read_only=True),
         ParamSpec("tool_radius", tool_radius, "tool tip sphere radius [m]", (1e-4, 10.0), read_only=True),
-        ParamSpec("tool_offset", list(tool_offset), "tool tip centre in the platform frame [m]", read_only=True),
+        ParamSpec("tool_offset", list(tool_offset), "tool tip centre in the platform frame [m]", read_only=True, size=3),
         ParamSpec("lockstep_timeout", 1.0, "wall time to wait for a command before advancing anyway [s]; 0 = forever",
                   (0.0, 3600.0)),
         ParamSpec("realtime_factor", 1.0, "free-running speed relative to real time [-]", (0.01, 1000.0)),
@@ -107,23 +107,17 @@ def _specs(robot) -> list[ParamSpec]:
 
 
 def _validate(v: dict) -> None:
-    for name, n in (("initial_pose", 6), ("wall_point", 3), ("wall_normal", 3), ("cylinder_center", 3),
-                    ("cylinder_axis", 3), ("tool_offset", 3)):
-        x = np.asarray(v[name], dtype=float)
-        if x.shape != (n,) or not np.all(np.isfinite(x)):
-            raise ValueError(f"{name} needs {n} finite numbers, got {list(v[name])}")
+    """Beyond the declarations (sizes, finite values: ParameterSet): directions are not zero."""
     for name in ("wall_normal", "cylinder_axis"):
         if not np.linalg.norm(v[name]) > 0.0:
             raise ValueError(f"{name} must not be zero")
-    if not math.isfinite(v["floor_height"]):     # the one float without a range (a floor may be anywhere)
-        raise ValueError(f"floor_height must be a finite height [m], got {v['floor_height']}")
 
 
 class WinchPlatformSimNode(CdprNode):
     def __init__(self, **kwargs):
         super().__init__("winch_platform_sim", **kwargs)
         robot = self.robot
-        self.params = ParameterSet(self, _specs(robot), _validate, self._apply)
+        self.params = ParameterSet(self, parameters(robot), _validate, self._apply)
         self.sim = self._build_simulator(self.params.values)
         self.names = [f"cable_{i + 1}" for i in range(robot.m)]
         self.period_ns = int(round(self.dt * 1e9))
