@@ -1,6 +1,9 @@
 """Test-session environment: ROS 2 traffic stays on this machine, in a domain of its own."""
+import fcntl
 import os
 import random
+import tempfile
+from pathlib import Path
 
 # Discovery only on localhost (no multicast leaves the machine), and a random domain so that
 # concurrent test runs on one machine do not see each other's nodes.
@@ -19,21 +22,42 @@ os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 import pytest  # noqa: E402
 
 
-_MODULES_RUN = [0]
+_NEXT_DOMAIN = [SESSION_DOMAIN]
+
+
+def claim_domain(first: int) -> tuple[int, object]:
+    """The first ROS domain from ``first`` on (cycling through 1..100) that no other test session on
+    this machine holds, and its lock (an flock on a file in the temporary directory, held until the
+    file is closed or the process ends). Random domains alone collided: with several sessions on one
+    machine, a module's graph received another session's /winch/state and /ground_truth/pose."""
+    for k in range(100):
+        domain = 1 + (first - 1 + k) % 100
+        lock = open(Path(tempfile.gettempdir()) / f"cdpr-test-ros-domain-{domain}.lock", "w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        return domain, lock
+    raise RuntimeError("every ROS domain 1..100 is held by another test session on this machine")
 
 
 @pytest.fixture(scope="module", autouse=True)
 def ros_domain_of_the_module():
     """Each test module on a ROS domain of its own: whatever an earlier module left publishing (a
-    node of a failed test, a player) cannot reach this module's subscribers or recordings. The
+    node of a failed test, a player) cannot reach this module's subscribers or recordings, nor can
+    a module of another test session running on the same machine (:func:`claim_domain`). The
     domains cycle from the session's random one through 1..100 (FastDDS's port range on localhost);
     contexts, launched graphs and subprocesses made in the module read ROS_DOMAIN_ID when they start.
     Autouse at module scope: set before the module's other fixtures start anything."""
-    domain = 1 + (SESSION_DOMAIN - 1 + _MODULES_RUN[0]) % 100
-    _MODULES_RUN[0] += 1
+    domain, lock = claim_domain(_NEXT_DOMAIN[0])
+    _NEXT_DOMAIN[0] = domain % 100 + 1
     os.environ["ROS_DOMAIN_ID"] = str(domain)
-    yield domain
-    os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN)
+    try:
+        yield domain
+    finally:
+        os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN)
+        lock.close()
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,7 @@ import threading
 import time
 
 import numpy as np
-from cdpr_msgs.msg import ProgramStatus
+from cdpr_msgs.msg import CableForces, ProgramStatus
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -23,7 +23,11 @@ from .graph import Collector, Spinner, wait_for
 
 ROBOT = "ipanema3_mini"
 PERIOD_NS = 1_000_000
-TOPICS = {"/winch/command": JointState, "/diagnostics": DiagnosticArray, "/program_status": ProgramStatus}
+TOPICS = {"/winch/command": JointState, "/diagnostics": DiagnosticArray, "/program_status": ProgramStatus,
+          "/ground_truth/cable_forces": CableForces}
+FORCE_BAND = (0.5, 1.5)     # x f_min, x f_max: the simulated cable forces a fault may not leave ...
+EXCURSION_S = 0.1           # ... for longer than this (simulated time) (issue 28)
+LOOP_GAP_S = 1.0            # simulated time a fault may keep the loop from commanding (issue 28)
 
 
 class FaultGraph:
@@ -112,6 +116,30 @@ class FaultGraph:
                  timeout=timeout, what=f"program state {state}")
 
     # -- checks ---------------------------------------------------------------------------------
+    def check_forces(self, since_stamp: int = 0) -> None:
+        """No simulated cable force (the plant's, /ground_truth/cable_forces) out of
+        [0.5 f_min, 1.5 f_max] for more than 100 ms of simulated time, and no gap of more than 1 s
+        of simulated time between two commands: the loop ran through the fault."""
+        forces = sorted((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, np.asarray(m.f))
+                        for m in self.collector.messages("/ground_truth/cable_forces")
+                        if m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec >= since_stamp)
+        assert forces, "no /ground_truth/cable_forces"
+        c = self.robot.cable
+        low, high = FORCE_BAND
+        out = np.array([np.any((f < low * c.f_min) | (f > high * c.f_max)) for _, f in forces])
+        stamps = np.array([t for t, _ in forces])
+        started = None
+        for t, bad in zip(stamps, out):
+            if bad and started is None:
+                started = t
+            elif not bad:
+                started = None
+            assert started is None or t - started <= EXCURSION_S * 1e9, \
+                f"a cable force out of [{low} f_min, {high} f_max] from {started * 1e-9:.3f} s to {t * 1e-9:.3f} s"
+        commands = sorted(t for t, _ in self.commands() if t >= since_stamp)
+        assert len(commands) > 1 and np.diff(commands).max() <= LOOP_GAP_S * 1e9, \
+            f"the loop stopped for {np.diff(commands).max() * 1e-9:.3f} s of simulated time"
+
     def check_commands(self, since_stamp: int = 0) -> None:
         """No NaN and no step: every command finite, consecutive ones (by stamp) at most v_max per
         period apart per cable (the joint command's rate limit, which a hold keeps too)."""

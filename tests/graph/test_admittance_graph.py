@@ -224,15 +224,19 @@ def test_free_running_admittance_node_integrates_the_skipped_periods():
         spinner.close()
 
 
-def _guided_from_start(periods: int, tmp_path) -> dict:
+def _guided_from_start(periods: int, tmp_path, lockstep_timeout: float) -> tuple[dict, int]:
     """The shipped graph in lockstep with hand guiding on from the start and no dead band (the
-    residual wrench of noise and friction drives it): stamp -> (set-point pose, admittance output)."""
+    residual wrench of noise and friction drives it): stamp -> (set-point pose, admittance output),
+    and the simulator's count of missed deadlines."""
     description = load_launch_file(GRAPH, {"robot": "ipanema3_mini"})
-    spec = next(n for n in description.nodes if n.module.endswith("admittance_controller"))
     override = tmp_path / "guided.yaml"          # by node name: a "/**" entry would not beat the file's
-    override.write_text(yaml.safe_dump({"admittance_controller": {"ros__parameters": {
-        "hand_guiding": True, "dead_band": [0.0] * 6, "tare_on_enable": False}}}))
-    spec.parameters.append(str(override))
+    override.write_text(yaml.safe_dump({
+        "admittance_controller": {"ros__parameters": {"hand_guiding": True, "dead_band": [0.0] * 6,
+                                                      "tare_on_enable": False}},
+        "winch_platform_sim": {"ros__parameters": {"lockstep_timeout": lockstep_timeout}}}))
+    for spec in description.nodes:
+        if spec.module.endswith(("admittance_controller", "winch_platform_sim")):
+            spec.parameters.append(str(override))
     spinner = Spinner()
     collector = spinner.add(Collector, topics={"/setpoint": OperationalSetpoint,
                                                "/admittance_controller/state": ControllerState})
@@ -240,18 +244,24 @@ def _guided_from_start(periods: int, tmp_path) -> dict:
         with Launcher(description, mode="composed") as launch:
             sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").sim
             wait_for(lambda: sim.steps >= periods + 5, timeout=300.0, what=f"{periods} periods")
+            missed = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim").missed_deadlines
         stamp = lambda m: m.header.stamp.sec * 10**9 + m.header.stamp.nanosec       # noqa: E731
         sp = {stamp(m): tuple(pose_from_msg(m.pose)) for m in collector.messages("/setpoint")}
         st = {stamp(m): tuple(m.output) for m in collector.messages("/admittance_controller/state")}
-        return {t: (sp[t], st[t]) for t in sp if t in st and t <= periods * PERIOD_NS}
+        return {t: (sp[t], st[t]) for t in sp if t in st and t <= periods * PERIOD_NS}, missed
     finally:
         spinner.close()
 
 
 def test_lockstep_hand_guiding_is_deterministic(tmp_path):
     """Same seed, same graph: the guided set-points and admittance outputs of two runs are equal
-    bit for bit (the collector may join a few periods late; the common periods are compared)."""
-    a, b = _guided_from_start(1000, tmp_path), _guided_from_start(1000, tmp_path)
+    bit for bit (the collector may join a few periods late; the common periods are compared), also
+    when the simulator's lockstep_timeout is shorter than the graph takes for one period (3 ms
+    against about 5-10): a composed graph that is slow, not stopped, misses no deadline, so a
+    loaded machine cannot change the run (before, the simulator advanced on its watchdog while
+    the command was still queued in the process: 103 missed deadlines, 995 of 1001 periods differed)."""
+    (a, missed_a), (b, missed_b) = _guided_from_start(1000, tmp_path, 1.0), _guided_from_start(1000, tmp_path, 0.003)
+    assert missed_a == missed_b == 0
     common = sorted(set(a) & set(b))
     assert len(common) > 800
     assert all(a[t] == b[t] for t in common)

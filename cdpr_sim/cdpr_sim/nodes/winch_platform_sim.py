@@ -15,7 +15,9 @@ and advances one control period when the command stamped with the current time h
 controller copies the stamp of the winch/state it answers; a stamp older than the current period is
 late: counted, no step, held unless older than the command held); after ``lockstep_timeout`` of
 wall time it advances with the last command and counts a missed deadline (0 waits forever). Until the first command the state of
-t = 0 is repeated every 0.5 s, so that late subscribers start the loop. ``latest`` runs free at
+t = 0 is repeated every 0.5 s, so that late subscribers start the loop. Neither happens while
+deliveries are queued in this process (a composed graph still computing the period is slow, not
+stopped), so a composed lockstep run does not depend on the machine's load. ``latest`` runs free at
 ``realtime_factor`` times real time on a wall timer, holds the newest command and counts the
 periods without a fresh one; it reports on /diagnostics the lateness of each step against its
 wall-clock schedule (``step_lateness_*``) and the latency from publishing ``winch/state`` to
@@ -43,7 +45,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.intraprocess import has_subscribers
+from cdpr_control.ros.intraprocess import IntraProcess, has_subscribers
 from cdpr_control.ros.conversions import pose_to_msg, twist_to_msg, wrench_from_msg, wrench_to_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
@@ -290,6 +292,11 @@ class WinchPlatformSimNode(CdprNode):
         self._publish()
 
     def _lockstep_watchdog(self) -> None:
+        if IntraProcess.of(self.context).pending():
+            # the graph in this process is still computing the period (slow, not stopped; e.g. the
+            # process was descheduled on a loaded machine): neither repeat nor advance, or the run
+            # would depend on the machine's load
+            return
         now = time.monotonic()
         if not self.got_command:
             if now - self._last_handshake >= HANDSHAKE_PERIOD:
