@@ -5,7 +5,8 @@ is the thesis'."""
 import numpy as np
 import pytest
 
-from cdpr_control.control.force_setpoint import RESERVE_RELEASE_TIME, RESERVE_SHARE, ForceSetpoint, largest_margin
+from cdpr_control.control.force_setpoint import (RESERVE_RELEASE_TIME, RESERVE_SHARE, ForceSetpoint, MarginLP,
+    largest_margin, user_forces)
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.dynamics import platform_wrench
@@ -109,3 +110,46 @@ def test_the_mini_keeps_f_min_when_a_13_N_push_is_let_go_at_once():
     moved = r.x_d[r.t > release][-1, 0] - r.x_d[0, 0]
     assert moved > 1e-3                                          # it was guided along the push
     assert r.f[r.t > enable].min() >= MINI.cable.f_min.min()
+
+
+def _guided_path(robot, periods, amplitude, push):
+    """A guided path about home: (A^T, w) per period, the pose swinging by ``amplitude`` [m] and the
+    wrench by ``push`` [N] (a hand moving the platform around)."""
+    zero = np.zeros(6)
+    for k in range(periods):
+        x = np.asarray(robot.home, dtype=float).copy()
+        x[:3] += amplitude * np.sin(np.r_[1.0, 1.3, 0.7] * k * 0.003)
+        w = platform_wrench(robot, x, zero, zero) + push * np.r_[np.sin(np.r_[0.9, 1.1, 0.5] * k * 0.01 + 1.0), zero[:3]]
+        yield inverse_kinematics(robot, x).AT, w
+
+
+@pytest.mark.parametrize("name, amplitude, push", [("ipanema3_mini", 0.04, 40.0), ("ipanema3", 1.5, 2000.0)])
+def test_the_margin_lp_kept_warm_is_the_cold_lp_along_a_guided_path(name, amplitude, push):
+    """The force set-point keeps one LP model from period to period (MarginLP, set up once: building
+    it anew each period cost about 100 us of the 1 kHz loop); warm-started, it finds the margin of a
+    cold solve at every period, also where the wrench leaves none (-inf) and after."""
+    robot = load_robot(name)
+    f_min, f_max = robot.cable.f_min, robot.cable.f_max
+    lp = MarginLP(6, robot.m)
+    warm, cold = [], []
+    for AT, w in _guided_path(robot, 1500, amplitude, push):
+        warm.append(lp.solve(AT, w, f_min, f_max))
+        cold.append(largest_margin(AT, w, f_min, f_max))
+    assert np.isfinite(cold).sum() > 100 and np.isinf(cold).sum() > 100   # (margins and none along the path)
+    np.testing.assert_allclose(warm, cold, atol=1e-6)
+
+
+def test_the_guided_force_setpoint_sets_its_margin_lp_up_once():
+    """The LP of the reserve's margin is set up in the first guided period and then only updated."""
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    _at_rest(fs, MINI, 2, HAND)
+    model = fs.margin_lp.model
+    _at_rest(fs, MINI, 200, HAND)
+    assert model is not None and fs.margin_lp.model is model
+
+
+def test_the_user_forces_are_the_least_squares_forces():
+    AT = inverse_kinematics(MINI, np.r_[0.02, -0.01, 0.01, 0.02, 0.0, -0.03]).AT
+    np.testing.assert_allclose(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0], rtol=1e-10)
+    AT[5] = 0.0                                                  # rank-deficient: the least-squares fallback
+    np.testing.assert_array_equal(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0])

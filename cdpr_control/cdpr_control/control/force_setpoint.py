@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import daqp
 import numpy as np
 
 from cdpr_control import kernels
@@ -72,22 +73,65 @@ def vertical_eigenfrequency(robot, x, f, mass: float) -> float:
 
 def largest_margin(AT, w, f_min, f_max) -> float:
     """The largest t [N] for which f_min + t <= f <= f_max - t, A^T f = -w has a solution (an LP,
-    DAQP), at most (f_max - f_min) / 2; -inf where the wrench w is not feasible at all."""
-    import daqp
+    DAQP), at most (f_max - f_min) / 2; -inf where the wrench w is not feasible at all. One cold
+    solve of :class:`MarginLP`, which the force set-point keeps warm from period to period."""
+    n, m = np.shape(AT)
+    return MarginLP(n, m).solve(AT, w, f_min, f_max)
 
-    n, m = AT.shape
-    A = np.zeros((n + 2 * m, m + 1))
-    A[:n, :m] = AT
-    A[n:n + m, :m] = A[n + m:, :m] = np.eye(m)
-    A[n:n + m, m] = -1.0                                  # f - t >= f_min
-    A[n + m:, m] = 1.0                                    # f + t <= f_max
-    top = float(np.min(f_max - f_min)) / 2.0
-    bu = np.r_[np.full(m, _INF), top, -w, np.full(m, _INF), f_max]
-    bl = np.r_[np.full(m, -_INF), 0.0, -w, f_min, np.full(m, -_INF)]
-    sense = np.zeros(n + 3 * m + 1, dtype=np.int32)
-    sense[m + 1:m + 1 + n] = 5                           # the equality rows A^T f = -w
-    x, _, exitflag, _ = daqp.solve(None, np.r_[np.zeros(m), -1.0], A, bu, bl, sense)
-    return float(x[m]) if exitflag == 1 and np.isfinite(x[m]) else -np.inf
+
+class MarginLP:
+    """:func:`largest_margin` as one DAQP model kept between calls: the constraint matrix and the
+    bounds are allocated once, a call writes A^T and w into them and solves from the last working
+    set (the pose and the user's wrench change little from one period to the next). Building the
+    LP anew each period cost about 100 us of the 1 kHz loop, mostly in numpy's concatenations.
+
+    Variables [f (m), t]; rows A^T f = -w (n), f - t >= f_min (m), f + t <= f_max (m)."""
+
+    def __init__(self, n: int, m: int):
+        self.n, self.m = n, m
+        A = np.zeros((n + 2 * m, m + 1))
+        A[n:n + m, :m] = A[n + m:, :m] = np.eye(m)
+        A[n:n + m, m] = -1.0
+        A[n + m:, m] = 1.0
+        self.A = A
+        self.bu = np.full(n + 3 * m + 1, _INF)               # [f, t] bounds, then the rows
+        self.bl = np.full(n + 3 * m + 1, -_INF)
+        self.bl[m] = 0.0
+        self.sense = np.zeros(n + 3 * m + 1, dtype=np.int32)
+        self.sense[m + 1:m + 1 + n] = 5                      # the equality rows A^T f = -w
+        self.cost = np.r_[np.zeros(m), -1.0]                 # max t
+        self.no_hessian = np.zeros((m + 1, m + 1))           # an LP (Model.setup takes no None)
+        self.model = None
+
+    def solve(self, AT, w, f_min, f_max) -> float:
+        n, m = self.n, self.m
+        self.A[:n, :m] = AT
+        bu, bl = self.bu, self.bl
+        bu[m] = float(np.min(f_max - f_min)) / 2.0
+        np.negative(w, out=bu[m + 1:m + 1 + n])
+        bl[m + 1:m + 1 + n] = bu[m + 1:m + 1 + n]
+        bl[m + 1 + n:m + 1 + n + m] = f_min
+        bu[m + 1 + n + m:] = f_max
+        if self.model is None:
+            self.model = daqp.Model()
+            self.model.setup(self.no_hessian, self.cost, self.A, bu, bl, self.sense)
+        else:
+            self.model.update(A=self.A, bupper=bu, blower=bl)
+        x, _, exitflag, _ = self.model.solve()
+        if exitflag != 1 or not np.isfinite(x[m]):
+            self.model = None                                # a failed working set is no warm start
+            return -np.inf
+        return float(x[m])
+
+
+def user_forces(AT, w_user) -> np.ndarray:
+    """Δf = (A^T)^+ w_user (m,) [N], the least-norm cable forces of the user's wrench, as
+    A (A^T A)^-1 w_user with the 6 x 6 A^T A: the least-squares solution where A^T has full rank
+    (everywhere in the workspace) at about half the cost of ``lstsq``; a singular A^T A falls back to it."""
+    try:
+        return AT.T @ np.linalg.solve(AT @ AT.T, w_user)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(AT, w_user, rcond=None)[0]
 
 
 def loop_filter_times(T: float, omega_n: float) -> tuple[float, float]:
@@ -150,6 +194,7 @@ class ForceSetpoint:
         self.w_d: np.ndarray | None = None
         self.w_user: np.ndarray | None = None    # hand guiding: the user's wrench w_Adm (set_user_wrench)
         self.reserve = 0.0                       # N, the hand's reserve from f_min and f_max (_hand_reserve)
+        self.margin_lp = MarginLP(6, robot.m)    # largest_margin, warm from period to period (_with_reserve)
         self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
         self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
         self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
@@ -270,8 +315,7 @@ class ForceSetpoint:
         user's wrench at the tension level's rate (``tension_rate``, the internal forces move
         smoothly) and decays with RESERVE_RELEASE_TIME after the hand has let go, so the reserve is
         there while the cables ring out. Without a user (``set_user_wrench(None)``) r decays to 0."""
-        target = 0.0 if self.w_user is None else \
-            float(np.abs(np.linalg.lstsq(AT, self.w_user, rcond=None)[0]).max())
+        target = 0.0 if self.w_user is None else float(np.abs(user_forces(AT, self.w_user)).max())
         if target >= self.reserve:
             d = self.distributor
             rate = self.params.tension_rate * float(np.max(d.f_max - d.f_min))
@@ -289,7 +333,7 @@ class ForceSetpoint:
         d = self.distributor
         if self.reserve == 0.0 or d.method != "qp" or result.status != Status.FEASIBLE:
             return result
-        r = min(self.reserve, RESERVE_SHARE * largest_margin(AT, self.w_d, d.f_min, d.f_max))
+        r = min(self.reserve, RESERVE_SHARE * self.margin_lp.solve(AT, self.w_d, d.f_min, d.f_max))
         if not r > 0.0:
             return result
         raised = d.qp.solve(AT, self.w_d, f_min=d.f_min + r, f_max=d.f_max - r)
