@@ -72,7 +72,8 @@ class NumpyMovingAverage:
 
 class NumpyLoadCompensation(LoadCompensation):
     """LoadCompensation with its per-period bookkeeping on numpy arrays (the delay line, the moving
-    averages, the identification (4.4) and the force window), as it was written first."""
+    averages, the identification (4.4) and the force window), as it was written first; the offset
+    (4.5)-(4.6) after the window is the library's own (LoadCompensation._offset)."""
 
     def __init__(self, robot, dt, params=None, monkeypatch=None):
         monkeypatch.setattr(lcm, "MovingAverage", NumpyMovingAverage)     # the filters __init__ builds
@@ -136,21 +137,7 @@ class NumpyLoadCompensation(LoadCompensation):
         S = np.array([[0.0, -f_p[2], f_p[1]], [f_p[2], 0.0, -f_p[0]], [-f_p[1], f_p[0], 0.0]])
         self.cog_filter.update(np.concatenate(((S.T @ S).ravel(), -S.T @ tau_p)))
 
-    def update(self, x_d, xdot_d, xddot_d, f, x=None, ik_d=None):
-        x_d = np.asarray(x_d, dtype=float)
-        ik = ik_d
-        if ik is None and (self.params.enabled or self.settlement.ratio > 0.0):
-            ik = kernels.inverse_kinematics(self.robot, x_d)
-        AT = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")[0] if ik is None else ik.AT
-        f = np.asarray(f, dtype=float)
-        self.identify(x_d, xdot_d, xddot_d, f, AT, x)
-        self.m_c = self.m_hat - self.m_p
-        self.periods += 1
-        if (self.params.tare_at_start and not self.tared
-                and self.periods >= self.wrench_filter.n + max(self._delay_n, 1)
-                and (self.pose_acceleration or x is None or self.params.acceleration_source == "commanded")):
-            self.tare()
-        self.cog = self._centre_of_gravity()
+    def _window_forces(self, f, ik):
         finite = all_finite(f)
         if finite:
             f = self.force_filter.update(f)
@@ -160,12 +147,7 @@ class NumpyLoadCompensation(LoadCompensation):
                 if self.settlement.f_settled is None and self.f_ref is not None:
                     self.settlement.reset(self.f_ref)
                 self.settlement.update(f, lcm.cable.total_free_length(self.robot, ik.q))
-        p = self.params
-        if not p.enabled:
-            self.x_lc = np.zeros(6)
-            self.output_filter.reset(np.zeros(6))
-            self.rate_limited[:] = False
-            return self.x_lc.copy()
+        return f, finite
         if finite:
             try:
                 cog = self.cog if p.torque else None

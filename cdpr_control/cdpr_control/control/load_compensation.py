@@ -572,6 +572,13 @@ class LoadCompensation:
                 and (self.pose_acceleration or x is None or self.params.acceleration_source == "commanded")):
             self.tare()                                  # retried each period until not guarded
         self.cog = self._centre_of_gravity()
+        f, finite = self._window_forces(f, ik)
+        return self._offset(x_d, ik, f, finite)
+
+    def _window_forces(self, f: np.ndarray, ik) -> tuple[np.ndarray, bool]:
+        """(the forces of (4.4)'s window (m,) [N], whether f was finite): the window's mean, which
+        also updates the unloaded reference forces, the slack count and the settlement model; f
+        itself where neither the offset nor the settlement needs the mean."""
         f_floats = f.ravel().tolist()
         finite = all_finite(f_floats)
         if finite:
@@ -586,6 +593,12 @@ class LoadCompensation:
                 if self.settlement.f_settled is None and self.f_ref is not None:
                     self.settlement.reset(self.f_ref)             # no tare: settled to the first unloaded state
                 self.settlement.update(f, cable.total_free_length(self.robot, ik.q))
+        return f, finite
+
+    def _offset(self, x_d: np.ndarray, ik, f: np.ndarray, finite: bool) -> np.ndarray:
+        """x_d,LC (6,): the pose offset that cancels the compensated wrench's sag (4.5)-(4.6) at the
+        window's forces f, low-passed and rate-limited (zero when disabled; the last target where f
+        was not finite or the stiffness singular)."""
         p = self.params
         if not p.enabled:
             self.x_lc = np.zeros(6)
