@@ -514,8 +514,11 @@ class CFCCoupling:
         self.weight = 0.0                       # share of the filtered set-point, 0..1
         self.share = 1.0                        # share of the contact force handed over (contact_update)
         self.paused = False                     # the CFC paused in the last period (run)
+        self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
+        self.bias.reset(0.0)
 
     def set_time_constant(self, T_MA: float) -> None:
+        self.bias.set_time_constant(T_MA)
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
             last = self.average.y
             self.average = MovingAverage(T_MA, self.dt)
@@ -538,10 +541,12 @@ class CFCCoupling:
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
 
 
-    def contact_update(self, state: str, f_d, a) -> tuple[np.ndarray, np.ndarray, bool]:
+    def contact_update(self, state: str, f_d, a, f_a: float | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
-        :func:`task_force_direction` -> (set-point of the error (3.2), feed-forward (3.22), paused).
+        :func:`task_force_direction`, f_a [N] the press a . f_err along a the error is to aim at in
+        D (None: a . f_d; :meth:`run` gives a . f_d less its bias against the hybrid force
+        controller's error) -> (set-point of the error (3.2), feed-forward (3.22), paused).
 
         - A-C: paused, the set-point of the pause held (thesis).
         - D and R: the error acts on the live f_d (off a it goes there from the one held within
@@ -584,18 +589,30 @@ class CFCCoupling:
             f_err = target
             if aa > 0.0:
                 y += a * (a @ (target - y)) / aa
-                f_err = target + a * (a @ (f_d - target)) / aa      # live along a
+                along = float(a @ f_d) if f_a is None or state != CONTACT else f_a
+                f_err = target + a * (along - a @ target) / aa      # live (less its bias) along a
             return f_err, y, False
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
         return out, out, False
 
 
-    def run(self, state: str, f_d, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
-        before that controller's update of the period: f the measured cable forces (m,) [N]
+        before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
+        the hybrid force controller's force error F_d - F (None: not known)
         -> (set-point, feed-forward, paused, F_a).
+
+        - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
+          T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
+          distribution's error as before, steady it is e_F, so the integral part handed over to
+          x_t integrates the PID's own error. Both read the contact force, but a is taken at x_d,
+          the measured wrench at the estimated pose, through the distribution's filter: the two
+          differ by a few per cent of F_d, and the two integrators on x_t met where their errors
+          cancelled (the Mini held 6 N at 5.89 N with x_t standing). On e_F alone (no bias
+          estimate) the PID's filtered force in the CFC's fast loop made the IPAnema 3 oscillate
+          (docs/hybrid_force_control.md, "Validation sweep").
 
         - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
           integral part takes the proportional part's step.
@@ -606,7 +623,15 @@ class CFCCoupling:
           nothing of it stays in Δq_CFC when the contact ends.
         """
         a = np.asarray(a, dtype=float)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a)
+        f_a = None
+        if e_F is not None and state == CONTACT:
+            f_d = np.asarray(f_d, dtype=float)
+            a_f_d = float(a @ f_d)
+            bias, = self.bias.update_floats((a_f_d - float(a @ np.asarray(f, dtype=float)) - e_F,))
+            f_a = a_f_d - bias
+        else:
+            self.bias.reset(0.0)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, f_a)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             c.feedback_filter.reset(f)
@@ -715,10 +740,12 @@ class ContactCableForceControl:
         the coupling passes f_d through whatever a is (the most frequent case by far)."""
         return (state or IDLE) != IDLE or self.coupling.weight > 0.0
 
-    def update(self, state: str | None, F_d0, x_d, f_d, f, theta, f_min, f_max) -> np.ndarray:
+    def update(self, state: str | None, F_d0, x_d, f_d, f, theta, f_min, f_max, F_vec=None) -> np.ndarray:
         """state: the hybrid force controller's (None: none, taken as idle); F_d,0 (3,) [N] and x_d
         (6,) of the period, None where there is none (then a = 0: nothing handed over); f_d, f,
-        theta, f_min, f_max as :meth:`CableForceControl.update` -> Δq_CFC (m,) [m]."""
+        theta, f_min, f_max as :meth:`CableForceControl.update`; F_vec (3,) [N] the hybrid force
+        controller's contact force (``HPFCState.F_vec``; None: the error along a stays on f_d, see
+        :meth:`CFCCoupling.run`) -> Δq_CFC (m,) [m]."""
         state = state or IDLE
         if F_d0 is not None:
             F_d0 = np.asarray(F_d0, dtype=float)
@@ -729,8 +756,12 @@ class ContactCableForceControl:
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
+        e_F = None
+        if F_d0 is not None and F_vec is not None:
+            F_vec = np.asarray(F_vec, dtype=float)
+            e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)
