@@ -516,6 +516,7 @@ class CFCCoupling:
         self.paused = False                     # the CFC paused in the last period (run)
         self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
         self.bias.reset(0.0)
+        self.bias_step = 0.0                    # N per period of its ramp-out after D
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -541,12 +542,13 @@ class CFCCoupling:
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
 
 
-    def contact_update(self, state: str, f_d, a, f_a: float | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+    def contact_update(self, state: str, f_d, a, bias: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
-        :func:`task_force_direction`, f_a [N] the press a . f_err along a the error is to aim at in
-        D (None: a . f_d; :meth:`run` gives a . f_d less its bias against the hybrid force
-        controller's error) -> (set-point of the error (3.2), feed-forward (3.22), paused).
+        :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
+        in D, R and I (a . f_err = a . f_d - bias; :meth:`run` gives the bias of a . (f_d - f)
+        against the hybrid force controller's error) -> (set-point of the error (3.2), feed-forward
+        (3.22), paused).
 
         - A-C: paused, the set-point of the pause held (thesis).
         - D and R: the error acts on the live f_d (off a it goes there from the one held within
@@ -560,14 +562,14 @@ class CFCCoupling:
           :meth:`update`, again live along a.
         """
         f_d = np.asarray(f_d, dtype=float)
-        if state == IDLE and self.weight == 0.0:     # idle, ramped out: f_d passes, whatever a is
+        if state == IDLE and self.weight == 0.0 and bias == 0.0:   # idle, ramped out: f_d passes, whatever a is
             self.average.reset(None)
             return f_d, f_d, False
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
 
         def live_along_a(f):
-            return f + a * (a @ (f_d - f)) / aa if aa > 0.0 else f
+            return f + a * (a @ (f_d - f) - bias) / aa if aa > 0.0 else f
 
         if state in CFC_PAUSED:
             if self.average.y is None or self.weight == 0.0:
@@ -589,8 +591,7 @@ class CFCCoupling:
             f_err = target
             if aa > 0.0:
                 y += a * (a @ (target - y)) / aa
-                along = float(a @ f_d) if f_a is None or state != CONTACT else f_a
-                f_err = target + a * (along - a @ target) / aa      # live (less its bias) along a
+                f_err = target + a * (a @ (f_d - target) - bias) / aa      # live along a, less the bias
             return f_err, y, False
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
@@ -607,7 +608,8 @@ class CFCCoupling:
         - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
           T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
           distribution's error as before, steady it is e_F, so the integral part handed over to
-          x_t integrates the PID's own error. Both read the contact force, but a is taken at x_d,
+          x_t integrates the PID's own error. After D (R, I) the bias ramps out within
+          HAND_OVER_TIME (dropped at once, it stepped the drive command by 0.5 mm at the release). Both read the contact force, but a is taken at x_d,
           the measured wrench at the estimated pose, through the distribution's filter: the two
           differ by a few per cent of F_d, and the two integrators on x_t met where their errors
           cancelled (the Mini held 6 N at 5.89 N with x_t standing). On e_F alone (no bias
@@ -623,15 +625,17 @@ class CFCCoupling:
           nothing of it stays in Δq_CFC when the contact ends.
         """
         a = np.asarray(a, dtype=float)
-        f_a = None
-        if e_F is not None and state == CONTACT:
-            f_d = np.asarray(f_d, dtype=float)
-            a_f_d = float(a @ f_d)
-            bias, = self.bias.update_floats((a_f_d - float(a @ np.asarray(f, dtype=float)) - e_F,))
-            f_a = a_f_d - bias
+        bias = float(self.bias.y)
+        if state == CONTACT and e_F is not None:
+            bias, = self.bias.update_floats((float(a @ (np.asarray(f_d, dtype=float) - np.asarray(f, dtype=float)))
+                                             - e_F,))
+            self.bias_step = abs(bias) * self.dt / HAND_OVER_TIME
+        elif state in CFC_PAUSED:                       # the CFC resumes bumpless from the pause
+            bias = 0.0
         else:
-            self.bias.reset(0.0)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a, f_a)
+            bias = math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
+        self.bias.reset(bias)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             c.feedback_filter.reset(f)
