@@ -4,13 +4,15 @@ band, each with the fix that brought it in (docs/hybrid_force_control.md, "Valid
 Each case is the sweep's own runner (cdpr_tools.validate.cases.contact_case: the shipped parameter
 file, the plant named) at a pose of the robot's grid."""
 import numpy as np
+import pytest
 
 from cdpr_control import kernels
 from cdpr_control.control.cable_force_control import CableForceControl
 from cdpr_control.control.hybrid_force_control import (CONTACT, HAND_OVER_TIME, ContactCableForceControl,
-                                                         task_force_direction)
+                                                         drive_ramp_lag, task_force_direction)
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.robot import load_robot
+from cdpr_sim.drive_models import DriveModel
 
 MINI = load_robot("ipanema3_mini")
 HAND_OVER_PERIODS = int(round(HAND_OVER_TIME / 1e-3))
@@ -71,3 +73,26 @@ def test_mini_contact_settles_on_F_d_not_beside_it():
     r = _sweep_contact("ipanema3_mini", 3, "nominal", 0, 0.6, 1e5)
     assert r.status == "passed", (r.note, r.checks)
     assert r.metrics["settling_s"] < 2.0
+
+
+@pytest.mark.parametrize("name", ["ipanema3", "ipanema3_mini"])
+def test_drive_ramp_lag_is_the_simulated_drives_lag_behind_a_ramp(name):
+    """drive_ramp_lag, which B's lead adds to T_F, against the simulator's drive model of the robot
+    file (IPAnema 3: PT1 with dead time (3.10), 7.0 ms; Mini: second order (5.11), 16.3 ms)."""
+    robot = load_robot(name)
+    drives = DriveModel.from_robot(robot, 1e-3)
+    drives.reset(np.zeros(robot.m))
+    v = 0.01                                   # rad/s
+    for k in range(1, 2001):
+        theta = drives.step(np.full(robot.m, v * k * 1e-3))
+    lag = (v * 2.0 - theta[0]) / v
+    assert abs(lag - drive_ramp_lag(robot.drive)) < 1e-3     # one period
+
+
+def test_mini_3N_contact_brakes_for_the_drives_lag():
+    """Sweep case Mini #0 (home), mismatched seed 1, 3 N on 1e5 N/m: B's stop planned with the
+    force filter's lag T_F = 10 ms alone ran 21.5 % past F_d (the drives follow x_t 16.3 ms late,
+    (5.11)); with T_F + drive_ramp_lag 4.9 %."""
+    r = _sweep_contact("ipanema3_mini", 0, "mismatched", 1, 0.3, 1e5)
+    assert r.status == "passed", (r.note, r.checks)
+    assert r.metrics["overshoot_percent"] < 12.0

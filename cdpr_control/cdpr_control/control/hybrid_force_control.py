@@ -103,6 +103,14 @@ class HPFCParams:
             raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
 
 
+def drive_ramp_lag(drive) -> float:
+    """The time [s] by which a drive's position follows a ramp of its command (its velocity lag):
+    T_d + T_1 for the PT1 with dead time (3.10), T_d + 2 zeta T_w for the second-order drive (5.11)."""
+    if drive.model == "second_order":
+        return drive.T_d + 2.0 * drive.zeta * drive.T_w
+    return drive.T_d + drive.T_1
+
+
 def _clip(value: float, bound: float) -> float:
     """value limited to [-bound, bound] (scalar; np.clip costs microseconds per call)."""
     return max(-bound, min(bound, float(value)))
@@ -236,6 +244,7 @@ class HybridForceControl:
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
+        self.drive_lag = drive_ramp_lag(robot.drive)   # s, the drives' lag behind a ramp of x_t (_brake_ahead)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
         self.brake_track: deque = deque()      # (x_t, F) of B's last periods: the stiffness met (_brake_ahead)
         self.braking = False                   # B has begun to slow down (it does not speed up again)
@@ -249,9 +258,10 @@ class HybridForceControl:
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
         # B's stiffness is the force's rise over x_t's across 2 T_F (at least 2 periods), x_t taken
-        # T_F earlier (the PT1's lag behind x_t): _brake_ahead
+        # T_F + drive_lag earlier (the PT1's and the drives' lag behind x_t): _brake_ahead
         self.brake_window = max(2, int(round(2.0 * params.T_F / self.dt)))
-        self.brake_delay = int(round(params.T_F / self.dt))
+        self.brake_lag = params.T_F + self.drive_lag
+        self.brake_delay = int(round(self.brake_lag / self.dt))
         self.brake_track = deque(self.brake_track, maxlen=self.brake_window + self.brake_delay + 1)
         self.mass = self.robot.platform.mass + params.payload
         self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
@@ -292,13 +302,15 @@ class HybridForceControl:
         """B's stroke left [m] to where the force is expected to reach F_d: (F_d - F_lead) / k.
 
         k is the stiffness met: the rise of the filtered force across B's last 2 T_F over that of
-        x_t across the same time T_F earlier (:attr:`brake_track`; the PT1 of T_F follows x_t about
-        T_F late, also while B speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness)
-        until measured. Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer
-        one (the IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
-        F_lead = F + T_F k v_t is the force the PT1 lags behind at the speed v_t (a ramp of slope
-        k v_t through a PT1 lags by T_F k v_t): planned on F alone, B stopped where the filtered
-        force reached F_d, the true one that much beyond.
+        x_t across the same time T_lag = T_F + drive_lag earlier (:attr:`brake_track`; the force
+        follows x_t through the drives (:func:`drive_ramp_lag`) and the PT1 of T_F, also while B
+        speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness) until measured.
+        Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer one (the
+        IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
+        F_lead = F + T_lag k v_t is the force the drives and the PT1 lag behind at the speed v_t (a
+        ramp of slope k v_t through a lag of T lags by T k v_t): planned on F alone, B stopped where
+        the filtered force reached F_d, the true one that much beyond; with T_F alone the Mini's
+        3 N contact ran 21.5 % past F_d (its drives follow 16.3 ms late, (5.11); sweep pose #0).
         """
         p = self.params
         track = self.brake_track
@@ -309,7 +321,7 @@ class HybridForceControl:
             F_0 = track[self.brake_delay][1]
             if x_1 - x_0 > 0.0 and F - F_0 > 0.0:
                 k = max(K_MIN * p.K_p, (F - F_0) / (x_1 - x_0))
-        return max(0.0, F_d - F - p.T_F * k * self.v_t) / k
+        return max(0.0, F_d - F - self.brake_lag * k * self.v_t) / k
 
     def approach_speed(self, F_d: float) -> float:
         """The speed of A and C [m/s]: v_max, or less where the platform's mass m (with a known
