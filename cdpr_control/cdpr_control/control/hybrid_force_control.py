@@ -103,6 +103,14 @@ class HPFCParams:
             raise ValueError(f"invalid HPFC parameters: {', '.join(f'{k}={getattr(self, k)}' for k in bad)}")
 
 
+def drive_ramp_lag(drive) -> float:
+    """The time [s] by which a drive's position follows a ramp of its command (its velocity lag):
+    T_d + T_1 for the PT1 with dead time (3.10), T_d + 2 zeta T_w for the second-order drive (5.11)."""
+    if drive.model == "second_order":
+        return drive.T_d + 2.0 * drive.zeta * drive.T_w
+    return drive.T_d + drive.T_1
+
+
 def _clip(value: float, bound: float) -> float:
     """value limited to [-bound, bound] (scalar; np.clip costs microseconds per call)."""
     return max(-bound, min(bound, float(value)))
@@ -236,6 +244,7 @@ class HybridForceControl:
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
+        self.drive_lag = drive_ramp_lag(robot.drive)   # s, the drives' lag behind a ramp of x_t (_brake_ahead)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
         self.brake_track: deque = deque()      # (x_t, F) of B's last periods: the stiffness met (_brake_ahead)
         self.braking = False                   # B has begun to slow down (it does not speed up again)
@@ -249,9 +258,10 @@ class HybridForceControl:
         self.params = params
         self.force_filter.set_time_constant(params.T_F)
         # B's stiffness is the force's rise over x_t's across 2 T_F (at least 2 periods), x_t taken
-        # T_F earlier (the PT1's lag behind x_t): _brake_ahead
+        # T_F + drive_lag earlier (the PT1's and the drives' lag behind x_t): _brake_ahead
         self.brake_window = max(2, int(round(2.0 * params.T_F / self.dt)))
-        self.brake_delay = int(round(params.T_F / self.dt))
+        self.brake_lag = params.T_F + self.drive_lag
+        self.brake_delay = int(round(self.brake_lag / self.dt))
         self.brake_track = deque(self.brake_track, maxlen=self.brake_window + self.brake_delay + 1)
         self.mass = self.robot.platform.mass + params.payload
         self.weight = self.mass * np.asarray(self.robot.gravity, dtype=float)   # m g of contact_force, once
@@ -292,13 +302,15 @@ class HybridForceControl:
         """B's stroke left [m] to where the force is expected to reach F_d: (F_d - F_lead) / k.
 
         k is the stiffness met: the rise of the filtered force across B's last 2 T_F over that of
-        x_t across the same time T_F earlier (:attr:`brake_track`; the PT1 of T_F follows x_t about
-        T_F late, also while B speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness)
-        until measured. Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer
-        one (the IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
-        F_lead = F + T_F k v_t is the force the PT1 lags behind at the speed v_t (a ramp of slope
-        k v_t through a PT1 lags by T_F k v_t): planned on F alone, B stopped where the filtered
-        force reached F_d, the true one that much beyond.
+        x_t across the same time T_lag = T_F + drive_lag earlier (:attr:`brake_track`; the force
+        follows x_t through the drives (:func:`drive_ramp_lag`) and the PT1 of T_F, also while B
+        speeds up), at least K_MIN K_p; K_p (table 5.1's effective stiffness) until measured.
+        Planned with K_p, a contact stiffer than K_p ran 20-40 % past F_d, a softer one (the
+        IPAnema 3 at home, about 12,600 N/m) crept towards it for seconds (issue 25).
+        F_lead = F + T_lag k v_t is the force the drives and the PT1 lag behind at the speed v_t (a
+        ramp of slope k v_t through a lag of T lags by T k v_t): planned on F alone, B stopped where
+        the filtered force reached F_d, the true one that much beyond; with T_F alone the Mini's
+        3 N contact ran 21.5 % past F_d (its drives follow 16.3 ms late, (5.11); sweep pose #0).
         """
         p = self.params
         track = self.brake_track
@@ -309,7 +321,7 @@ class HybridForceControl:
             F_0 = track[self.brake_delay][1]
             if x_1 - x_0 > 0.0 and F - F_0 > 0.0:
                 k = max(K_MIN * p.K_p, (F - F_0) / (x_1 - x_0))
-        return max(0.0, F_d - F - p.T_F * k * self.v_t) / k
+        return max(0.0, F_d - F - self.brake_lag * k * self.v_t) / k
 
     def approach_speed(self, F_d: float) -> float:
         """The speed of A and C [m/s]: v_max, or less where the platform's mass m (with a known
@@ -514,8 +526,12 @@ class CFCCoupling:
         self.weight = 0.0                       # share of the filtered set-point, 0..1
         self.share = 1.0                        # share of the contact force handed over (contact_update)
         self.paused = False                     # the CFC paused in the last period (run)
+        self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
+        self.bias.reset(0.0)
+        self.bias_step = 0.0                    # N per period of its ramp-out after D
 
     def set_time_constant(self, T_MA: float) -> None:
+        self.bias.set_time_constant(T_MA)
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
             last = self.average.y
             self.average = MovingAverage(T_MA, self.dt)
@@ -538,10 +554,13 @@ class CFCCoupling:
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
 
 
-    def contact_update(self, state: str, f_d, a) -> tuple[np.ndarray, np.ndarray, bool]:
+    def contact_update(self, state: str, f_d, a, bias: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
-        :func:`task_force_direction` -> (set-point of the error (3.2), feed-forward (3.22), paused).
+        :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
+        in D, R and I (a . f_err = a . f_d - bias; :meth:`run` gives the bias of a . (f_d - f)
+        against the hybrid force controller's error) -> (set-point of the error (3.2), feed-forward
+        (3.22), paused).
 
         - A-C: paused, the set-point of the pause held (thesis).
         - D and R: the error acts on the live f_d (off a it goes there from the one held within
@@ -555,14 +574,14 @@ class CFCCoupling:
           :meth:`update`, again live along a.
         """
         f_d = np.asarray(f_d, dtype=float)
-        if state == IDLE and self.weight == 0.0:     # idle, ramped out: f_d passes, whatever a is
+        if state == IDLE and self.weight == 0.0 and bias == 0.0:   # idle, ramped out: f_d passes, whatever a is
             self.average.reset(None)
             return f_d, f_d, False
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
 
         def live_along_a(f):
-            return f + a * (a @ (f_d - f)) / aa if aa > 0.0 else f
+            return f + a * (a @ (f_d - f) - bias) / aa if aa > 0.0 else f
 
         if state in CFC_PAUSED:
             if self.average.y is None or self.weight == 0.0:
@@ -584,18 +603,30 @@ class CFCCoupling:
             f_err = target
             if aa > 0.0:
                 y += a * (a @ (target - y)) / aa
-                f_err = target + a * (a @ (f_d - target)) / aa      # live along a
+                f_err = target + a * (a @ (f_d - target) - bias) / aa      # live along a, less the bias
             return f_err, y, False
         out, _ = self.update(state, f_d)
         out = live_along_a(out)
         return out, out, False
 
 
-    def run(self, state: str, f_d, a, controller, f) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
-        before that controller's update of the period: f the measured cable forces (m,) [N]
+        before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
+        the hybrid force controller's force error F_d - F (None: not known)
         -> (set-point, feed-forward, paused, F_a).
+
+        - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
+          T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
+          distribution's error as before, steady it is e_F, so the integral part handed over to
+          x_t integrates the PID's own error. After D (R, I) the bias ramps out within
+          HAND_OVER_TIME (dropped at once, it stepped the drive command by 0.5 mm at the release). Both read the contact force, but a is taken at x_d,
+          the measured wrench at the estimated pose, through the distribution's filter: the two
+          differ by a few per cent of F_d, and the two integrators on x_t met where their errors
+          cancelled (the Mini held 6 N at 5.89 N with x_t standing). On e_F alone (no bias
+          estimate) the PID's filtered force in the CFC's fast loop made the IPAnema 3 oscillate
+          (docs/hybrid_force_control.md, "Validation sweep").
 
         - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
           integral part takes the proportional part's step.
@@ -606,7 +637,17 @@ class CFCCoupling:
           nothing of it stays in Δq_CFC when the contact ends.
         """
         a = np.asarray(a, dtype=float)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a)
+        bias = float(self.bias.y)
+        if state == CONTACT and e_F is not None:
+            bias, = self.bias.update_floats((float(a @ (np.asarray(f_d, dtype=float) - np.asarray(f, dtype=float)))
+                                             - e_F,))
+            self.bias_step = abs(bias) * self.dt / HAND_OVER_TIME
+        elif state in CFC_PAUSED:                       # the CFC resumes bumpless from the pause
+            bias = 0.0
+        else:
+            bias = math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
+        self.bias.reset(bias)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             c.feedback_filter.reset(f)
@@ -715,10 +756,12 @@ class ContactCableForceControl:
         the coupling passes f_d through whatever a is (the most frequent case by far)."""
         return (state or IDLE) != IDLE or self.coupling.weight > 0.0
 
-    def update(self, state: str | None, F_d0, x_d, f_d, f, theta, f_min, f_max) -> np.ndarray:
+    def update(self, state: str | None, F_d0, x_d, f_d, f, theta, f_min, f_max, F_vec=None) -> np.ndarray:
         """state: the hybrid force controller's (None: none, taken as idle); F_d,0 (3,) [N] and x_d
         (6,) of the period, None where there is none (then a = 0: nothing handed over); f_d, f,
-        theta, f_min, f_max as :meth:`CableForceControl.update` -> Δq_CFC (m,) [m]."""
+        theta, f_min, f_max as :meth:`CableForceControl.update`; F_vec (3,) [N] the hybrid force
+        controller's contact force (``HPFCState.F_vec``; None: the error along a stays on f_d, see
+        :meth:`CFCCoupling.run`) -> Δq_CFC (m,) [m]."""
         state = state or IDLE
         if F_d0 is not None:
             F_d0 = np.asarray(F_d0, dtype=float)
@@ -729,8 +772,12 @@ class ContactCableForceControl:
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
+        e_F = None
+        if F_d0 is not None and F_vec is not None:
+            F_vec = np.asarray(F_vec, dtype=float)
+            e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)

@@ -201,7 +201,8 @@ class ControlLoop:
         if hpfc is None:
             self.dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
         else:                                          # section 5.1.2: held during contact establishment
-            self.dq_cfc = self.contact.update(hpfc.state, hpfc.F_d0, x_d, dist.f, f, theta, dist.f_min, dist.f_max)
+            self.dq_cfc = self.contact.update(hpfc.state, hpfc.F_d0, x_d, dist.f, f, theta, dist.f_min, dist.f_max,
+                                              hpfc.F_vec)
         dq_cfc = s_cfc * self.dq_cfc
         self._cfc_applied = s_cfc > 0.0
         if s_cfc == 0.0:

@@ -177,20 +177,21 @@ class CableForceControllerNode(CdprNode):
         integral part."""
         hpfc, sp = msgs.get("hpfc"), msgs.get("setpoint")
         state = (parse_state(hpfc.controller) if hpfc is not None else None) or "I"
-        F_d0 = x_d = None
+        F_d0 = x_d = F_vec = None
         if hpfc is not None and sp is not None:
-            F_d0 = hpfc.reference[:3]
+            F_d0, F_vec = hpfc.reference[:3], hpfc.feedback[:3]
             # x_d only where the stage uses it (not idle with the ramp-out done: the most frequent
             # case by far); its pose StampSync found finite
             x_d = pose_from_msg(sp.pose) if self.contact.needs_setpoint(state) else None
             if not (all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist()))):
-                F_d0 = x_d = None
+                F_d0 = x_d = F_vec = None
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
                             "no hand-over this period", stamp_ns=t_ns)
         elif state != "I":
             self.report(DiagnosticStatus.WARN, "no set-point: no hand-over this period", stamp_ns=t_ns)
         contact = self.contact
-        dq = contact.update(state, F_d0, x_d, f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max))
+        dq = contact.update(state, F_d0, x_d, f_d, f, theta, np.asarray(fd_msg.f_min), np.asarray(fd_msg.f_max),
+                            F_vec)
         F_a, z = contact.F_a, contact.z_t
         stage = self.stage
         self.hand_over.publish(self.message_factory(ControllerState)(
