@@ -27,7 +27,11 @@ class PoseEstimator:
     ``xtol`` 1e-8 (10 nm, 10 nrad; the encoders resolve micrometres): with the elastic residual of
     measured forces the Gauss-Newton step can stay above 1e-9 from rounding alone (seen on the Mini
     under the mismatched plant: 30 iterations between 1e-9 and 3e-9 without moving the pose, which a
-    1e-8 tolerance reaches in 3), and a solve that does not converge holds the loop.
+    1e-8 tolerance reaches in 3), and a solve that does not converge holds the loop. With the
+    large residuals of forces and lengths no pose explains (8.8 N on the Mini's demo, 1.8 kN on the
+    IPAnema 3 under a payload) the last step, just above 1e-8, gains less than the cost's rounding:
+    the solver takes such steps (docs/model.md, "Steps within the cost's rounding") instead of
+    stalling into ``max_iterations``.
     """
 
     def __init__(self, robot, pulleys: str = "frozen", max_iterations: int = 30, xtol: float = 1e-8,

@@ -29,6 +29,7 @@ from cdpr_control.kernels.robot_data import robot_data, vector
 # termination codes of elastic_frozen, in the order of forward_kinematics._TERMINATIONS
 CONVERGED, MAX_ITERATIONS, STALLED, NON_FINITE = 0, 1, 2, 3
 _LAMBDA_START, _LAMBDA_MIN, _LAMBDA_MAX, _LAMBDA_CONVERGED = 1e-6, 1e-12, 1e12, 1e-2
+_EPS = float(np.finfo(np.float64).eps)
 
 @njit
 def rotation(phi_x, phi_y, phi_z, R):
@@ -351,6 +352,16 @@ def _normal_equations(JT, res, lam, A, g):
 
 
 @njit(error_model="numpy")
+def _within_rounding(increase, gain, res, rounding):
+    """Whether a step's cost increase and predicted gain g^T dx are both within 4 sum |Psi_i|
+    rounding_i, the rounding error of comparing two costs (forward_kinematics._within_rounding)."""
+    noise = 0.0
+    for i in range(res.shape[0]):
+        noise += abs(res[i]) * rounding[i]
+    return increase <= 4.0 * noise and gain <= 4.0 * noise
+
+
+@njit(error_model="numpy")
 def elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2, xtol, max_iterations, x_out):
     """Levenberg-Marquardt on Psi = K_l (IK_frozen(x) - q_hat) (3.8)-(3.9) from x_d, with q_hat
     and K_l from the winch lengths theta and forces f (m,) (:func:`elastic_cable_state`).
@@ -372,12 +383,16 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
     q_hat, k_l = elastic_cable_state(theta, f, l_0, k0, k1, k2)
     x = x_d.copy()
     res, JT = np.empty(m), np.empty((6, m))
-    res_new, JT_new, q_free = np.empty(m), np.empty((6, m)), np.empty(m)
+    res_new, JT_new, q_free, rounding = np.empty(m), np.empty((6, m)), np.empty(m), np.empty(m)
     ca, sa = math.cos(x[3]), math.sin(x[3])
     cb, sb = math.cos(x[4]), math.sin(x[4])
+    r_d = math.sqrt(x_d[0] ** 2 + x_d[1] ** 2 + x_d[2] ** 2)
     cost = 0.0
     for i in range(m):
         q_free[i] = q_hat[i] - beta[i] * r_p[i]
+        # the rounding error of Psi_i (ForwardKinematics._residual_rounding)
+        rounding[i] = _EPS * k_l[i] * (math.sqrt(cT[0, i] ** 2 + cT[1, i] ** 2 + cT[2, i] ** 2)
+                                       + math.sqrt(b[i, 0] ** 2 + b[i, 1] ** 2 + b[i, 2] ** 2) + r_d)
         res[i] = k_l[i] * (q_d[i] - q_hat[i])
         cost += res[i] * res[i]
         for k in range(6):
@@ -409,7 +424,8 @@ def _elastic_frozen(x_d, q_d, AT_d, cT, beta, b, r_p, theta, f, l_0, k0, k1, k2,
         for k in range(6):
             x_new[k] = x[k] - dx[k]
         cost_new = _frozen_residual(x_new, cT, b, q_free, k_l, res_new, JT_new, R, S, Rb)
-        if cost_new <= cost:
+        if cost_new <= cost or _within_rounding(cost_new - cost, g[0] * dx[0] + g[1] * dx[1] + g[2] * dx[2]
+                                                + g[3] * dx[3] + g[4] * dx[4] + g[5] * dx[5], res, rounding):
             x, x_new = x_new, x
             res, res_new = res_new, res
             JT, JT_new = JT_new, JT

@@ -41,6 +41,7 @@ _LAMBDA_START = 1e-6
 _LAMBDA_MIN = 1e-12
 _LAMBDA_MAX = 1e12
 _LAMBDA_CONVERGED = 1e-2  # below this damping a small step means convergence (else check GN step)
+_EPS = float(np.finfo(float).eps)  # unit roundoff, of the elastic residual's rounding error
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,14 @@ def _gauss_newton_step_norm(JT, res) -> float:
     return math.sqrt(np.dot(dx, dx)) if info == 0 else math.inf
 
 
+def _within_rounding(increase, gain, res, rounding) -> bool:
+    """Whether a step's cost increase and its predicted gain g^T dx (g = J^T Psi) are both within
+    the rounding error of comparing two costs, 4 sum |Psi_i| rounding_i (rounding (m,): of each
+    Psi_i): the comparison cannot tell, so the step is taken as the linear model predicts."""
+    noise = 4.0 * np.dot(np.abs(res), rounding)        # d|Psi|^2 = 2 Psi dPsi, two costs compared
+    return increase <= noise and gain <= noise
+
+
 class ForwardKinematics:
     """Levenberg-Marquardt forward kinematics for one robot (single poses).
 
@@ -90,7 +99,8 @@ class ForwardKinematics:
         self._bT = np.ascontiguousarray(robot.b.T)  # (3, m)
         self._S = np.zeros((9, 3))  # buffer of _rotation_derivatives
         self._S[1, 2], self._S[2, 1] = -1.0, 1.0
-        self._lever = float(np.mean(np.linalg.norm(robot.b, axis=1)))
+        self._b_norm = np.linalg.norm(robot.b, axis=1)
+        self._lever = float(np.mean(self._b_norm))
         # the pulley IK fields at x_d of the last compiled frozen solve, as the kernel takes them,
         # kept for the same x_d (bytes): the set-point repeats while holding, the IK with it
         self._ik_key: bytes | None = None
@@ -177,23 +187,24 @@ class ForwardKinematics:
         dq = cable.elongation_from_force_and_winch_length(robot, f, theta)
         q_hat = theta + dq
         k_l = cable.stiffness(robot, f, cable.total_free_length(robot, q_hat))
+        if pulleys not in ("frozen", "full"):
+            raise ValueError(f"pulleys must be 'frozen' or 'full', got {pulleys!r}")
+        if ik_d is None:
+            ik_d = inverse_kinematics(robot, x_d)
+        rounding = self._residual_rounding(k_l, ik_d.c, x_d)
         if pulleys == "full":
 
             def residual(x):
                 ik = inverse_kinematics(robot, x)
                 return k_l * (ik.q - q_hat), self._jacobian_T(ik.AT, x, k_l)
 
-            return self._solve(residual, x_d)
-        if pulleys != "frozen":
-            raise ValueError(f"pulleys must be 'frozen' or 'full', got {pulleys!r}")
-        if ik_d is None:
-            ik_d = inverse_kinematics(robot, x_d)
+            return self._solve(residual, x_d, rounding=rounding)
         residual = self._frozen_residual(
             np.ascontiguousarray(ik_d.c.T), q_hat - ik_d.beta * robot.r_p, k_l
         )
         # at x_d the frozen model is the pulley IK itself: its first residual comes for free
         first = (k_l * (ik_d.q - q_hat), self._jacobian_T(ik_d.AT, x_d, k_l))
-        return self._solve(residual, x_d, first)
+        return self._solve(residual, x_d, first, rounding)
 
     # --- internals ----------------------------------------------------------------------------
 
@@ -215,6 +226,11 @@ class ForwardKinematics:
             x_d, q, AT, cT, beta, d.b, d.r_p, v(theta), v(f), d.l_0,
             d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
+
+    def _residual_rounding(self, k_l, c, x_d):
+        """(m,) rounding error of the elastic residual Psi_i = k_l,i (|c_i - r - R b_i| - q_free_i)
+        at x_d: eps k_l,i (|c_i| + |b_i| + |r_d|), a few ulp of the lengths it subtracts."""
+        return _EPS * k_l * (np.linalg.norm(c, axis=1) + self._b_norm + math.sqrt(np.dot(x_d[:3], x_d[:3])))
 
     def _jacobian_T(self, AT, x, k_l):
         """(dPsi/dx)^T (6, m) of Psi = k_l (IK(x) - .): dq/dx = -A blockdiag(I, H(phi))."""
@@ -245,10 +261,15 @@ class ForwardKinematics:
 
         return residual
 
-    def _solve(self, residual, x0, first=None) -> FKResult:
+    def _solve(self, residual, x0, first=None, rounding=None) -> FKResult:
         """Levenberg-Marquardt with Marquardt scaling; stops on a small nearly-undamped step.
 
         residual(x) -> (Psi, dPsi/dx transposed); first: its value at x0 if already known.
+        rounding (m,): the rounding error of each Psi_i; with it a step is also taken when its
+        cost increase and predicted gain are both below what comparing two costs can resolve
+        (:func:`_within_rounding`): with a large least-squares residual (forces and lengths no pose
+        explains exactly) a Gauss-Newton step just above xtol in a weakly determined direction
+        gains less than the cost's rounding error, and rejecting it stalled the solve there.
         """
         x = np.array(x0, dtype=float)
         res, JT = residual(x) if first is None else first
@@ -260,7 +281,8 @@ class ForwardKinematics:
         for it in range(1, self.max_iterations + 1):
             A = np.dot(JT, JT.T)
             A.flat[::7] *= 1.0 + lam  # Marquardt: A + lam diag(A)
-            _, dx, info = dposv(A, np.dot(JT, res), overwrite_a=1)
+            g = np.dot(JT, res)
+            _, dx, info = dposv(A, g, overwrite_a=1)
             if info != 0:
                 lam *= 10.0
                 if lam > _LAMBDA_MAX:
@@ -273,7 +295,8 @@ class ForwardKinematics:
             x_new = x - dx
             res_new, JT_new = residual(x_new)
             cost_new = float(np.dot(res_new, res_new))
-            if cost_new <= cost:
+            if cost_new <= cost or (rounding is not None
+                                    and _within_rounding(cost_new - cost, np.dot(g, dx), res, rounding)):
                 x, res, JT, cost = x_new, res_new, JT_new, cost_new
                 lam = max(lam * 0.1, _LAMBDA_MIN)
             else:
