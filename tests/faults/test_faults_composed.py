@@ -172,7 +172,9 @@ def test_leaving_the_workspace_at_run_time_holds_and_fails_the_program(graph):
     jc = node(graph, "joint_command")
     jc.set_parameters([Parameter("force_watch", value=False)])
     start, mark = graph.newest_command(), graph.mark()
-    running = graph.start_program("G21 G90\nG1 X20 F600\nM30", "leave")
+    # a dwell of 10 min after the move: the program is still running, however long the parameter
+    # change below takes to arrive (at 2 s it had ended before under load, and succeeded)
+    running = graph.start_program("G21 G90\nG1 X20 F600\nG4 P600\nM30", "leave")
     graph.wait_program_state(ProgramStatus.RUNNING)
     graph.wait_running(periods=50)
     limits = fd.get_parameters(["f_max", "overload_factor"])

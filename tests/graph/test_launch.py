@@ -66,8 +66,13 @@ def check_bag(path, ns: str) -> None:
 
 
 def wait_for_graph_and_recorder(launcher, collector, ns: str) -> None:
-    wait_for(lambda: {f"{ns}/chatter", f"{ns}/heard"} <= set(launcher.recorder.recorded_topics),
-             what="recorder subscribed")
+    """The recorder subscribed to both topics and matched (DDS) the publisher of each - from then on
+    it receives what they publish, however loaded the machine (a fixed count of messages after the
+    subscription was not enough: DDS matches a reader asynchronously) - and the graph runs."""
+    topics = (f"{ns}/chatter", f"{ns}/heard")
+    wait_for(lambda: set(topics) <= set(launcher.recorder.recorded_topics), what="recorder subscribed")
+    subscriptions = [launcher.recorder._recording[t] for t in topics]
+    wait_for(lambda: all(s.get_publisher_count() > 0 for s in subscriptions), what="recorder matched the publishers")
     start = collector.count(f"{ns}/heard")
     wait_for(lambda: collector.count(f"{ns}/heard") >= start + 5, what=f"talker -> listener -> {ns}/heard")
 
