@@ -31,8 +31,9 @@ def node_graph(make_nodes: Callable[[], list]) -> Iterator[tuple[list, object, o
         rclpy.shutdown()
 
 
-def spin_until(executor, done: Callable[[], bool], timeout: float = 10.0, step: float = 0.02) -> bool:
-    """Spin ``executor`` until ``done()`` or ``timeout`` [s]; returns ``done()``."""
+def spin_until(executor, done: Callable[[], bool], timeout: float = 120.0, step: float = 0.02) -> bool:
+    """Spin ``executor`` until ``done()`` or ``timeout`` [s]; returns ``done()``. The default timeout is
+    a hang guard, not a margin: a busy machine may take many times the idle time to get there."""
     deadline = time.monotonic() + timeout
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=step)

@@ -49,7 +49,7 @@ def graph():
     rclpy.shutdown()
 
 
-def spin_until(executor, done, timeout=20.0):
+def spin_until(executor, done, timeout=120.0):   # a hang guard, not a margin (busy machines)
     deadline = time.monotonic() + timeout
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.01)

@@ -53,7 +53,7 @@ def _filled(cls, i: int = 1):
     return msg
 
 
-def _spin_until(executor, done, timeout=5.0):
+def _spin_until(executor, done, timeout=120.0):   # a hang guard, not a margin (busy machines)
     deadline = time.monotonic() + timeout
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
