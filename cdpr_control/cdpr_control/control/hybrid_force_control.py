@@ -642,11 +642,11 @@ class CFCCoupling:
             bias, = self.bias.update_floats((float(a @ (np.asarray(f_d, dtype=float) - np.asarray(f, dtype=float)))
                                              - e_F,))
             self.bias_step = abs(bias) * self.dt / HAND_OVER_TIME
-        elif state in CFC_PAUSED:                       # the CFC resumes bumpless from the pause
-            bias = 0.0
-        else:
-            bias = math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
-        self.bias.reset(bias)
+            self.bias.reset(bias)
+        elif bias != 0.0:                               # (none to ramp out: the idle period's case)
+            # paused: the CFC resumes bumpless from the pause; else ramped out
+            bias = 0.0 if state in CFC_PAUSED else math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
+            self.bias.reset(bias)
         f_set, f_ff, paused = self.contact_update(state, f_d, a, bias)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
@@ -773,7 +773,7 @@ class ContactCableForceControl:
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
         e_F = None
-        if F_d0 is not None and F_vec is not None:
+        if state == CONTACT and F_d0 is not None and F_vec is not None:     # (run reads it in D only)
             F_vec = np.asarray(F_vec, dtype=float)
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
