@@ -53,8 +53,20 @@ MODES = ("composed", "processes")
 STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SIGTERM
 RECORDER_TIMEOUT = 60.0  # s the recorder may take to discover a composed graph's topics
 # child process: import the node module and call its main([module, --ros-args, ...])
-_BOOTSTRAP = ("import importlib, sys; "
-              "sys.exit(getattr(importlib.import_module(sys.argv[1]), sys.argv[2])([sys.argv[1]] + sys.argv[3:]))")
+# A child stopped while it still imports its node's module (SIGINT/SIGTERM before its main runs)
+# has nothing to clean up yet: it ends at once with code 0 instead of a KeyboardInterrupt traceback
+# (seen when a loaded machine is slow to start thirteen processes and the launch is stopped early).
+_BOOTSTRAP = ("import os, signal, sys\n"
+              "def _stopped_while_starting(*_):\n"
+              "    os.write(1, b'stopped while starting\\n')\n"
+              "    os._exit(0)\n"
+              "signal.signal(signal.SIGINT, _stopped_while_starting)\n"
+              "signal.signal(signal.SIGTERM, _stopped_while_starting)\n"
+              "import importlib\n"
+              "main = getattr(importlib.import_module(sys.argv[1]), sys.argv[2])\n"
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"   # main's own handling from here
+              "signal.signal(signal.SIGTERM, signal.SIG_DFL)\n"
+              "sys.exit(main([sys.argv[1]] + sys.argv[3:]))\n")
 
 
 @dataclass
@@ -318,6 +330,8 @@ class Launcher:
             self._print(label, f"process exited with code {code}")
             if code != 0:
                 self.errors.append(f"{label}: exit code {code}")
+        elif code != 0:
+            self._print(label, f"exited with code {code} while stopping")
         if required or all(p.poll() is not None for p in self.processes.values()):
             self._done.set()
 

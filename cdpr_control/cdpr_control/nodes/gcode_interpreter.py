@@ -37,7 +37,7 @@ Faults fail the running program with the reason (result and ``program_status`` m
 input or a set-point outside the wrench-feasible workspace);
 ``winch/command`` more than twice ``input_deadline`` periods older than the winch state (the
 command path stopped, the joint command too); in lockstep, no ``winch/state`` for
-``state_timeout`` of wall time. A ``winch/state`` stamp that jumps more than
+``state_timeout`` of wall time (not counted while the graph in this process still computes a period). A ``winch/state`` stamp that jumps more than
 ``input_deadline`` periods ahead (or back) is refused and reported unless the next one continues from it.
 """
 from __future__ import annotations
@@ -68,6 +68,7 @@ from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
+from cdpr_control.ros.intraprocess import IntraProcess
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL, DIAGNOSTICS, STATUS
 from cdpr_control.ros.sync import StampJumps, stamp_ns
@@ -407,7 +408,9 @@ class GCodeInterpreterNode(CdprNode):
                         "the command path stopped", brake=False)
 
     def _state_watchdog(self) -> None:
-        if self.active is None:
+        if self.active is None or IntraProcess.of(self.context).pending():
+            # no program, or the graph in this process is still computing a period (slow, not
+            # stopped: a composed lockstep run on a loaded machine; the simulator waits the same way)
             self._last_state_wall = time.monotonic()
         elif time.monotonic() - self._last_state_wall > self.values["state_timeout"]:
             self._abort(f"no winch/state for {self.values['state_timeout']:g} s (the simulator or the drives stopped)",

@@ -85,19 +85,20 @@ def run_node(node_class, args: list[str] | None = None) -> None:
 
     ``args`` are the process arguments (``--ros-args -r __node:=... -p ...`` are applied to the node).
     The signals stop the loop rather than shutting the context down first, so ``destroy_node``
-    still runs with a valid context (it may publish and log).
+    still runs with a valid context (it may publish and log). A signal that comes while the node is
+    still being built (a launch stopped during start-up) ends the process cleanly once it is built.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        with stop_on_signals(threading.Event()) as stop:
+    with stop_on_signals(threading.Event()) as stop:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
             node = node_class()
             executor = EventsExecutor()
             executor.add_node(node)
             spin(executor, stop)
-    except ExternalShutdownException:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        except ExternalShutdownException:
+            pass
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
