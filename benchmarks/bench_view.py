@@ -2,19 +2,23 @@
 
 The IPAnema 3 Mini holds still at home in lockstep (graphs/closed_loop.yaml, composed in this
 process, the simulator's default mismatched plant, as `cdpr launch` runs it). One graph is started
-and measured in consecutive windows, the configurations alternating in the pattern
-``without, unwatched, cable_forces, unwatched, without, ...`` (ROUNDS times), so that every window
-of the view has a window without it next to it on each side:
+and measured in consecutive windows, the configurations alternating (ROUNDS rounds, pattern below)
+so that every window of the view has a window without it next to it on each side:
 
 - ``without``: the graph alone (the baseline);
 - ``unwatched``: `cdpr view` running in a process of its own, no Foxglove client connected;
 - ``cable_forces``: the same with a Foxglove WebSocket client (a process of its own, the protocol's
-  ``subscribe`` op, as Foxglove sends it) subscribed to /cable_forces only, receiving every message.
+  ``subscribe`` op, as Foxglove sends it) subscribed to /cable_forces only, receiving every message;
+- ``dds_cable_forces``: no view, a plain rclpy subscriber (a process of its own, serialized
+  messages, as the bridge subscribes) to /cable_forces: what any subscriber outside the graph's
+  process costs, to tell the view's share from the transport's.
+
+A round is ``unwatched, cable_forces, unwatched, without, dds_cable_forces, without``.
 
 Per window: the real-time factor (simulated time, read from the simulator node in this process, over
 wall time) and the CPU time of this process (the graph) per simulated period. A configuration's
-ratio in a round is its window's figure over the mean of the two ``without`` windows around the
-round; the result is the median over the rounds. On a shared machine the RTF follows the load of
+ratio in a round is its windows' mean figure over the mean of the three ``without`` windows that
+begin, split and end the round; the result is the median over the rounds. On a shared machine the RTF follows the load of
 the moment (other processes take the cores); the graph's CPU per period does much less, so both are
 reported: the RTF is the issue's figure, the CPU per period says what the view costs the loop's own
 process. The view's and the client's processes run on the same two cores and take their share of
@@ -50,6 +54,7 @@ WINDOW_S = 8.0      # wall time of a window
 ROUNDS = 4
 TOPIC = "/cable_forces"
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+CONFIGS = ("without", "unwatched", "cable_forces", "dds_cable_forces")
 MESSAGE_DATA = 0x01  # the server's binary opcode of a message on a subscribed channel
 TARGETS = {"unwatched_rtf_ratio_min": 0.95, "one_topic_rtf_ratio_min": 0.90}
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "view.json"
@@ -100,6 +105,60 @@ def watch(port: int, topic: str) -> None:
     print(received, flush=True)
 
 
+def subscribe(topic: str) -> None:
+    """The plain subscriber process (``--subscribe TOPIC``): an rclpy node subscribed to ``topic``
+    (serialized, QoS adapted to the publishers); prints ``subscribed`` once it is, and on SIGTERM the
+    number of messages it received."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from cdpr_tools.message_convert import message_class
+    from cdpr_tools.ros_graph import adapted_qos, new_context, topic_types
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    context = new_context()
+    node = Node(f"_bench_view_subscriber_{os.getpid()}", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    deadline = time.monotonic() + 60
+    while topic not in topic_types(node) or node.count_publishers(topic) == 0:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no publisher of {topic}")
+        executor.spin_once(timeout_sec=0.1)
+    received = [0]
+
+    def count(_data) -> None:
+        received[0] += 1
+
+    node.create_subscription(message_class(topic_types(node)[topic][0]), topic, count,
+                             adapted_qos(node, topic), raw=True)
+    print("subscribed", flush=True)
+    while not stop.is_set():
+        executor.spin_once(timeout_sec=0.2)
+    print(received[0], flush=True)
+
+
+class Subscriber:
+    """A process of this file subscribed to a topic (``--watch`` or ``--subscribe``)."""
+
+    def __init__(self, *args: str):
+        self.process = subprocess.Popen([sys.executable, __file__, *args], env=child_env(),
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+        if self.process.stdout.readline().strip() != "subscribed":
+            raise RuntimeError(f"{args}: did not subscribe (exit {self.process.wait()})")
+
+    def stop(self) -> int:
+        """Stop it; the number of messages it received."""
+        self.process.terminate()
+        out, _ = self.process.communicate(timeout=60)
+        return int(out.split()[-1])
+
+    def kill(self) -> None:
+        self.process.kill()
+        self.process.wait()
+
+
 class View:
     """`cdpr view` in a process of its own, and optionally one client of it."""
 
@@ -114,25 +173,19 @@ class View:
         else:
             raise RuntimeError(f"cdpr view exited with {self.process.wait()} before it listened")
         threading.Thread(target=self.process.stderr.read, daemon=True).start()   # drain the log
-        self.client: subprocess.Popen | None = None
+        self.client: Subscriber | None = None
 
     def connect(self, topic: str) -> None:
-        self.client = subprocess.Popen([sys.executable, __file__, "--watch", str(self.port), topic], env=child_env(),
-                                       stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
-        if self.client.stdout.readline().strip() != "subscribed":
-            raise RuntimeError(f"the client did not subscribe to {topic} (exit {self.client.wait()})")
+        self.client = Subscriber("--watch", str(self.port), topic)
 
     def disconnect(self) -> int:
         """Stop the client; the number of messages it received."""
-        self.client.terminate()
-        out, _ = self.client.communicate(timeout=60)
-        self.client = None
-        return int(out.split()[-1])
+        received, self.client = self.client.stop(), None
+        return received
 
     def close(self) -> None:
         if self.client is not None:
             self.client.kill()
-            self.client.wait()
         self.process.send_signal(signal.SIGINT)
         try:
             self.process.wait(30)
@@ -164,7 +217,7 @@ def run(rounds: int) -> list[dict]:
     description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml", {"robot": ROBOT})
     probe = ClockProbe(clock=False)
     windows = []
-    view = None
+    view = subscriber = None
 
     def measure(config: str, k: int, **extra) -> None:
         windows.append({"config": config, "round": k, **window(probe, WINDOW_S), **extra})
@@ -194,11 +247,22 @@ def run(rounds: int) -> list[dict]:
                 view.close()
                 view = None
                 time.sleep(SETTLE_S)
+                measure("without", k)
+                subscriber = Subscriber("--subscribe", TOPIC)
+                steps0 = probe.sim.sim.steps
+                time.sleep(SETTLE_S)
+                measure("dds_cable_forces", k)
+                periods = probe.sim.sim.steps - steps0
+                received, subscriber = subscriber.stop(), None
+                windows[-1]["cable_forces_received_per_period"] = received / max(1, periods)
+                time.sleep(SETTLE_S)
                 measure("without", k + 1)
             errors = list(launch.errors)
     finally:
         if view is not None:
             view.close()
+        if subscriber is not None:
+            subscriber.kill()
         probe.close()
     if errors:
         raise RuntimeError(f"the graph reported errors: {errors}")
@@ -206,9 +270,9 @@ def run(rounds: int) -> list[dict]:
 
 
 def summarize(windows: list[dict], rounds: int) -> dict:
-    """Per round each configuration's figures over the mean of the ``without`` windows around the
-    round; medians over the rounds."""
-    ratios = {c: {"rtf": [], "graph_cpu_us_per_period": []} for c in ("unwatched", "cable_forces")}
+    """Per round each configuration's figures over the mean of the ``without`` windows that begin,
+    split and end the round; medians over the rounds."""
+    ratios = {c: {"rtf": [], "graph_cpu_us_per_period": []} for c in CONFIGS[1:]}
     for k in range(rounds):
         base = [w for w in windows if w["config"] == "without" and w["round"] in (k, k + 1)]
         for config, figures in ratios.items():
@@ -223,12 +287,13 @@ def summarize(windows: list[dict], rounds: int) -> dict:
         "unwatched_cpu_per_period_ratio": med["unwatched"]["graph_cpu_us_per_period"],
         "one_topic_cpu_per_period_ratio": med["cable_forces"]["graph_cpu_us_per_period"],
         "ratios_per_round": ratios,
-        "rtf_median": {c: statistics.median(w["rtf"] for w in windows if w["config"] == c)
-                       for c in ("without", "unwatched", "cable_forces")},
+        "dds_subscriber_rtf_ratio": med["dds_cable_forces"]["rtf"],
+        "dds_subscriber_cpu_per_period_ratio": med["dds_cable_forces"]["graph_cpu_us_per_period"],
+        "rtf_median": {c: statistics.median(w["rtf"] for w in windows if w["config"] == c) for c in CONFIGS},
         "graph_cpu_us_per_period_median": {
             c: statistics.median(w["graph_cpu_us_per_period"] for w in windows
                                  if w["config"] == c and w["graph_cpu_us_per_period"])
-            for c in ("without", "unwatched", "cable_forces")},
+            for c in CONFIGS},
     }
 
 
@@ -236,9 +301,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=ROUNDS)
     parser.add_argument("--watch", nargs=2, metavar=("PORT", "TOPIC"), help=argparse.SUPPRESS)
+    parser.add_argument("--subscribe", metavar="TOPIC", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.watch:
         watch(int(args.watch[0]), args.watch[1])
+        return
+    if args.subscribe:
+        subscribe(args.subscribe)
         return
     from bench_graph import ROBOT
 
