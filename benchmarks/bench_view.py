@@ -50,6 +50,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 WARMUP_S = 5.0      # wall time after the loop runs, before the first window
 WARMUP_SIM_S = 1.0  # ... and at least this much simulated time (the first periods are slow)
 SETTLE_S = 5.0      # wall time after a change of configuration (the view and the graph discover each other)
+IDLE_CPU = 0.05     # the view has started when its process takes less than this [s of CPU a second]
 WINDOW_S = 8.0      # wall time of a window
 ROUNDS = 4
 TOPIC = "/cable_forces"
@@ -175,6 +176,21 @@ class View:
         threading.Thread(target=self.process.stderr.read, daemon=True).start()   # drain the log
         self.client: Subscriber | None = None
 
+    def wait_idle(self, timeout: float = 120.0) -> float:
+        """Until the view's start is over (imports, discovering the graph, a channel per topic, a
+        client per service: seconds of CPU on a busy machine) - its process used less than
+        IDLE_CPU of a core for two seconds in a row; the wall time that took."""
+        from bench_graph import process_cpu_s
+
+        t0 = time.monotonic()
+        quiet, cpu = 0, process_cpu_s(self.process.pid)
+        while quiet < 2 and time.monotonic() - t0 < timeout:
+            time.sleep(1.0)
+            now = process_cpu_s(self.process.pid)
+            quiet = quiet + 1 if now - cpu < IDLE_CPU else 0
+            cpu = now
+        return time.monotonic() - t0
+
     def connect(self, topic: str) -> None:
         self.client = Subscriber("--watch", str(self.port), topic)
 
@@ -233,8 +249,9 @@ def run(rounds: int) -> list[dict]:
             measure("without", 0)
             for k in range(rounds):
                 view = View()
+                start_s = view.wait_idle()
                 time.sleep(SETTLE_S)
-                measure("unwatched", k)
+                measure("unwatched", k, view_start_s=start_s)
                 view.connect(TOPIC)
                 steps0 = probe.sim.sim.steps
                 time.sleep(SETTLE_S)
