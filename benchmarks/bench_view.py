@@ -18,11 +18,13 @@ A round is ``unwatched, cable_forces, unwatched, without, dds_cable_forces, with
 Per window: the real-time factor (simulated time, read from the simulator node in this process, over
 wall time) and the CPU time of this process (the graph) per simulated period. A configuration's
 ratio in a round is its windows' mean figure over the mean of the three ``without`` windows that
-begin, split and end the round; the result is the median over the rounds. On a shared machine the RTF follows the load of
-the moment (other processes take the cores); the graph's CPU per period does much less, so both are
-reported: the RTF is the issue's figure, the CPU per period says what the view costs the loop's own
-process. The view's and the client's processes run on the same two cores and take their share of
-them, which the RTF includes and the CPU per period does not.
+begin, split and end the round; the result is the median over the rounds. The unwatched window
+starts once the view's start is over (its process idle for two seconds). On a shared machine the
+RTF follows the load of the moment and the scheduler (docs/visualization.md: at a load of 20-40 any
+subscriber outside the process raised it 1.2-13x); the graph's CPU per period does much less, so
+both are reported: the RTF is the issue's figure, the CPU per period says what the view costs the
+loop's own process. The view's and the client's processes run on the same two cores and take their
+share of them, which the RTF includes and the CPU per period does not.
 
 Targets (issue 27): unwatched within 5 % of the baseline's RTF, one topic watched within 10 %.
 Writes bench/view.json. Run: .venv/bin/python benchmarks/bench_view.py [--rounds N]
