@@ -47,7 +47,7 @@ def add_parser(sub) -> None:
                         "auto: the one the program needs")
     p.add_argument("--contact-stiffness", type=float, default=1e6, help="surface stiffness [N/m] (damping 1 %% of it)")
     p.add_argument("--output", help="bag directory (default: bags/demo_<robot>_<date-time>)")
-    p.add_argument("--timeout", type=float, default=900.0, help="wall-clock limit for the program [s]")
+    p.add_argument("--timeout", type=float, default=900.0, help="wall-clock limit for the program, and for the graph to take it [s]")
     p.set_defaults(run=run)
 
 
@@ -100,7 +100,11 @@ def run(args) -> int:
         if args.mode == "processes":
             _wait_for_recorder(launch)  # the children run at once; the recorder discovers them meanwhile
         progress = Progress(f"[demo] program {name!r}")
-        result = run_program(text, name, timeout=args.timeout, feedback=lambda line, p: progress.update(p, f"line {line}"))
+        # the graph is the demo's own: its answer to the goal (the interpreter plans and checks the
+        # program first, between the loop's periods) may take as long as the program may; on a busy
+        # machine that took more than the 30 s a client of a running graph waits
+        result = run_program(text, name, timeout=args.timeout, server_timeout=args.timeout,
+                             feedback=lambda line, p: progress.update(p, f"line {line}"))
         progress.done()
         wall = time.perf_counter() - wall0
         errors = list(launch.errors)

@@ -51,3 +51,37 @@ def test_a_latched_hold_of_the_joint_command_fails_the_run_with_its_message_a_tr
     assert transient == ["t = 2.002 s: forward kinematics did not converge; holding"]
     (p,) = run_problems(_data([[10.0, 20.0]]), held)
     assert "the safety layer held the robot" in p and "force watch: cable 3" in p
+
+
+def test_the_demo_waits_for_its_own_graph_to_take_the_program_as_long_as_the_program_may_run(tmp_path, monkeypatch):
+    """The demo starts the graph itself, so the goal's answer (the interpreter plans and checks the
+    program between the loop's periods) may take up to ``--timeout``, not the 30 s a client of a
+    graph already running waits (a clean clone's `make demo` at a load of 25 failed on those 30 s)."""
+    import types
+
+    import cdpr_tools.launch
+    import cdpr_tools.program_client
+    from cdpr_tools import cli
+
+    calls = []
+
+    class Graph:
+        errors = []
+
+        def __init__(self, description, mode=None):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    def run_program(text, name, **kwargs):
+        calls.append(kwargs)
+        return types.SimpleNamespace(success=False, message="refused by the test", duration=0.0)
+
+    monkeypatch.setattr(cdpr_tools.launch, "Launcher", Graph)
+    monkeypatch.setattr(cdpr_tools.program_client, "run_program", run_program)
+    assert cli.main(["demo", "--output", str(tmp_path / "bag"), "--timeout", "321"]) == 1
+    assert [(c["timeout"], c["server_timeout"]) for c in calls] == [(321.0, 321.0)]

@@ -50,8 +50,8 @@ class BagRecorder(IntraProcessNode):
             description="bag directory (or .mcap file); empty: bags/rosbag2_<date>-<time>", read_only=True))
         self.declare_parameter("queue_depth", DEFAULT_QUEUE_DEPTH, ParameterDescriptor(read_only=True))
         self.declare_parameter("compression", "zstd", ParameterDescriptor(
-            description="chunk compression of the MCAP file: zstd (default: a fifth of the size, compressed "
-                        "in the writer process), lz4 or none (as rosbag2's mcap storage)",
+            description="chunk compression of the MCAP file: zstd (default: the main job's bag to 29 % of its "
+                        "uncompressed size, compressed in the writer process), lz4 or none (as rosbag2's mcap storage)",
             read_only=True))
         self.declare_parameter("max_bag_size", 0, ParameterDescriptor(
             description="split the bag into files of about this many bytes (0: one file), as ros2 bag record",
