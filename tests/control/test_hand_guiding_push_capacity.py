@@ -12,7 +12,7 @@ from cdpr_control import kernels
 from cdpr_control.control.force_setpoint import RESERVE_SHARE
 from cdpr_control.model.robot import load_robot
 from cdpr_tools.validate import criteria
-from cdpr_tools.validate.cases import PUSH_MIN_SCALE, push_scale
+from cdpr_tools.validate.cases import PUSH_MIN_SCALE, PushCapacity, hold_is_safe_reaction, push_scale
 from cdpr_tools.validate.grid import planned_f_min
 
 MINI = load_robot("ipanema3_mini")
@@ -93,3 +93,12 @@ def test_safety_criteria_of_a_push_beyond_capacity():
     assert criteria.above_limit(f_d, 40.0) == 0.5 and not criteria.BANDS["setpoint_above_f_max_N"].holds(0.5)
     f_d[5, 1] = np.nan                      # a NaN set-point is never within
     assert not criteria.BANDS["setpoint_above_f_max_N"].holds(criteria.above_limit(f_d, 40.0))
+
+
+def test_a_hold_passes_only_beyond_capacity_and_only_from_the_push_on():
+    beyond, carried = PushCapacity(0.1, 6.0, -np.inf), PushCapacity(0.5, 6.0, 3.0)
+    assert beyond.beyond and not carried.beyond
+    assert hold_is_safe_reaction(beyond, 1.6, 1.5)            # the force watch during the push
+    assert not hold_is_safe_reaction(beyond, 1.2, 1.5)        # held before the push: the start-up, a failure
+    assert not hold_is_safe_reaction(beyond, None, 1.5)
+    assert not hold_is_safe_reaction(carried, 1.6, 1.5)       # a push the pose carries must not hold

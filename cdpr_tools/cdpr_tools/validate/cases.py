@@ -409,8 +409,7 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
                        setpoint_above_f_max_N=criteria.above_limit(f_d, robot.cable.f_max))
         if not capacity.beyond:
             metrics["push_force_margin_N"] = float((f - robot.cable.f_min).min())
-        hold_at = _first_hold(rec)
-        if capacity.beyond and hold_at is not None and hold_at >= t_push:
+        if hold_is_safe_reaction(capacity, _first_hold(rec), t_push):
             notes.append(f"the safe reaction: {rec.held}")
             held = None
     else:
@@ -420,6 +419,12 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     notes += [note] if note else []
     held = held or (f"in the eigenfrequency run: {held_eigen}" if held_eigen else None)
     return judge(spec, metrics, not (ok and ok_eigen), "; ".join(notes), held)
+
+
+def hold_is_safe_reaction(capacity: PushCapacity, hold_at: float | None, t_push: float) -> bool:
+    """A hold of the loop at ``hold_at`` [s] (None: none) is the safe reaction to the push, not a
+    failure: the pose is beyond capacity and the hold came once the push had begun (``t_push``)."""
+    return capacity.beyond and hold_at is not None and hold_at >= t_push
 
 
 def _first_hold(rec: Recorder) -> float | None:
