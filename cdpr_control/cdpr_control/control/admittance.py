@@ -63,7 +63,6 @@ class UserWrenchParams:
     w_max: object = field(default_factory=lambda: [20.0, 0.5])       # N, N m, saturation (ASSUMPTION)
     tare_on_enable: bool = True                                # the thesis' w_init at start-up
     tare_time: float = 0.0                                     # s, w_init is the mean over this after switch-on (0: one sample)
-    rest_tracking_time: float = 0.0                            # s, the tare follows the remainder inside the dead band (0: off)
     inertia_compensation: bool = True                          # the m_p xddot_d term of (5.9)
 
     def validate(self) -> None:
@@ -71,8 +70,6 @@ class UserWrenchParams:
             raise ValueError(f"T_filter must be >= 0 s, got {self.T_filter}")
         if not self.tare_time >= 0.0:
             raise ValueError(f"tare_time must be >= 0 s, got {self.tare_time}")
-        if not self.rest_tracking_time >= 0.0:
-            raise ValueError(f"rest_tracking_time must be >= 0 s, got {self.rest_tracking_time}")
         per_axis(self.dead_band, "dead_band")
         w_max = per_axis(self.w_max, "w_max")
         if np.any(w_max <= per_axis(self.dead_band, "dead_band")):
@@ -121,15 +118,7 @@ class UserWrench:
         self.filter.reset(raw - self.tare)
 
     def update(self, raw) -> np.ndarray:
-        """One period: filtered, dead band (continuous: |w| - band), saturated; zero while taring.
-
-        With ``rest_tracking_time`` > 0 (a departure from the thesis, whose w_init is taken once),
-        while the filtered remainder is inside the dead band on every axis (nobody pushes: w_Adm = 0)
-        the tare follows it with that time constant, the filter's state shifted with it: a slow
-        drift of the remainder at rest (the friction compensation's model error, sensor drift) is
-        tared before it leaves the dead band. Outside it the tare is frozen, so a push is never
-        tared away beyond the part inside the band; the output is the same as without tracking
-        until something leaves the band."""
+        """One period: filtered, dead band (continuous: |w| - band), saturated; zero while taring."""
         if self._tare_left > 0:
             self._tare_sum += np.asarray(raw, dtype=float)
             self._tare_count += 1
@@ -138,10 +127,6 @@ class UserWrench:
             self.filter.reset(np.zeros(6))
             return np.zeros(6)
         y = self.filter.update(np.asarray(raw, dtype=float) - self.tare)
-        if self.params.rest_tracking_time > 0.0 and np.all(np.abs(y) <= self.dead_band):
-            step = min(1.0, self.dt / self.params.rest_tracking_time) * y
-            self.tare = self.tare + step
-            self.filter.y = y = y - step
         y = np.sign(y) * np.maximum(np.abs(y) - self.dead_band, 0.0)
         return np.clip(y, -self.w_max, self.w_max)
 
@@ -341,7 +326,6 @@ def default_parameters() -> dict:
         "v_max": six(p.v_max), "a_max": six(p.a_max),
         "T_filter": p.user.T_filter, "dead_band": six(p.user.dead_band), "w_max": six(p.user.w_max),
         "tare_on_enable": p.user.tare_on_enable, "tare_time": p.user.tare_time,
-        "rest_tracking_time": p.user.rest_tracking_time,
         "inertia_compensation": p.user.inertia_compensation,
         "payload_mass": 0.0, "payload_center_of_gravity": [0.0, 0.0, 0.0],
         "zones.origin": [0.0] * 6, "zones.rest.radius": float(rest.size),
@@ -363,8 +347,7 @@ def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[Ad
     v = {**default_parameters(), **values}
     params = AdmittanceParams(v_max=v["v_max"], a_max=v["a_max"], user=UserWrenchParams(
         T_filter=v["T_filter"], dead_band=v["dead_band"], w_max=v["w_max"],
-        tare_on_enable=v["tare_on_enable"], tare_time=v["tare_time"], rest_tracking_time=v["rest_tracking_time"],
-        inertia_compensation=v["inertia_compensation"]))
+        tare_on_enable=v["tare_on_enable"], tare_time=v["tare_time"], inertia_compensation=v["inertia_compensation"]))
     params.validate()
     if not v["payload_mass"] >= 0.0:
         raise ValueError(f"payload_mass must be >= 0 kg, got {v['payload_mass']}")

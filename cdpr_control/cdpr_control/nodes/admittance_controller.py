@@ -49,8 +49,6 @@ _DESCRIPTIONS = {
     "w_max": ("saturation of the user wrench per axis [N, N m]", (1e-6, 1e4)),
     "tare_on_enable": ("at switch-on take the remaining wrench as zero (the thesis' w_init)", None),
     "tare_time": ("the tare is the mean remaining wrench over this time after switch-on [s]", (0.0, 10.0)),
-    "rest_tracking_time": ("while the user wrench is inside the dead band the tare follows it with this time constant (0: off) [s]",
-                           (0.0, 100.0)),
     "inertia_compensation": ("remove the platform's inertia wrench of the set-point (m_p xddot_d of (5.9))", None),
     "payload_mass": ("known payload on the platform [kg], removed from the measured wrench", (0.0, 1e4)),
     "payload_center_of_gravity": ("its centre of gravity in the platform frame [m]", None),
