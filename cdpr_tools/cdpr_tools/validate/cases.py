@@ -400,8 +400,11 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
         n_rest = int(round(REST_TIME / DT))
         w_user = np.array([o.w_user for o in g.source.outputs])[int(round(GUIDING_ENABLE / DT)):][:n_rest]
         f = _after_enable(rec, "f")
+        # the force set-point that reaches the drives: while the loop holds, the joint command
+        # restores the force watch's last safe forces instead (JointCommand.update's ``safe``)
+        acting = [s is None or not any(fault.holds for fault in s.faults) for s in rec.rows["state"]]
         f_d = np.array([np.full(robot.m, np.nan) if s is None else s.f_d for s in rec.rows["state"]])
-        f_d = f_d[rec.array("t") - GUIDING_ENABLE > 0.0]
+        f_d = f_d[(rec.array("t") - GUIDING_ENABLE > 0.0) & np.array(acting, dtype=bool)]
         metrics.update(rest_motion_mm=criteria.rest_motion_mm(_after_enable(rec, "x", 0.0, REST_TIME)),
                        rest_wrench_percent=criteria.wrench_share_percent(w_user, w_max),
                        push_min_force_N=float(f.min()),

@@ -50,6 +50,8 @@ BANDS = {
     # (cases.push_scale: the pose carries less than cases.PUSH_MIN_SCALE of the nominal push, which is
     # applied; the force watch's or the controller's hold is then the safe reaction, not a failure)
     "safety_slack_s": Band(None, 0.05, "no cable below 0.5 f_min for > 50 ms (safety holds)"),
+    # (the set-point of the periods the loop does not hold: while it holds, the joint command restores
+    # the force watch's last safe forces, and the live set-point does not reach the drives)
     "setpoint_above_f_max_N": Band(None, 0.0, "no force set-point above f_max to the drives (safety holds)"),
     # (c) payload, section 4.1.3
     "estimate_error_percent": Band(None, 5.0, "issue 25: within 5 % from 1 s after the step"),
