@@ -63,7 +63,12 @@ PAYLOAD_CONTROLLERS = ("force_control", "ik_lc")   # identify.load_steps.CONFIGS
 REFERENCE = "ik"                                    # the uncompensated sag: IK-only, no load compensation
 SAG_WINDOW = 0.3                                   # s: mean z error at the end of rest and dwell
 PUSH_DIRECTIONS = ((1, 0, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 1, -1), (-1, 1, 0))
-PUSH_SHARE = 0.65                                  # of w_max (the Mini: 13 N, the push of issue 25)
+PUSH_SHARE = 0.65                                  # of w_max (the Mini: 13 N, the push of issue 25): the nominal push
+# -: the sweep's push is what a user can legitimately apply at the pose (push_scale): the nominal push
+# scaled so that the hand's share of the cable forces stays within the reserve the pose leaves; a pose
+# whose push would be below PUSH_MIN_SCALE of the nominal one is *beyond capacity*: the nominal push
+# is applied and the criterion is that safety holds (criteria.BEYOND_CAPACITY_BANDS)
+PUSH_MIN_SCALE = 0.2
 # s: hand guiding is switched on once the start-up has raised the cables to the planned forces
 # (near the IPAnema 3's border its z oscillation after start-up lasts about 1 s; switched on
 # before, the tare is taken while the forces change: docs/admittance.md)
@@ -292,6 +297,57 @@ def _guided(spec: CaseSpec, robot, overrides: dict, segments, duration: float):
     return rec, g, True
 
 
+@dataclass(frozen=True)
+class PushCapacity:
+    """What a user can push at a pose (:func:`push_scale`)."""
+
+    scale: float             # largest k in [0, 1]: k * the nominal push keeps the hand's share within the reserve
+    share_N: float           # the nominal push's share max_i |Δf_i| [N], Δf = (A^T)^+ h
+    margin_N: float          # t [N] of the model's wrench with the nominal push (-inf: no solution within the limits)
+
+    @property
+    def beyond(self) -> bool:
+        """The pose carries less than PUSH_MIN_SCALE of the nominal push: a *beyond capacity* case."""
+        return self.scale < PUSH_MIN_SCALE
+
+
+def push_scale(robot, x, push, tol: float = 1e-4) -> PushCapacity:
+    """The largest share k in [0, 1] of the hand's wrench ``push`` (6,) [N, N m] for which the hand's
+    share of the cable forces stays within the reserve the pose leaves: max_i |Δf_i(k h)| <=
+    RESERVE_SHARE * t(w + k h), Δf = (A^T)^+ h (:func:`~cdpr_control.control.force_setpoint.user_forces`)
+    and t the largest margin (:func:`~cdpr_control.control.force_setpoint.largest_margin`) of the
+    model's static wrench w (2.33) with the push, within the distribution's planned limits (the
+    parameter file's f_min, the robot's f_max): exactly the hand's reserve r = min(share, 0.7 t)
+    the force set-point plans while the user pushes (docs/admittance.md), untruncated. t is concave
+    in the wrench and the share linear in k, so the condition holds on an interval from k = 0 (where
+    the pose leaves any margin): bisection to ``tol``. k = 0 where the pose leaves no margin at all."""
+    from cdpr_control import kernels
+    from cdpr_control.control.force_setpoint import RESERVE_SHARE, largest_margin, user_forces
+    from cdpr_tools.validate.grid import planned_f_min
+
+    x, h = np.asarray(x, dtype=float), np.asarray(push, dtype=float)
+    f_min = planned_f_min(robot)
+    f_max = np.asarray(file_section(robot.file.stem, "force_distribution").get("f_max", robot.cable.f_max),
+                       dtype=float) * np.ones(robot.m)
+    w = kernels.platform_wrench(robot, x, np.zeros(6), np.zeros(6))
+    AT, = kernels.inverse_kinematics_fields(robot, x, "AT")
+    share = float(np.abs(user_forces(AT, h)).max())
+
+    def within(k: float) -> bool:
+        return k * share <= RESERVE_SHARE * largest_margin(AT, w + k * h, f_min, f_max)
+
+    margin = largest_margin(AT, w + h, f_min, f_max)
+    if within(1.0):
+        return PushCapacity(1.0, share, margin)
+    lo, hi = 0.0, 1.0
+    if not within(lo):
+        return PushCapacity(0.0, share, margin)
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if within(mid) else (lo, mid)
+    return PushCapacity(lo, share, margin)
+
+
 def _after_enable(rec: Recorder, key: str, start: float = 0.0, end: float = np.inf) -> np.ndarray:
     """A recorded series from ``start`` s after hand guiding was switched on (until ``end``)."""
     t = rec.array("t") - GUIDING_ENABLE
@@ -301,16 +357,25 @@ def _after_enable(rec: Recorder, key: str, start: float = 0.0, end: float = np.i
 def guiding_case(spec: CaseSpec) -> CaseResult:
     """Hand guiding switched on at the pose once the start-up has settled (GUIDING_ENABLE; as a
     user switches it on a running robot): at rest with nobody pushing for REST_TIME, then a push
-    of PUSH_SHARE w_max in the variant's direction, held, released; then the eigenfrequency of
-    (5.12) with the robot's EIGEN zone (:func:`_eigen_case`). Zones that would leave the WFW at the
-    pose are shrunk to fit, and the note says so."""
+    in the variant's direction, held, released; then the eigenfrequency of (5.12) with the robot's
+    EIGEN zone (:func:`_eigen_case`). Zones that would leave the WFW at the pose are shrunk to fit,
+    and the note says so.
+
+    The push is what a user can legitimately apply at the pose: PUSH_SHARE w_max scaled by
+    :func:`push_scale` (the hand's share of the cable forces within the pose's reserve). Where that
+    is below PUSH_MIN_SCALE the pose is *beyond capacity*: the nominal push is applied, the lowest
+    cable is reported, not judged, and the case passes when safety holds
+    (criteria.BEYOND_CAPACITY_BANDS; a hold of the loop from the push on is then the safe reaction,
+    not a failure)."""
     from cdpr_control.control.admittance_zones import per_axis
     from cdpr_sim.hand import Segment
 
     robot = load_robot(spec.robot)
     w_max = per_axis(_admittance_values(spec.robot)["w_max"], "w_max")
     direction = np.asarray(spec.variant["direction"], dtype=float)
-    push = np.r_[PUSH_SHARE * w_max[0] * direction / np.linalg.norm(direction), np.zeros(3)]
+    nominal = np.r_[PUSH_SHARE * w_max[0] * direction / np.linalg.norm(direction), np.zeros(3)]
+    capacity = push_scale(robot, spec.x, nominal)
+    push = nominal if capacity.beyond else capacity.scale * nominal
     t_push = GUIDING_ENABLE + REST_TIME
     segments = [Segment(t_push, tuple(push), "ramp", PUSH_RISE), Segment(t_push + PUSH_RISE, tuple(push), "step"),
                 Segment(t_push + PUSH_HOLD, release=True)]
@@ -319,22 +384,58 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     except ValueError as exc:
         return CaseResult(spec, {}, {}, "refused", f"hand guiding refused at this pose: {exc}")
     notes = [] if g is None or g.clipping is None else [g.clipping.text()]
-    metrics = dict.fromkeys(("rest_motion_mm", "rest_wrench_percent", "push_force_margin_N", "push_min_force_N"),
-                            float("nan"))
+    if capacity.beyond:
+        notes.append(f"beyond capacity: the pose carries {100 * capacity.scale:.3g} % of the {np.linalg.norm(nominal):.3g} N "
+                     f"push (share {capacity.share_N:.3g} N, margin {capacity.margin_N:.3g} N pushed): pushed "
+                     "with it, judged on safety")
+    elif capacity.scale < 1.0:
+        notes.append(f"push scaled to {100 * capacity.scale:.3g} % ({np.linalg.norm(push):.3g} N) by the pose's reserve")
+    margin_key = "push_min_force_N" if capacity.beyond else "push_force_margin_N"
+    metrics = {"push_N": float(np.linalg.norm(push[:3])), "push_scale": capacity.scale,
+               "beyond_capacity": float(capacity.beyond)}
+    metrics.update(dict.fromkeys(("rest_motion_mm", "rest_wrench_percent", margin_key, "push_min_force_N",
+                                  "safety_slack_s", "setpoint_above_f_max_N"), float("nan")))
+    held = rec.held
     if ok:
         n_rest = int(round(REST_TIME / DT))
         w_user = np.array([o.w_user for o in g.source.outputs])[int(round(GUIDING_ENABLE / DT)):][:n_rest]
         f = _after_enable(rec, "f")
+        # the force set-point that reaches the drives: while the loop holds, the joint command
+        # restores the force watch's last safe forces instead (JointCommand.update's ``safe``)
+        acting = [s is None or not any(fault.holds for fault in s.faults) for s in rec.rows["state"]]
+        f_d = np.array([np.full(robot.m, np.nan) if s is None else s.f_d for s in rec.rows["state"]])
+        f_d = f_d[(rec.array("t") - GUIDING_ENABLE > 0.0) & np.array(acting, dtype=bool)]
         metrics.update(rest_motion_mm=criteria.rest_motion_mm(_after_enable(rec, "x", 0.0, REST_TIME)),
                        rest_wrench_percent=criteria.wrench_share_percent(w_user, w_max),
-                       push_force_margin_N=float((f - robot.cable.f_min).min()), push_min_force_N=float(f.min()))
+                       push_min_force_N=float(f.min()),
+                       safety_slack_s=criteria.slack_time(f, criteria.SAFETY_SLACK_SHARE * robot.cable.f_min, DT),
+                       setpoint_above_f_max_N=criteria.above_limit(f_d, robot.cable.f_max))
+        if not capacity.beyond:
+            metrics["push_force_margin_N"] = float((f - robot.cable.f_min).min())
+        if hold_is_safe_reaction(capacity, _first_hold(rec), t_push):
+            notes.append(f"the safe reaction: {rec.held}")
+            held = None
     else:
         notes.append(f"diverged at {rec.diverged_at:.3f} s")
     eigen, ok_eigen, note, held_eigen = _eigen_case(spec, robot)
     metrics.update(eigen)
     notes += [note] if note else []
-    held = rec.held or (f"in the eigenfrequency run: {held_eigen}" if held_eigen else None)
+    held = held or (f"in the eigenfrequency run: {held_eigen}" if held_eigen else None)
     return judge(spec, metrics, not (ok and ok_eigen), "; ".join(notes), held)
+
+
+def hold_is_safe_reaction(capacity: PushCapacity, hold_at: float | None, t_push: float) -> bool:
+    """A hold of the loop at ``hold_at`` [s] (None: none) is the safe reaction to the push, not a
+    failure: the pose is beyond capacity and the hold came once the push had begun (``t_push``)."""
+    return capacity.beyond and hold_at is not None and hold_at >= t_push
+
+
+def _first_hold(rec: Recorder) -> float | None:
+    """The time [s] of the first period in which the loop held (a holding fault), None if never."""
+    for t, state in zip(rec.rows["t"], rec.rows["state"]):
+        if state is not None and any(f.holds for f in state.faults):
+            return float(t)
+    return None
 
 
 def _eigen_case(spec: CaseSpec, robot) -> tuple[dict, bool, str, str | None]:

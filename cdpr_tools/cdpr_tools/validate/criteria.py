@@ -46,6 +46,13 @@ BANDS = {
     "rest_wrench_percent": Band(None, 5.0, "issue 25: at rest < 5 % of w_max"),
     "push_force_margin_N": Band(0.0, None, "no cable below f_min while guided"),
     "eigenfrequency_error_percent": Band(-2.5, 2.5, "table 5.3: within 2.5 % of (5.12)"),
+    # safety while guided, every guiding case; the only push criteria of a pose *beyond capacity*
+    # (cases.push_scale: the pose carries less than cases.PUSH_MIN_SCALE of the nominal push, which is
+    # applied; the force watch's or the controller's hold is then the safe reaction, not a failure)
+    "safety_slack_s": Band(None, 0.05, "no cable below 0.5 f_min for > 50 ms (safety holds)"),
+    # (the set-point of the periods the loop does not hold: while it holds, the joint command restores
+    # the force watch's last safe forces, and the live set-point does not reach the drives)
+    "setpoint_above_f_max_N": Band(None, 0.0, "no force set-point above f_max to the drives (safety holds)"),
     # (c) payload, section 4.1.3
     "estimate_error_percent": Band(None, 5.0, "issue 25: within 5 % from 1 s after the step"),
     # (d) program: the cable forces within the robot's limits
@@ -54,6 +61,7 @@ BANDS = {
     # every family: a run stopped because it diverged fails
     "diverged": Band(None, 0.0, "issue 25: forces beyond 1.5 f_max end the run"),
 }
+SAFETY_SLACK_SHARE = 0.5    # -, of the robot's f_min: safety_slack_s counts a cable below this as slack
 SAG_CUT = {"nominal": Band(90.0, None, "issue 25 / section 4.1.3: >= 90 % nominal plant"),
            "mismatched": Band(85.0, None, "issue 25: >= 85 % default (mismatched) plant")}
 DIVERGENCE_FACTOR = 1.5      # a cable force beyond this times f_max stops a run as diverged
@@ -131,6 +139,16 @@ def wrench_share_percent(w_user, w_max) -> float:
     """Largest |w_Adm,i| / w_max,i [%] over the run and the six axes (w_user (N, 6))."""
     w_user = np.asarray(w_user, dtype=float).reshape(-1, 6)
     return float(100.0 * (np.abs(w_user) / np.asarray(w_max, dtype=float)).max()) if len(w_user) else float("nan")
+
+
+def above_limit(f, f_max) -> float:
+    """Largest f_i - f_max,i [N] over the samples and cables of f (N, m) (a NaN sample counts as NaN:
+    not within any band); -inf for no samples."""
+    f = np.asarray(f, dtype=float)
+    if not f.size:
+        return float("-inf")
+    excess = f - np.asarray(f_max, dtype=float)
+    return float("nan") if np.isnan(excess).any() else float(excess.max())
 
 
 def fitted_frequency(t, y) -> float:
