@@ -169,3 +169,16 @@ def test_the_error_keeps_the_live_set_point_when_R_ends_before_the_moving_averag
     assert lag > 1.0                                    # the average still lags f_d in I
     steps = np.abs(np.diff(f_set[1000:], axis=0)).max()
     assert steps < 0.01, steps                          # 0.005 N per period and the bias ramping out
+
+
+def test_ipanema3_29_is_not_taken_back_by_the_saturated_cfcs_hand_over():
+    """Sweep case IPAnema 3 #29 [-6.142, 3.855, -0.340] c +5 deg (border), mismatched seed 2, 150 N
+    on 2e6 N/m, the sweep's worst case before session 10: in D four to five CFC outputs at +200 N,
+    and the hand-over of their (clamped) integral part took x_t back by F_a / k_t each period (the
+    PID's integral part 6.4 -> 0.8 mm in 1.1 s), the contact was lost, B pressed again and the force
+    watch held the loop at 3.85 s with the true force at 235 % overshoot. Without the hand-over
+    while an output is saturated: not held, 11 % overshoot. (The force then creeps towards F_d,
+    -16 % after 4.6 s: docs/hybrid_force_control.md, "Session 10".)"""
+    r = _sweep_contact("ipanema3", 29, "mismatched", 2, 0.3, 2e6)
+    assert r.status != "held", r.note
+    assert r.metrics["overshoot_percent"] <= 20.0
