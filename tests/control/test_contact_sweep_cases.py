@@ -109,8 +109,8 @@ def test_no_hand_over_while_a_cfc_output_is_saturated_switched_over_the_hand_ove
     """Sweep case Mini #13 (seed 2): four CFC outputs at their saturation in D, whose clamp refilled
     each period the integral part the hand-over took out along a; the hybrid force controller's x_t
     was taken back against its PID (steady error -40 %). No hand-over while an output is saturated,
-    switched off and on again over HAND_OVER_TIME (switched at once, the floor program's drive
-    command stepped by 1.19 mm in one period): F_a = gain dt / T_i a . I, the gain ramped."""
+    switched off and on again over HAND_OVER_TIME: F_a = gain dt / T_i a . I, the gain ramped. (The
+    floor program's 1.19 mm drive command step of session 9's attempt was R -> I, the next test.)"""
     stage = _contact_stage(MINI)
     x_d, f_d, theta, f_min, f_max = _mini_contact_inputs()
     F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.5])
