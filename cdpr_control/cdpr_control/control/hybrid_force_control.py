@@ -609,7 +609,7 @@ class CFCCoupling:
             return f_err, y, False
         f_ff, _ = self.update(state, f_d)
         # the error's set-point stays the live one it was in D and R (the ramp from the one held
-        # finished); through the average as the feed-forward, it stepped the drive command by 1.1 mm
+        # finished); through the average as the feed-forward, it stepped the drive command by 1.12 mm
         # when R ended before the average had followed f_d
         self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
         f_err = f_d if self.share == 1.0 else self.hold + self.share * (f_d - self.hold)
@@ -640,7 +640,10 @@ class CFCCoupling:
           handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
           integrator this period (the hybrid force controller takes F_a / k_t on x_t,
           :meth:`HybridForceControl.absorb`), so the PID (5.3) owns the steady contact force and
-          nothing of it stays in Δq_CFC when the contact ends.
+          nothing of it stays in Δq_CFC when the contact ends. Not while an output is saturated
+          (:attr:`hand_over_gain`, 0 within HAND_OVER_TIME of a saturation, 1 within the same time
+          after it): a clamped integral part comes back after the hand-over took it out, which
+          only took x_t back against the PID (docs/hybrid_force_control.md, "Session 10").
         """
         a = np.asarray(a, dtype=float)
         bias = float(self.bias.y)
