@@ -529,6 +529,7 @@ class CFCCoupling:
         self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
         self.bias.reset(0.0)
         self.bias_step = 0.0                    # N per period of its ramp-out after D
+        self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -571,7 +572,8 @@ class CFCCoupling:
           (the joint command lifts the platform by it over the contact stiffness), so nothing of
           the contact force stays in Δq_CFC after the contact.
         - I: the feed-forward returns to the live set-point through the average as in
-          :meth:`update`, again live along a.
+          :meth:`update`, again live along a; the error keeps the live set-point of D and R (its
+          ramp from the one held completed if R was shorter than HAND_OVER_TIME).
         """
         f_d = np.asarray(f_d, dtype=float)
         if state == IDLE and self.weight == 0.0 and bias == 0.0:   # idle, ramped out: f_d passes, whatever a is
@@ -605,9 +607,13 @@ class CFCCoupling:
                 y += a * (a @ (target - y)) / aa
                 f_err = target + a * (a @ (f_d - target) - bias) / aa      # live along a, less the bias
             return f_err, y, False
-        out, _ = self.update(state, f_d)
-        out = live_along_a(out)
-        return out, out, False
+        f_ff, _ = self.update(state, f_d)
+        # the error's set-point stays the live one it was in D and R (the ramp from the one held
+        # finished); through the average as the feed-forward, it stepped the drive command by 1.12 mm
+        # when R ended before the average had followed f_d
+        self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
+        f_err = f_d if self.share == 1.0 else self.hold + self.share * (f_d - self.hold)
+        return live_along_a(f_err), live_along_a(f_ff), False
 
 
     def run(self, state: str, f_d, a, controller, f, e_F: float | None = None) -> tuple[np.ndarray, np.ndarray, bool, float]:
@@ -634,7 +640,10 @@ class CFCCoupling:
           handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
           integrator this period (the hybrid force controller takes F_a / k_t on x_t,
           :meth:`HybridForceControl.absorb`), so the PID (5.3) owns the steady contact force and
-          nothing of it stays in Δq_CFC when the contact ends.
+          nothing of it stays in Δq_CFC when the contact ends. Not while an output is saturated
+          (:attr:`hand_over_gain`, 0 within HAND_OVER_TIME of a saturation, 1 within the same time
+          after it): a clamped integral part comes back after the hand-over took it out, which
+          only took x_t back against the PID (docs/hybrid_force_control.md, "Session 10").
         """
         a = np.asarray(a, dtype=float)
         bias = float(self.bias.y)
@@ -654,9 +663,14 @@ class CFCCoupling:
             c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
         self.paused = paused
         F_a = 0.0
+        # no hand-over while an output is saturated (its integral part is clamped, not drained: what
+        # the hand-over took out along a came back each period); off and on again over HAND_OVER_TIME
+        step = self.dt / HAND_OVER_TIME
+        self.hand_over_gain = (max(0.0, self.hand_over_gain - step) if c.pi.saturated.any()
+                               else min(1.0, self.hand_over_gain + step))
         aa = float(a @ a) if not paused and state in (CONTACT, RELEASE) else 0.0
-        if aa > 0.0:
-            share = min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
+        if aa > 0.0 and self.hand_over_gain > 0.0:
+            share = self.hand_over_gain * min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
             c.pi.integrator = c.pi.integrator - share * a
             F_a = share * aa                            # the cables press with a . f along z_t
         return f_set, f_ff, paused, F_a
