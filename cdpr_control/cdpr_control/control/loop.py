@@ -179,8 +179,10 @@ class ControlLoop:
         beta, = kernels.inverse_kinematics_fields(robot, x_d, "beta")
         f = self.friction.update(F_s, theta, thetadot, beta)
         x, w = self.estimator.update(theta, f, x_d)
-        inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
-        outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
+        outputs = {}
+        if self.offset_stages:
+            inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
+            outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
         hpfc = x_hpfc = contact = None
         if self.hpfc is not None:
