@@ -143,7 +143,7 @@ def schemes():
     out["kernels/friction _series_tables (alpha, gamma)"] = (tables_miss, lambda: kf._series_tables(series, beta))
 
     def series_miss():
-        series._tables.clear()
+        series._beta_key = series._beta_seen = None
         return series.tables(beta)
     series.tables(beta)
     out["model/friction PulleySeries.tables (numpy reference)"] = (series_miss, lambda: series.tables(beta))

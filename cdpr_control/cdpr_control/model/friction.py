@@ -35,8 +35,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_control.model.memo import Memo
-
 
 def wrap_factor(beta) -> np.ndarray:
     """k = sqrt(2 (1 - cos beta)) (3.33): normal force on a pulley per unit mean cable force."""
@@ -101,7 +99,8 @@ class PulleySeries:
                 alpha, gamma = np.where(inner, a * alpha, alpha), np.where(inner, a * gamma + b, gamma)
             self._alpha_in[row], self._gamma_in[row] = alpha, gamma
         self._cols = np.arange(self.m)
-        self._tables = Memo()    # (alpha, gamma) of the last beta_last's bytes (tables)
+        self._beta_key = None
+        self._beta_seen = None
 
     @property
     def inner(self) -> tuple[np.ndarray, np.ndarray]:
@@ -110,9 +109,13 @@ class PulleySeries:
 
     def tables(self, beta_last) -> tuple[np.ndarray, np.ndarray]:
         """alpha, gamma (3, m) for s = -1, 0, 1 (rows); recomputed only when beta_last changes."""
-        beta_last = _floats(beta_last)
-        return self._tables((beta_last.tobytes(), beta_last.shape), last_pulley_tables, beta_last, self.mu, self.F_pv,
-                            self.has_last, self._alpha_in, self._gamma_in)
+        if beta_last is not self._beta_seen and (self._beta_key is None or not (self._beta_key == beta_last).all()):
+            self._alpha, self._gamma = last_pulley_tables(_floats(beta_last), self.mu, self.F_pv, self.has_last,
+                                                          self._alpha_in, self._gamma_in)
+            self._beta_key = np.array(beta_last, dtype=float)
+        # the same read-only array again (the simulator's frozen wrap angles): no comparison needed
+        self._beta_seen = beta_last if isinstance(beta_last, np.ndarray) and not beta_last.flags.writeable else None
+        return self._alpha, self._gamma
 
     def gains(self, s, beta_last) -> tuple[np.ndarray, np.ndarray]:
         """(alpha, gamma) (m,) of F_np = alpha F_1 + gamma thetadot for directions s (m,) in {-1, 0, 1}."""
