@@ -43,10 +43,14 @@ STAGES = {  # label -> (the ControlLoop attribute, its method); absent ones (old
 
 
 class _Kernels:
-    """The loop module's ``kernels`` with its inverse_kinematics timed (the IK of x_d, once a period)."""
+    """The loop module's ``kernels`` with its IK of x_d timed (once a period: ``inverse_kinematics``
+    up to session 9, the ``inverse_kinematics_fields`` the friction compensation takes since)."""
 
-    def __init__(self, kernels, timed_ik):
-        self._kernels, self.inverse_kinematics = kernels, timed_ik
+    def __init__(self, kernels, times, label):
+        self._kernels = kernels
+        self.inverse_kinematics = timed(times, label, kernels.inverse_kinematics)
+        if hasattr(kernels, "inverse_kinematics_fields"):
+            self.inverse_kinematics_fields = timed(times, label, kernels.inverse_kinematics_fields)
 
     def __getattr__(self, name):
         return getattr(self._kernels, name)
@@ -71,7 +75,7 @@ def instrument(times: dict):
         for label, (attr, method) in STAGES.items():
             if attr is None:
                 kernels = loop_module.kernels
-                loop_module.kernels = _Kernels(kernels, timed(times, label, kernels.inverse_kinematics))
+                loop_module.kernels = _Kernels(kernels, times, label)
                 continue
             stage = getattr(loop, attr, None)
             if stage is not None and hasattr(stage, method):

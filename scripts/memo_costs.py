@@ -90,7 +90,7 @@ def schemes():
     xdot_d, xddot_d = np.full(6, 0.01), np.full(6, 0.1)
 
     def model_miss():
-        fs._model_key = None
+        fs._model_memo.clear()
         return fs._model(x, xdot_d, xddot_d)
 
     def model_miss_no_ik_memo():    # kernels._packed's own memo also missing (another pose)
@@ -103,7 +103,7 @@ def schemes():
     cog = np.array([0.0, 0.0, -0.05])
 
     def payload_miss():
-        fs._payload_key = None
+        fs._payload_memo.clear()
         return fs.payload_wrench(x, xdot_d, xddot_d, 1.0, cog)
     fs.payload_wrench(x, xdot_d, xddot_d, 1.0, cog)
     out["control/force_setpoint payload_wrench (payload kinematics)"] = (
@@ -150,7 +150,7 @@ def schemes():
     from cdpr_control.model.memo import Memo
     v = kernels.vector
 
-    def fk_ik_miss():        # model/forward_kinematics' _ik_key memo; kernels._packed hits (the same x_d)
+    def fk_ik_miss():        # model/forward_kinematics' _ik_fields memo; kernels._packed hits (the same x_d)
         return x.tobytes(), tuple(map(v, kernels.inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta")))
     out["model/forward_kinematics _ik_fields (kernels._packed hit)"] = (fk_ik_miss, lambda: x.tobytes() != key)
     memo, inline_key = Memo(), [key, None]

@@ -119,7 +119,7 @@ def test_friction_compensation_keeps_the_wrap_angles_of_a_repeated_pose(robot):
                for k, pose in enumerate(_set_points(robot)) if k != 9]       # a NaN pose is the IK's to refuse
 
     def forget(node):
-        node._beta_key = None
+        node._beta.clear()
 
     kept, fresh = _run_pair(lambda: FrictionCompensationNode(parameter_overrides=_overrides()), periods, forget)
     assert len(kept) == len(periods) and kept == fresh
@@ -156,8 +156,8 @@ def test_forward_kinematics_keeps_x_d_of_a_repeated_pose(robot):
         periods.append({"theta": state, "f": forces, "setpoint": OperationalSetpoint(header=_stamp(k), pose=pose)})
 
     def forget(node):
-        node._x_d_key = None
-        node.estimator.solver._ik_key = None
+        node._x_d.clear()
+        node.estimator.solver._ik_fields.clear()
 
     kept, fresh = _run_pair(lambda: ForwardKinematicsNode(parameter_overrides=_overrides()), periods, forget)
     for out in (kept, fresh):                       # the wall-clock solve time aside
@@ -196,7 +196,7 @@ def test_ospc_keeps_x_d_of_a_repeated_pose(robot):
                                                 reference=[0.0] * 6, output=[0.0] * 6)})
 
     def forget(node):
-        node._x_d_key = None
+        node._x_d.clear()
 
     overrides = _overrides(force_controller="hybrid_force_controller")
     kept, fresh = _run_pair(lambda: OSPCNode(parameter_overrides=overrides), periods, forget)

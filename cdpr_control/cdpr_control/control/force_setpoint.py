@@ -29,6 +29,7 @@ import numpy as np
 from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
 from cdpr_control.model import cable
+from cdpr_control.model.memo import Memo
 from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
 from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, expected_contact_wrench_of, task_axis
 from cdpr_control.control.load_compensation import payload_kinematics, payload_wrench_of_mass
@@ -195,12 +196,10 @@ class ForceSetpoint:
         self.w_user: np.ndarray | None = None    # hand guiding: the user's wrench w_Adm (set_user_wrench)
         self.reserve = 0.0                       # N, the hand's reserve from f_min and f_max (_hand_reserve)
         self.margin_lp = MarginLP(6, robot.m)    # largest_margin, warm from period to period (_with_reserve)
-        self._model_key: tuple | None = None     # (set-point bytes, kernels.ENABLED) of _model_value
-        self._model_value: tuple = ()            # (w_dyn, A^T) of that set-point
-        self._payload_key: bytes | None = None   # (set-point, cog) bytes of _payload_kinematics
-        self._payload_kinematics: tuple = ()     # R c, g - a_c of that key (load_compensation.payload_kinematics)
+        self._model_memo = Memo()                # (w_dyn, A^T) of the set-point's bytes and kernels.ENABLED (_model)
+        self._payload_memo = Memo()              # R c, g - a_c of the set-point's and cog's bytes (payload_wrench)
         self.z_t = np.array([0.0, 0.0, 1.0])     # task z axis of the hybrid force controller, kept in R
-        self._z_t_of: bytes | None = None        # F_d,0 (its bytes) of z_t
+        self._task_axis = Memo()                 # z_t of F_d,0's bytes (_contact_wrench)
         self.set_params(params or ForceSetpointParams())
         kernels.warm_up(robot)               # the compiled w_dyn loaded now, not in the first period
 
@@ -255,24 +254,24 @@ class ForceSetpoint:
     def _model(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
         """(w_dyn (2.33) of x_d, ẋ_d, ẍ_d; A^T (2.10) at x_d): the arrays of the last period again
         (read, never written) while the set-point repeats (holding, a pause of a program)."""
-        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
-        key = (x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes(), kernels.ENABLED)
-        if key != self._model_key:
-            w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
-            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")
-            self._model_key, self._model_value = key, (w_dyn, AT)
-        return self._model_value
+        x_d, xdot_d, xddot_d = np.asarray(x_d, dtype=float), np.asarray(xdot_d, dtype=float), \
+            np.asarray(xddot_d, dtype=float)
+        return self._model_memo((x_d.tobytes(), xdot_d.tobytes(), xddot_d.tobytes(), kernels.ENABLED),
+                                self._model_of, x_d, xdot_d, xddot_d)
+
+    def _model_of(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
+        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
+        AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")    # (2.10)
+        return w_dyn, AT
 
     def payload_wrench(self, x_d, xdot_d, xddot_d, mass: float, cog) -> np.ndarray:
         """The model wrench of a payload (a point mass [kg] at cog (3,) [m], platform frame) at the
         set-point (:func:`cdpr_control.control.load_compensation.payload_wrench`), for ``w_model``:
         its mass-free part kept while the set-point and the cog repeat, times the mass of the period."""
-        x_d, xdot_d, xddot_d = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d))
-        key = x_d.tobytes() + xdot_d.tobytes() + xddot_d.tobytes() + np.asarray(cog, dtype=float).tobytes()
-        if key != self._payload_key:
-            self._payload_key = key
-            self._payload_kinematics = payload_kinematics(self.robot, x_d, xdot_d, xddot_d, cog)
-        return payload_wrench_of_mass(self._payload_kinematics, mass)
+        x_d, xdot_d, xddot_d, cog = (np.asarray(v, dtype=float) for v in (x_d, xdot_d, xddot_d, cog))
+        key = (x_d.tobytes(), xdot_d.tobytes(), xddot_d.tobytes(), cog.tobytes())
+        return payload_wrench_of_mass(
+            self._payload_memo(key, payload_kinematics, self.robot, x_d, xdot_d, xddot_d, cog), mass)
 
     def _feed_forward(self, x_d, w_dyn, w_model) -> np.ndarray | None:
         """w_ff = PT1_ff(w_model) (6,) of this period, None without a known payload; the filters'
@@ -347,9 +346,7 @@ class ForceSetpoint:
         of the hybrid force controller; None while it does not act."""
         state, F_d0, F_vec = contact
         F_d0 = np.asarray(F_d0, dtype=float)
-        key = F_d0.tobytes()
-        if key != self._z_t_of:                  # task_axis of an unchanged F_d,0 keeps z_t
-            self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
+        self.z_t = self._task_axis(F_d0.tobytes(), task_axis, F_d0, self.z_t)   # (an unchanged F_d,0: the same axis)
         if state not in FORCE_CONTROLLED:        # idle: the expected contact wrench is zero
             return None
         return expected_contact_wrench_of(state, F_d0, F_vec, self.z_t)

@@ -72,7 +72,8 @@ class LoopInputs:
     f: np.ndarray            # cable forces at the platform (friction-compensated)
     x: np.ndarray            # pose estimate (forward kinematics)
     w: np.ndarray            # measured wrench
-    ik_d: object             # inverse_kinematics(robot, x_d)
+    ik_d: object = None      # inverse_kinematics(robot, x_d); None: the stage takes what it needs of it,
+                             # as its node does (kernels.inverse_kinematics_fields, one IK a period)
 
 
 @dataclass
@@ -173,11 +174,15 @@ class ControlLoop:
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta, self.params.start_ramp)
-        ik_d = kernels.inverse_kinematics(robot, x_d)  # once per period, shared by three stages
-        f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
-        x, w = self.estimator.update(theta, f, x_d, ik_d)
-        inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w, ik_d)
-        outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
+        # the IK of x_d as the nodes take it: each stage its fields (kernels.inverse_kinematics_fields),
+        # of one computation a period that the stages share (and none while x_d repeats: holding)
+        beta, = kernels.inverse_kinematics_fields(robot, x_d, "beta")
+        f = self.friction.update(F_s, theta, thetadot, beta)
+        x, w = self.estimator.update(theta, f, x_d)
+        outputs = {}
+        if self.offset_stages:
+            inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
+            outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
         hpfc = x_hpfc = contact = None
         if self.hpfc is not None:
