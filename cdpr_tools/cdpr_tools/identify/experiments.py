@@ -6,6 +6,8 @@ Topics and types are the graph's (docs/sim.md), fully qualified as a recorder na
 (cdpr_msgs/CableForces: the reference force at the platform that stands in for the extra sensor of
 section 3.7.2), ``/ground_truth/pose`` (PoseStamped), ``/setpoint`` (cdpr_msgs/OperationalSetpoint:
 x_d) and ``/joint_command/mode`` (std_msgs/String: ik_only). Header stamps and log times are sim time.
+Every experiment takes ``seed`` (the sensor noise) and ``plant``, ``plant_seed`` (the simulated robot,
+:mod:`cdpr_sim.plant`; default the simulator's, mismatched seed 1), independently.
 
 The command of period k is stamped t_k and held over [t_k, t_k+1]; the state it causes is stamped
 t_k+1, as in the lockstep graph (controllers answer the state of t_k with a command stamped t_k).
@@ -243,8 +245,8 @@ def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_st
 
 
 def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
-                      payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0), plant: str = "mismatched", plant_seed: int = 1,
-                      **circle) -> Path:
+                      payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0), plant: str = "mismatched",
+                      plant_seed: int = 1, **circle) -> Path:
     """Record the circle run of section 4.1.1 (IK-only control along :func:`circle_trajectory`).
 
     payload_mass [kg] at payload_cog [m, platform frame]: an additional load as in Fig. 4.1, (4.1).
@@ -284,7 +286,8 @@ def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10
 
 
 def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.35, 0.15), hold: float = 0.35,
-                         ramp: float = 0.2, seed: int = 1, level: float = 0.95, plant: str = "mismatched", plant_seed: int = 1) -> Path:
+                         ramp: float = 0.2, seed: int = 1, level: float = 0.95, plant: str = "mismatched",
+                         plant_seed: int = 1) -> Path:
     """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
     (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16).
     The run starts tensed at ``level`` (a pre-load: the cables settle there, section 4.1.3) and
@@ -320,7 +323,8 @@ def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitud
     return record_run(robot, bag_path, commands, None, seed, None, level, plant=plant, plant_seed=plant_seed)
 
 
-def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print, plant: str = "mismatched", plant_seed: int = 1) -> dict[str, Path]:
+def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print, plant: str = "mismatched",
+                       plant_seed: int = 1) -> dict[str, Path]:
     """Record every identification experiment into ``outdir`` on one plant (``plant``, ``plant_seed``;
     ``seed``: the sensor noise): name -> bag path."""
     outdir = Path(outdir)
