@@ -6,7 +6,7 @@
     cdpr identify stiffness BAG [--robot NAME] [--friction params.yaml] [--reference] [-o robot.yaml]
     cdpr identify settlement BAG [--robot robot.yaml] [--friction params.yaml] [-o lc_params.yaml]
     cdpr identify eigenfrequency BAG [--robot NAME] [--friction params.yaml] [--reference] [--plot [fit.png]]
-    cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N]
+    cdpr identify record-experiments OUTDIR [--robot NAME] [--seed N] [--plant P] [--plant-seed N]
     cdpr identify load-steps OUTDIR [--robot NAME] [--configs ik,ik_lc,...] [--step-mass KG] [--steps N] [--plant P]
     cdpr identify load-program OUTDIR [--robot NAME] [--payloads 40,80] [--program NAME]
 """
@@ -76,7 +76,10 @@ def add_parser(sub) -> None:
     r = what.add_parser("record-experiments", help="record the identification runs with the simulator")
     r.add_argument("outdir", help="directory for the bags (friction/, drive_sweep/, circle/, stiffness/, pulse/)")
     r.add_argument("--robot", default="ipanema3_mini")
-    r.add_argument("--seed", type=int, default=1)
+    r.add_argument("--seed", type=int, default=1, help="sensor noise seed (default 1)")
+    r.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
+                   help="the simulated robot: cdpr_sim.plant (default mismatched)")
+    r.add_argument("--plant-seed", type=int, default=1, help="which mismatched robot (default 1)")
     r.set_defaults(run=run_record)
 
     ls = what.add_parser("load-steps", help="online load identification and compensation (4.4)-(4.6): payload "
@@ -238,7 +241,8 @@ def _friction_params(args) -> dict | None:
 def run_record(args) -> int:
     from cdpr_tools.identify.experiments import record_experiments
 
-    record_experiments(args.outdir, args.robot, args.seed, progress=lambda line: print(line, flush=True))
+    record_experiments(args.outdir, args.robot, args.seed, progress=lambda line: print(line, flush=True),
+                       plant=args.plant, plant_seed=args.plant_seed)
     return 0
 
 

@@ -6,6 +6,8 @@ Topics and types are the graph's (docs/sim.md), fully qualified as a recorder na
 (cdpr_msgs/CableForces: the reference force at the platform that stands in for the extra sensor of
 section 3.7.2), ``/ground_truth/pose`` (PoseStamped), ``/setpoint`` (cdpr_msgs/OperationalSetpoint:
 x_d) and ``/joint_command/mode`` (std_msgs/String: ik_only). Header stamps and log times are sim time.
+Every experiment takes ``seed`` (the sensor noise) and ``plant``, ``plant_seed`` (the simulated robot,
+:mod:`cdpr_sim.plant`; default the simulator's, mismatched seed 1), independently.
 
 The command of period k is stamped t_k and held over [t_k, t_k+1]; the state it causes is stamped
 t_k+1, as in the lockstep graph (controllers answer the state of t_k with a command stamped t_k).
@@ -186,14 +188,17 @@ def circle_trajectory(home, r_c: float = 0.1, frequency: float = 1.0, revolution
 
 
 def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps: int = 1,
-               plant: str = "mismatched"):
+               plant: str = "mismatched", plant_seed: int = 1):
     """The simulator at rest at home under the QP forces of ``level``; payload (mass, c) carried from
-    the start (tensed and encoders calibrated with it on, so the run starts in equilibrium)."""
+    the start (tensed and encoders calibrated with it on, so the run starts in equilibrium).
+    ``seed`` draws the sensor noise, ``plant_seed`` the mismatched robot (cdpr_sim.plant): two
+    seeds, because one plant is identified from several runs with their own noise."""
     from cdpr_sim.simulator import SimConfig, Simulator
     from cdpr_sim.startup import startup_state
 
     loaded = robot if payload is None else robot.with_payload(*payload)
-    config = SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps, plant=plant)
+    config = SimConfig(seed=seed, noise_std=noise_std, friction=True, substeps=substeps, plant=plant,
+                       plant_seed=plant_seed)
     x0, theta0, offset = startup_state(loaded, robot.home, level=level, calibrate_home=True, config=config)
     sim = Simulator(robot, config, x0=x0, theta0=theta0, encoder_offset=offset)
     if payload is not None:
@@ -202,16 +207,17 @@ def _simulator(robot, seed: int, noise_std, level: float, payload=None, substeps
 
 
 def record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=None, before_step=None,
-               substeps: int = 1, plant: str = "mismatched") -> Path:
+               substeps: int = 1, plant: str = "mismatched", plant_seed: int = 1) -> Path:
     """Simulate ``commands`` (N, m) (with set-points x_d (N, 6) or None) and record the bag.
 
     payload: (mass, centre of gravity) on the platform; before_step(sim, k): called before step k;
-    substeps: physics steps per 1 ms period.
+    substeps: physics steps per 1 ms period; seed: the sensor noise; plant, plant_seed: the
+    simulated robot (:func:`cdpr_sim.plant.build_plant`; seed and plant_seed are independent).
     """
     from cdpr_tools.bag.writer_process import BagWriterProcess
     from cdpr_tools.progress import track
 
-    with _simulator(robot, seed, noise_std, level, payload, substeps, plant) as sim:
+    with _simulator(robot, seed, noise_std, level, payload, substeps, plant, plant_seed) as sim:
         writer = BagWriterProcess(bag_path)
         try:
             rec = _Recorder(writer, robot)
@@ -229,16 +235,18 @@ def record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload=N
 
 
 def record_friction_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
-                        **trajectory) -> Path:
-    """Record the friction identification run (IK-only control along :func:`friction_trajectory`)."""
+                        plant: str = "mismatched", plant_seed: int = 1, **trajectory) -> Path:
+    """Record the friction identification run (IK-only control along :func:`friction_trajectory`)
+    on the plant ``plant``, ``plant_seed`` (seed: the sensor noise)."""
     robot = load_robot(robot) if isinstance(robot, str) else robot
     x_d = friction_trajectory(robot.home, **trajectory)
     commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
-    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level)
+    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level, plant=plant, plant_seed=plant_seed)
 
 
 def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=None, level: float = 0.5,
-                      payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0), **circle) -> Path:
+                      payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0), plant: str = "mismatched",
+                      plant_seed: int = 1, **circle) -> Path:
     """Record the circle run of section 4.1.1 (IK-only control along :func:`circle_trajectory`).
 
     payload_mass [kg] at payload_cog [m, platform frame]: an additional load as in Fig. 4.1, (4.1).
@@ -247,13 +255,14 @@ def record_circle_run(bag_path, robot="ipanema3_mini", seed: int = 1, noise_std=
     x_d = circle_trajectory(robot.home, **circle)
     commands = np.array([inverse_kinematics(robot, x).q for x in x_d])
     payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
-    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload)
+    return record_run(robot, bag_path, commands, x_d, seed, noise_std, level, payload, plant=plant,
+                      plant_seed=plant_seed)
 
 
 def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10.0, 0.0, 0.0, 0.0),
                           pulse: float = 0.004, rest: float = 0.2, duration: float = 0.6, seed: int = 1,
                           level: float = 0.5, payload_mass: float = 0.0, payload_cog=(0.0, 0.0, 0.0),
-                          substeps: int = 10) -> Path:
+                          substeps: int = 10, plant: str = "mismatched", plant_seed: int = 1) -> Path:
     """Record the free oscillation of the platform for its eigenfrequency (section 4.3, (4.8)).
 
     The drives hold theta_d = IK{home} (no controller acts, as in the thesis' experiment); after
@@ -272,23 +281,26 @@ def record_pulse_response(bag_path, robot="ipanema3_mini", wrench=(0.0, 0.0, -10
             sim.apply_pulse(wrench, shape="rectangle", duration=pulse)
 
     payload = (payload_mass, payload_cog) if payload_mass > 0.0 else None
-    return record_run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps)
+    return record_run(robot, bag_path, commands, None, seed, None, level, payload, knock, substeps, plant,
+                      plant_seed)
 
 
 def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.35, 0.15), hold: float = 0.35,
-                         ramp: float = 0.2, seed: int = 1, level: float = 0.95, plant: str = "mismatched") -> Path:
+                         ramp: float = 0.2, seed: int = 1, level: float = 0.95, plant: str = "mismatched",
+                         plant_seed: int = 1) -> Path:
     """Record tension steps at home: theta_d = IK{home} - dq(f(level_j)) for each of ``levels``
     (QP forces (3.27)), ``ramp`` s cosine transitions, ``hold`` s at each: force/elongation data (2.16).
     The run starts tensed at ``level`` (a pre-load: the cables settle there, section 4.1.3) and
     steps down, so that no cable carries more than before and the steps see no settlement.
-    plant: the simulator's plant (cdpr_sim.plant)."""
+    plant, plant_seed: the simulator's plant (cdpr_sim.plant)."""
     from cdpr_sim.simulator import pretension_lengths
     from cdpr_sim.startup import startup_forces, startup_state
 
     robot = load_robot(robot) if isinstance(robot, str) else robot
     from cdpr_sim.simulator import SimConfig
 
-    offset = startup_state(robot, robot.home, level, calibrate_home=True, config=SimConfig(plant=plant))[2]
+    offset = startup_state(robot, robot.home, level, calibrate_home=True,
+                           config=SimConfig(plant=plant, plant_seed=plant_seed))[2]
     targets = [pretension_lengths(robot, robot.home, startup_forces(robot, robot.home, lv)) + offset
                for lv in (level, *levels)]
     n_ramp, n_hold = int(round(ramp / 1e-3)), int(round(hold / 1e-3))
@@ -296,22 +308,25 @@ def record_stiffness_run(bag_path, robot="ipanema3_mini", levels=(0.75, 0.55, 0.
     for a, b in zip(targets[:-1], targets[1:]):
         s = 0.5 * (1.0 - np.cos(np.pi * np.arange(1, n_ramp + 1) / n_ramp))
         parts += [a + s[:, None] * (b - a), np.repeat(b[None], n_hold, axis=0)]
-    return record_run(robot, bag_path, np.concatenate(parts), None, seed, None, level, plant=plant)
+    return record_run(robot, bag_path, np.concatenate(parts), None, seed, None, level, plant=plant,
+                      plant_seed=plant_seed)
 
 
 def record_drive_sweep(bag_path, robot="ipanema3_mini", cable: int = 0, amplitude: float = 5e-4,
                        duration: float = 3.0, f_start: float = 0.5, f_end: float = 40.0, seed: int = 1,
-                       level: float = 0.5) -> Path:
+                       level: float = 0.5, plant: str = "mismatched", plant_seed: int = 1) -> Path:
     """Record a sine sweep of ``amplitude`` m on theta_d of winch ``cable`` (0-based), the platform held."""
     robot = load_robot(robot) if isinstance(robot, str) else robot
     hold = inverse_kinematics(robot, robot.home).q            # the encoders read IK{home} at home
     commands = np.repeat(hold[None], int(round(duration / 1e-3)), axis=0)
     commands[:, cable] += amplitude * sweep(duration, f_start, f_end, 1e-3)
-    return record_run(robot, bag_path, commands, None, seed, None, level)
+    return record_run(robot, bag_path, commands, None, seed, None, level, plant=plant, plant_seed=plant_seed)
 
 
-def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print) -> dict[str, Path]:
-    """Record every identification experiment into ``outdir``: name -> bag path."""
+def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=print, plant: str = "mismatched",
+                       plant_seed: int = 1) -> dict[str, Path]:
+    """Record every identification experiment into ``outdir`` on one plant (``plant``, ``plant_seed``;
+    ``seed``: the sensor noise): name -> bag path."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     bags = {}
@@ -319,14 +334,14 @@ def record_experiments(outdir, robot="ipanema3_mini", seed: int = 1, progress=pr
                          ("circle", record_circle_run), ("stiffness", record_stiffness_run),
                          ("pulse", record_pulse_response)):
         progress(f"recording {name} ...")
-        bags[name] = record(outdir / name, robot=robot, seed=seed)
+        bags[name] = record(outdir / name, robot=robot, seed=seed, plant=plant, plant_seed=plant_seed)
         progress(f"  {bags[name]}")
     return bags
 
 
 def record_settlement_run(bag_path, robot="ipanema3", payload: float = 64.0, rest: float = 0.5, ramp: float = 0.3,
                           hold: float = 6.0, after: float = 1.0, seed: int = 1, level: float = 0.5,
-                          plant: str = "mismatched") -> Path:
+                          plant: str = "mismatched", plant_seed: int = 1) -> Path:
     """Record the cable settlement under load (section 4.1.3): the drives hold IK{home} (IK-only
     control at standstill), ``payload`` kg is put on after ``rest`` s (cosine over ``ramp`` s),
     held ``hold`` s and taken off again (``after`` s more). The pose (``ground_truth/pose``, the
@@ -344,4 +359,5 @@ def record_settlement_run(bag_path, robot="ipanema3", payload: float = 64.0, res
         if n_rest <= k <= n_rest + 2 * n_ramp + n_hold:
             sim.set_payload(mass(k))
 
-    return record_run(robot, bag_path, commands, None, seed, None, level, before_step=before_step, plant=plant)
+    return record_run(robot, bag_path, commands, None, seed, None, level, before_step=before_step, plant=plant,
+                      plant_seed=plant_seed)

@@ -686,7 +686,14 @@ def border_program(robot, poses) -> str:
 def program_case(spec: CaseSpec) -> CaseResult:
     """The border program under ``spec.variant["controller"]`` (force_control or ik_only): pose
     error (ground truth against the set-point) and the cable forces against the robot's limits
-    from 0.1 s on (the start-up raises them to the planned f_min)."""
+    from 0.1 s on (the start-up raises them to the planned f_min).
+
+    ik_only is the reference (criteria.NOT_JUDGED): it commands lengths, its cables slacken on the
+    way to the border, and its slack is reported, not judged. Its force watch is off, as for the
+    payload family's IK-only reference: on, it held the Mini's every IK-only program within 0.5 s
+    (a cable 3 N below f_min for 50 ms) and failed the case for the slack the family does not judge,
+    while the IPAnema 3's watch band (5 % of 2900 N below f_min 100 N) never trips at 0 N. f_max
+    and divergence are still judged, by the metrics and the recorder."""
     from cdpr_control.motion.gcode import parse_gcode
     from cdpr_control.motion.interpolation import Interpolator
     from cdpr_control.motion.program_check import check_program
@@ -704,9 +711,11 @@ def program_case(spec: CaseSpec) -> CaseResult:
         x_d.append(out[0])
         return out
 
+    params = control_loop_params(robot, mode=spec.variant["controller"])
+    if spec.variant["controller"] == "ik_only":
+        params = replace(params, safety=replace(params.safety, force_watch=False))
     rec = Recorder(robot)
-    ok = recorded_run(robot, rec, source, interp.duration,
-                      control_loop_params(robot, mode=spec.variant["controller"]), config=sim_config(spec))
+    ok = recorded_run(robot, rec, source, interp.duration, params, config=sim_config(spec))
     t, x, f = rec.array("t"), rec.array("x"), rec.array("f")
     metrics = dict.fromkeys(("position_error_rms_mm", "position_error_max_mm", "force_below_f_min_N",
                              "force_above_f_max_N"), float("nan"))
