@@ -498,8 +498,10 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     base = {"capacity_kg": capacity, "capacity_static_kg": DYNAMIC_LOAD_FACTOR * capacity,
             "capacity_robot_limits_kg": payload_capacity(robot, spec.x), "payload_kg": mass}
     if mass < 0.1 * robot.platform.mass:
-        return [CaseResult(s, dict(base), {}, "refused", f"dynamic capacity {capacity:.3g} kg at this pose (static "
-                           f"{DYNAMIC_LOAD_FACTOR * capacity:.3g} kg): no step to make") for s in specs]
+        return [CaseResult(s, dict(base), {}, "refused", f"payload below a tenth of the platform's mass ({mass:.3g} kg "
+                           f"of {robot.platform.mass:.3g} kg: {spec.variant['fraction']:g} of the dynamic capacity "
+                           f"{capacity:.3g} kg at this pose, static {DYNAMIC_LOAD_FACTOR * capacity:.3g} kg): no step to make")
+                for s in specs]
     reference, _, ok_ref, _ = _payload_run(spec, robot, REFERENCE, mass)       # (its force watch off)
     sag_reference = 1e3 * _sag(reference) if ok_ref else float("nan")
     note_ref = "" if ok_ref else f"the IK-only reference diverged at {reference.diverged_at:.3f} s"
