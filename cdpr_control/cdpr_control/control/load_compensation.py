@@ -530,7 +530,7 @@ class LoadCompensation:
         # the longest window): at rest again, the next load step is read with T_filter's latency
         if (len(self.extremes) >= 2 and abs(self.extremes[-1][1] - self.extremes[-2][1]) >= 2.0 * SWING_AMPLITUDE
                 and self.samples_seen - self.extremes[-1][0] <= self._n_max):
-            n = min(max(n, 2 * (self.extremes[-1][0] - self.extremes[-2][0])), self._n_max)
+            n = max(n, min(2 * (self.extremes[-1][0] - self.extremes[-2][0]), self._n_max))
         return n
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
@@ -540,16 +540,17 @@ class LoadCompensation:
         sample) gets the same means; the window is :meth:`_swing_periods`. None until the history
         spans the window and h."""
         h = self._velocity_base
+        n_max = max(self._n_max, self.wrench_filter.n)          # a T_filter beyond SWING_WINDOW_MAX: its own
         self.samples_seen += 1
         self.z_history.append(z)
-        del self.z_history[:-(self._n_max + h + 1)]
+        del self.z_history[:-(n_max + h + 1)]
         # D(k) = sum over the last h of C, the cumulative sum of w_z: (D(k) - D(k - n)) / (h n) is
         # the mean over h of the n-window means of w_z, for any n
         self.w_cumulative += w_z
         self.c_history.append(self.w_cumulative)
         previous = self.d_history[-1] if self.d_history else 0.0
         self.d_history.append(previous + self.w_cumulative - self.c_history.pop(0))
-        del self.d_history[:-(self._n_max + 1)]
+        del self.d_history[:-(n_max + 1)]
         n = self._swing_periods()
         if len(self.z_history) < n + h + 1:
             return None
