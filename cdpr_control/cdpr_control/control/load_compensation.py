@@ -429,7 +429,7 @@ class LoadCompensation:
         self.c_history: list[float] = [0.0] * self._velocity_base   # its last h values
         self.d_history: list[float] = []                       # sums of the cumulative sum over h
         self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
-        self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last two turning points
+        self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
         self.window_n: int | None = None                       # samples of the last window of (4.4)
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
@@ -512,25 +512,30 @@ class LoadCompensation:
         turning points are where z(t) - z(t - h) changes sign (by SWING_HYSTERESIS, so that the
         forward kinematics' noise at rest turns nothing); its period is twice the time between the
         last two (the latest half swing: a swing that decays or changes its frequency after a step
-        is matched as soon as it turns), its amplitude half their z difference."""
+        is matched as soon as it turns), and it counts as a swing where the last two half swings
+        each move z by 2 SWING_AMPLITUDE or more."""
         zh, h = self.z_history, self._velocity_base
         if len(zh) > h:
             v = zh[-1] - zh[-1 - h]
             direction = 1 if v > SWING_HYSTERESIS else -1 if v < -SWING_HYSTERESIS else self.direction
             if direction != self.direction:
-                if self.direction:
-                    # the turning point: the extreme z of the last h samples
-                    recent = zh[-1 - h:]
-                    k = max(range(len(recent)), key=recent.__getitem__) if self.direction > 0 else \
-                        min(range(len(recent)), key=recent.__getitem__)
-                    self.extremes = (self.extremes + [(self.samples_seen - len(recent) + k, recent[k])])[-2:]
+                # the turning point: the extreme z of the last h samples; the first motion from rest
+                # (no direction yet) turns there too, so that the first half swing after a step is one
+                previous = self.direction or -direction
+                recent = zh[-1 - h:]
+                k = max(range(len(recent)), key=recent.__getitem__) if previous > 0 else \
+                    min(range(len(recent)), key=recent.__getitem__)
+                self.extremes = (self.extremes + [(self.samples_seen - len(recent) + k, recent[k])])[-3:]
                 self.direction = direction
         n = self.wrench_filter.n
-        # a swing (the last half swing large enough) that has not stopped (a turning point within
-        # the longest window): at rest again, the next load step is read with T_filter's latency
-        if (len(self.extremes) >= 2 and abs(self.extremes[-1][1] - self.extremes[-2][1]) >= 2.0 * SWING_AMPLITUDE
-                and self.samples_seen - self.extremes[-1][0] <= self._n_max):
-            n = max(n, min(2 * (self.extremes[-1][0] - self.extremes[-2][0]), self._n_max))
+        # a swing: the last two half swings both large enough (a single excursion, such as the sag
+        # and recovery of a load step under force control, turns once from rest and is not one: a
+        # window over it would reach back across the load change), and not stopped (a turning point
+        # within the longest window): at rest again, the next load step is read with T_filter's latency
+        e = self.extremes
+        if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
+                and self.samples_seen - e[2][0] <= self._n_max):
+            n = max(n, min(2 * (e[2][0] - e[1][0]), self._n_max))
         return n
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
