@@ -102,3 +102,33 @@ def test_a_swing_the_forward_kinematics_sees_in_part_does_not_read_as_mass():
     error = np.abs(m_c[t >= 1.0] - 115.0).max() / 115.0
     assert error < 0.02
     assert 0.55 <= lc.window_n * DT <= 0.7              # one period of the swing (0.625 s)
+
+
+def _excursion(t):
+    """The sag and recovery of a 13 kg step under force control (ipanema3 #6, default plant seed 3):
+    the start-up's wobble (0.4 mm at 2 Hz until 0.5 s, turning points of its own), then 6.4 mm down
+    over 0.3 s from 0.7 s and back up over 1.8 s: one excursion, no swing. The forward kinematics
+    sees it all."""
+    drift = np.where(t < 0.5, 0.4e-3 * np.sin(2 * np.pi * 2.0 * t), 0.0)
+    down = -6.4e-3 * 0.5 * (1.0 - np.cos(np.pi * np.clip((t - 0.7) / 0.3, 0.0, 1.0)))
+    up = 6.4e-3 * 0.5 * (1.0 - np.cos(np.pi * np.clip((t - 1.0) / 1.8, 0.0, 1.0)))
+    z = drift + down + up
+    return z, z
+
+
+def test_the_sag_and_recovery_of_a_step_is_no_swing():
+    """A single excursion turns once from rest, so its window stays T_filter: a window of the
+    excursion's "period" (the former rule: twice the time between the last two turning points,
+    the start-up drift's and the bottom) reached back across the load step (ipanema3 #6: 21 %)."""
+    lc = LoadCompensation(IPANEMA3, DT, ESTIMATED)
+    f0, df = _vertical_forces(IPANEMA3, POSE, 13.0)
+    t = np.arange(3000) * DT
+    true_z, estimated_z = _excursion(t)
+    a = np.gradient(np.gradient(true_z, DT), DT)
+    windows = []
+    for k in range(len(t)):
+        x = POSE.copy()
+        x[2] += estimated_z[k]
+        lc.update(POSE, np.zeros(6), np.zeros(6), f0 + a[k] * df, x)
+        windows.append(lc.window_n or lc.wrench_filter.n)
+    assert max(windows) == lc.wrench_filter.n
