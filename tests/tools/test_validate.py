@@ -300,7 +300,7 @@ def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault(tmp_path, caps
     with CaseLog(tmp_path) as log:                     # the command exits 1 and says so
         log.write([r, judge(replace(spec, pose_index=1), {"rest_motion_mm": 0.1}, False)])
     assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
-    assert "guiding: 1/2 passed (50 %) [1 held]" in capsys.readouterr().out
+    assert "guiding: 1/2 applicable passed (50 %; 1/2 of all) [1 held]" in capsys.readouterr().out
 
 
 def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():
