@@ -132,3 +132,25 @@ def test_the_sag_and_recovery_of_a_step_is_no_swing():
         lc.update(POSE, np.zeros(6), np.zeros(6), f0 + a[k] * df, x)
         windows.append(lc.window_n or lc.wrench_filter.n)
     assert max(windows) == lc.wrench_filter.n
+
+
+def test_a_swing_at_start_up_does_not_delay_the_tare():
+    """A platform swinging by 4 mm at 2.5 Hz from the first period (the start-up at a border pose):
+    the swing's turning points come from h on, so its window cannot lengthen before the history
+    spans T_filter and h, and tare_at_start tares then, as at rest (the sweep puts its payload down
+    0.7 s after the start)."""
+    params = LoadCompensationParams(enabled=False, acceleration_source="estimated", tare_at_start=True)
+    lc = LoadCompensation(IPANEMA3, DT, params)
+    f0, df = _vertical_forces(IPANEMA3, POSE, 0.0)
+    t = np.arange(700) * DT
+    z = 0.004 * np.sin(2 * np.pi * 2.5 * t)
+    a = np.gradient(np.gradient(z, DT), DT)
+    tared_at = None
+    for k in range(len(t)):
+        x = POSE.copy()
+        x[2] += z[k]
+        lc.update(POSE, np.zeros(6), np.zeros(6), f0 + a[k] * df, x)
+        if lc.tared and tared_at is None:
+            tared_at = t[k]
+    assert tared_at == pytest.approx(0.24 + VELOCITY_BASE, abs=3e-3)
+    assert abs(lc.m_c) < 0.05
