@@ -18,7 +18,7 @@ import sys
 from timing import python_calibration_us
 
 from cdpr_tools.validate.cases import FAMILIES
-from cdpr_tools.validate.report import HEADLINE, dumps
+from cdpr_tools.validate.report import HEADLINE, applicable, dumps
 from cdpr_tools.validate.sweep import ROBOTS, plants, validate
 from cdpr_tools.validate_cmd import _names, _seeds, add_parser
 
@@ -30,7 +30,10 @@ def family_figures(s: dict, family: str) -> dict:
     """A family's summary: counts, pass rate, its headline metric's mean and worst case with where."""
     headline = s["metrics"].get(HEADLINE[family], {})
     return {"cases": s["cases"], "passed": s["passed"], "pass_rate": s["pass_rate"], "diverged": s["diverged"],
-            "held": s["held"], "refused": s["refused"], "error": s["error"], "headline_metric": HEADLINE[family],
+            "held": s["held"], "refused": s["refused"], "error": s["error"],
+            "applicable": s["applicable"], "not_applicable": s["not_applicable"],
+            "pass_rate_applicable": s["pass_rate_applicable"], "not_applicable_reasons": s["not_applicable_reasons"],
+            "sag_below_resolution": s["sag_below_resolution"], "headline_metric": HEADLINE[family],
             "mean": headline.get("mean"), "worst": headline.get("worst"), "where": headline.get("where"),
             "not_measured": headline.get("not_measured", 0),
             "out_of_band": {k: m["out_of_band"] for k, m in s["metrics"].items() if m["out_of_band"]}}
@@ -45,10 +48,13 @@ def main(argv=None) -> None:
     results, doc, _ = validate(_names(args.robot, ROBOTS, "robot"), _names(args.family, FAMILIES, "family"),
                                plants(args.plant, _seeds(args.seeds)), args.poses, args.jobs, args.output,
                                command=" ".join(["benchmarks/bench_validation.py", *argv]))
+    n_applicable = sum(applicable(r) for r in results)
     result = {"machine": platform.processor() or platform.machine(), "command": doc["meta"]["command"],
               "cases": len(results), "jobs": args.jobs, "sweep_wall_s": doc["meta"]["wall_s"],
               "sweep_cpu_s": doc["meta"]["cpu_s"],
               "pass_rate": sum(r.passed for r in results) / len(results),
+              "pass_rate_applicable": (sum(r.passed for r in results) / n_applicable) if n_applicable else None,
+              "not_applicable": len(results) - n_applicable,
               "families": {f: family_figures(s, f) for f, s in doc["summary"].items()},
               "per_robot_plant": doc["per_robot_plant"], "python_calibration_us": calibration,
               "report": str(pathlib.Path(args.output) / "validation.json")}

@@ -116,12 +116,11 @@ class NumpyLoadCompensation(LoadCompensation):
             self.guarded = True
             return
         w_z, a = self.wrench_filter.update([w[2], xddots[2]])
-        w_z_base = self.base_filter.update([w_z])[0]
         self.pose_acceleration = False
         if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
-            a_est = self._estimated_acceleration(float(x[2]))
-            if a_est is not None:
-                w_z, a = w_z_base, a_est
+            estimated = self._estimated_acceleration(float(x[2]), float(w[2]))
+            if estimated is not None:
+                w_z, a = estimated
                 self.pose_acceleration = True
         estimate = mass_estimate(float(w_z), float(a), float(self.robot.gravity[2]), self.params.accel_guard)
         self.guarded = estimate is None

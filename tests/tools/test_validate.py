@@ -159,7 +159,7 @@ def test_an_interrupted_runs_cases_are_reported_again(tmp_path, capsys):
     (tmp_path / "cases.jsonl").open("a").write('{"family": "payl')          # a line cut off by the interruption
     assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
     out = capsys.readouterr().out
-    assert "payload: 2/3 passed (67 %)" in out and "worst 7 at ipanema3_mini #7" in out
+    assert "payload: 2/3 applicable passed (67 %; 2/3 of all)" in out and "worst 7 at ipanema3_mini #7" in out
     assert (tmp_path / "r" / "validation_payload.png").is_file()
     assert len(read_cases(tmp_path / "cases.jsonl")) == 3
     program = CaseSpec("program", "ipanema3_mini", -1, [0.0] * 6, True, "nominal", 0,
@@ -168,6 +168,31 @@ def test_an_interrupted_runs_cases_are_reported_again(tmp_path, capsys):
         log.write([judge(program, {"position_error_max_mm": v, "force_below_f_min_N": -1.0}, False) for v in (2.0, 5.0)])
     assert main(["validate", "--from-cases", str(tmp_path / "p" / "cases.jsonl"), "-o", str(tmp_path / "p")]) == 0
     assert "position_error_max_mm mean 3.5, 2 .. 5" in capsys.readouterr().out
+
+
+def test_refused_cases_are_not_applicable_with_their_reason_apart_from_the_failures():
+    """A refused case is "not applicable (reason)": counted apart, with its reason, the pass rate
+    taken over the applicable cases (the rate over all kept beside it), n/a in the case lines and in
+    the per robot and plant rates."""
+    from cdpr_tools.validate.cases import CaseResult
+    from cdpr_tools.validate.report import case_line, family_summary, summary_line, to_json
+
+    spec = CaseSpec("payload", "ipanema3_mini", 4, [0.1, 0, 0, 0, 0, 0], False, "mismatched", 2,
+                    {"fraction": 0.5, "controller": "ik_lc"})
+    results = [judge(spec, {"estimate_error_percent": e, "sag_cut_percent": 95.0}, False) for e in (1.0, 7.0)]
+    results += [CaseResult(spec, {}, {}, "refused", "IK-only control does not hold this pose's cables tensed "
+                           f"before any payload: cable(s) {i} (0.0 N)") for i in (7, 8)]
+    results.append(CaseResult(spec, {}, {}, "refused", "payload below a tenth of the platform's mass (0.4 kg of "
+                              "5 kg: 0.25 of the dynamic capacity 1.6 kg at this pose, static 3.2 kg): no step to make"))
+    s = family_summary(results, "payload")
+    assert (s["applicable"], s["not_applicable"], s["passed"], s["failed"]) == (2, 3, 1, 1)
+    assert s["pass_rate_applicable"] == 0.5 and s["pass_rate"] == 0.2
+    assert s["not_applicable_reasons"] == {"IK-only control does not hold this pose's cables tensed before any "
+                                           "payload": 2, "payload below a tenth of the platform's mass": 1}
+    line = summary_line("payload", s)
+    assert line.startswith("payload: 1/2 applicable passed (50 %; 1/5 of all); not applicable 3 (2: IK-only")
+    assert case_line(results[2]).split()[1] == "n/a" and "not applicable: IK-only" in case_line(results[2])
+    assert to_json(results, {})["per_robot_plant"]["ipanema3_mini mismatched seed 2"]["payload"] == "1/2 (3 n/a)"
 
 
 # ---- real cases (IPAnema 3 Mini, nominal plant) -------------------------------------------------
@@ -286,7 +311,7 @@ def test_a_run_the_safety_layer_held_fails_as_held_with_its_fault(tmp_path, caps
     with CaseLog(tmp_path) as log:                     # the command exits 1 and says so
         log.write([r, judge(replace(spec, pose_index=1), {"rest_motion_mm": 0.1}, False)])
     assert main(["validate", "--from-cases", str(tmp_path / "cases.jsonl"), "-o", str(tmp_path / "r")]) == 1
-    assert "guiding: 1/2 passed (50 %) [1 held]" in capsys.readouterr().out
+    assert "guiding: 1/2 applicable passed (50 %; 1/2 of all) [1 held]" in capsys.readouterr().out
 
 
 def test_hand_guiding_at_a_border_pose_runs_in_shrunk_zones_and_rests():

@@ -59,6 +59,18 @@ ACCELERATION_SOURCES = ("commanded", "estimated")
 # stays exact for a platform swinging at any frequency, and the forward kinematics' noise, which the
 # quotient divides by h T, counts 20 times less than with 10 ms (measured: docs/load_compensation.md)
 VELOCITY_BASE = 0.2
+# The window of (4.4) matched to the platform's swing (LoadCompensation._swing_periods): a platform
+# swinging after a load step (under force control the IPAnema 3 at 1.5-2 Hz by tens of mm) has a
+# mean acceleration over a window T_filter shorter than its period of the order of the swing's
+# amplitude, and the forward kinematics sees only part of it (the elastic model's view of a
+# mismatched plant: 66-110 % of the swing at ipanema3 #38), which (4.4) reads as mass. Over a whole
+# period of the swing its acceleration, and any error proportional to it, averages to about zero,
+# so the window of w_z and of the pose's acceleration spans the last full period of the swing
+# (twice the time between the forward kinematics' last two turning points) where that is longer
+# than T_filter.
+SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
+SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
+SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -410,9 +422,16 @@ class LoadCompensation:
         self.samples = 0
         self.delay: list[list[float]] | None = None            # n + 1 rows of x_d, ẋ_d, ẍ_d (18 floats)
         self.delay_index = 0
-        self.z_history: list[float] = []                       # estimated z of the last window + h
+        self.z_history: list[float] = []                       # estimated z of the longest window + h
         self._velocity_base = max(int(round(VELOCITY_BASE / dt)), 1)   # h, periods
-        self.base_filter = MovingAverage(self._velocity_base * dt, dt)   # w_z's window means over h
+        self._n_max = max(int(round(SWING_WINDOW_MAX / dt)), 1)
+        self.w_cumulative = 0.0                                # running sum of w_z (for any window)
+        self.c_history: list[float] = [0.0] * self._velocity_base   # its last h values
+        self.d_history: list[float] = []                       # sums of the cumulative sum over h
+        self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
+        self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
+        self.window_n: int | None = None                       # samples of the last window of (4.4)
+        self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
         self.m_c = 0.0
@@ -487,17 +506,63 @@ class LoadCompensation:
         self.delay_index = (self.delay_index + 1) % len(self.delay)
         return self.delay[self.delay_index]                   # written _delay_n periods ago
 
-    def _estimated_acceleration(self, z: float) -> float | None:
-        """Mean vertical acceleration of the estimated pose over the window, (v(t) - v(t - T)) / T
-        with v a difference quotient over VELOCITY_BASE h: the mean over h of the window means of
-        the acceleration (see VELOCITY_BASE); None until the history is long enough."""
-        n, h = self.wrench_filter.n, self._velocity_base
+    def _swing_periods(self) -> int:
+        """n, the window of (4.4) in periods: T_filter, or the last full period of the platform's
+        swing where that is longer (at most SWING_WINDOW_MAX; see SWING_WINDOW_MAX). The swing's
+        turning points are where z(t) - z(t - h) changes sign (by SWING_HYSTERESIS, so that the
+        forward kinematics' noise at rest turns nothing); its period is twice the time between the
+        last two (the latest half swing: a swing that decays or changes its frequency after a step
+        is matched as soon as it turns), and it counts as a swing where the last two half swings
+        each move z by 2 SWING_AMPLITUDE or more."""
+        zh, h = self.z_history, self._velocity_base
+        if len(zh) > h:
+            v = zh[-1] - zh[-1 - h]
+            direction = 1 if v > SWING_HYSTERESIS else -1 if v < -SWING_HYSTERESIS else self.direction
+            if direction != self.direction:
+                # the turning point: the extreme z of the last h samples; the first motion from rest
+                # (no direction yet) turns there too, so that the first half swing after a step is one
+                previous = self.direction or -direction
+                recent = zh[-1 - h:]
+                k = max(range(len(recent)), key=recent.__getitem__) if previous > 0 else \
+                    min(range(len(recent)), key=recent.__getitem__)
+                self.extremes = (self.extremes + [(self.samples_seen - len(recent) + k, recent[k])])[-3:]
+                self.direction = direction
+        n = self.wrench_filter.n
+        # a swing: the last two half swings both large enough (a single excursion, such as the sag
+        # and recovery of a load step under force control, turns once from rest and is not one: a
+        # window over it would reach back across the load change), and not stopped (a turning point
+        # within the longest window): at rest again, the next load step is read with T_filter's latency
+        e = self.extremes
+        if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
+                and self.samples_seen - e[2][0] <= self._n_max):
+            n = max(n, min(2 * (e[2][0] - e[1][0]), self._n_max))
+        return n
+
+    def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
+        """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
+        window, (v(t) - v(t - T)) / T with v a difference quotient over VELOCITY_BASE h, is the mean
+        over h of the window means of the acceleration (see VELOCITY_BASE), and w_z (this period's
+        sample) gets the same means; the window is :meth:`_swing_periods`. None until the history
+        spans the window and h."""
+        h = self._velocity_base
+        n_max = max(self._n_max, self.wrench_filter.n)          # a T_filter beyond SWING_WINDOW_MAX: its own
+        self.samples_seen += 1
         self.z_history.append(z)
-        del self.z_history[:-(n + h + 1)]
+        del self.z_history[:-(n_max + h + 1)]
+        # D(k) = sum over the last h of C, the cumulative sum of w_z: (D(k) - D(k - n)) / (h n) is
+        # the mean over h of the n-window means of w_z, for any n
+        self.w_cumulative += w_z
+        self.c_history.append(self.w_cumulative)
+        previous = self.d_history[-1] if self.d_history else 0.0
+        self.d_history.append(previous + self.w_cumulative - self.c_history.pop(0))
+        del self.d_history[:-(n_max + 1)]
+        n = self._swing_periods()
         if len(self.z_history) < n + h + 1:
             return None
-        zh = self.z_history
-        return ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
+        self.window_n = n
+        zh, d = self.z_history, self.d_history
+        a = ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
+        return (d[-1] - d[-1 - n]) / (h * n), a
 
     def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
@@ -514,12 +579,11 @@ class LoadCompensation:
             self.guarded = True
             return                                                           # hold the estimate
         w_z, a = self.wrench_filter.push([w_floats[2], shifted[14]])        # means over the window (ẍ_z)
-        w_z_base = self.base_filter.push([w_z])[0]                          # and over h (VELOCITY_BASE)
         self.pose_acceleration = False
         if self.params.acceleration_source == "estimated" and x is not None and math.isfinite(x[2]):
-            a_est = self._estimated_acceleration(float(x[2]))
-            if a_est is not None:                      # commanded until the history spans a window and h
-                w_z, a = w_z_base, a_est               # both averaged alike: (4.4) exact for any motion
+            estimated = self._estimated_acceleration(float(x[2]), w_floats[2])
+            if estimated is not None:                  # commanded until the history spans a window and h
+                w_z, a = estimated                     # both averaged alike: (4.4) exact for any motion
                 self.pose_acceleration = True
         estimate = mass_estimate(w_z, a, float(self.robot.gravity[2]), self.params.accel_guard)
         self.guarded = estimate is None

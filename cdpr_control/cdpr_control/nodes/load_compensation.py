@@ -43,7 +43,8 @@ from cdpr_control.ros.sync import StampSync
 D = LoadCompensationParams        # the defaults are the library's (one source)
 PARAMS = [
     ParamSpec("enabled", D.enabled, "add x_d,LC to the set-point (the identification runs regardless)"),
-    ParamSpec("T_filter", D.T_filter, "moving-average window of the mass estimate (4.4) [s] (thesis: 0.24 s)",
+    ParamSpec("T_filter", D.T_filter, "moving-average window of the mass estimate (4.4) [s] (thesis: 0.24 s); with "
+              "acceleration_source estimated the period of the platform's swing where longer (up to 1 s)",
               range=(0.0, 10.0)),
     ParamSpec("time_shift", D.time_shift, "delay of the commanded acceleration in (4.4) [s]", range=(0.0, 0.5)),
     ParamSpec("accel_guard", D.accel_guard, "|ẍ_z - g| below this holds the estimate [m/s^2]", range=(1e-3, 9.81)),

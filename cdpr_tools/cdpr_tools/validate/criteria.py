@@ -55,6 +55,9 @@ BANDS = {
     "setpoint_above_f_max_N": Band(None, 0.0, "no force set-point above f_max to the drives (safety holds)"),
     # (c) payload, section 4.1.3
     "estimate_error_percent": Band(None, 5.0, "issue 25: within 5 % from 1 s after the step"),
+    # a reference sag below the resolution (cases.sag_resolution): the residual within the static accuracy
+    "sag_residual_beyond_accuracy_mm": Band(None, 0.0, "sag below resolution: residual within the platform's "
+                                                       "static accuracy with no payload"),
     # (d) program: the cable forces within the robot's limits
     "force_below_f_min_N": Band(None, 0.0, "cable limits (2.39)"),
     "force_above_f_max_N": Band(None, 0.0, "cable limits (2.39)"),

@@ -3,6 +3,7 @@ per family (the poses of each robot coloured by the family's headline metric aga
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import asdict
 from pathlib import Path
 
@@ -12,6 +13,8 @@ from cdpr_control.model.robot import load_robot
 
 from cdpr_tools.validate.cases import CaseResult
 from cdpr_tools.validate.criteria import band_for
+
+SAG_RESIDUAL = "sag_residual_beyond_accuracy_mm"     # a payload case whose sag was below the resolution
 
 # the metric a family's summary line and figure show
 HEADLINE = {"contact": "overshoot_percent", "guiding": "rest_wrench_percent",
@@ -54,12 +57,37 @@ def _measured(value) -> bool:
     return value is not None and not np.isnan(float(value))
 
 
+def applicable(r: CaseResult) -> bool:
+    """A case the configuration applies to: every case but a refused one (a controller the shipped
+    configuration refuses at the pose, a payload below the pose's capacity ...: "not applicable",
+    with its reason, reported apart from the failures)."""
+    return r.status != "refused"
+
+
+def refusal_reason(r: CaseResult) -> str:
+    """The reason of a refused case without its figures: its note up to the first figure, colon or
+    parenthesis ("dynamic capacity", "IK-only control does not hold this pose's cables tensed
+    before any payload")."""
+    return re.split(r"[:;(]|\d", r.note, maxsplit=1)[0].strip() or "refused"
+
+
 def family_summary(results: list[CaseResult], family: str) -> dict:
-    """Counts by status, pass rate, and per metric: mean over the finite values, and for a metric
-    with a band its worst value and where, for one without its range."""
+    """Counts by status, the pass rate over all cases and over the applicable ones (refused cases
+    are "not applicable", counted with their reasons), the cases whose sag was below the
+    resolution, and per metric: mean over the finite values, and for a metric with a band its worst
+    value and where, for one without its range."""
     rs = [r for r in results if r.spec.family == family]
     counts = {s: sum(r.status == s for r in rs) for s in ("passed", "failed", "diverged", "held", "refused", "error")}
-    out = {"cases": len(rs), **counts, "pass_rate": counts["passed"] / len(rs) if rs else float("nan"), "metrics": {}}
+    n_applicable = sum(applicable(r) for r in rs)
+    reasons: dict[str, int] = {}
+    for r in rs:
+        if not applicable(r):
+            reasons[refusal_reason(r)] = reasons.get(refusal_reason(r), 0) + 1
+    out = {"cases": len(rs), **counts, "pass_rate": counts["passed"] / len(rs) if rs else float("nan"),
+           "applicable": n_applicable, "not_applicable": len(rs) - n_applicable,
+           "pass_rate_applicable": counts["passed"] / n_applicable if n_applicable else float("nan"),
+           "not_applicable_reasons": reasons,
+           "sag_below_resolution": sum(1 for r in rs if SAG_RESIDUAL in r.metrics), "metrics": {}}
     names = sorted({m for r in rs for m in r.metrics})
     for name in names:
         have = [r for r in rs if name in r.metrics]
@@ -82,10 +110,23 @@ def family_summary(results: list[CaseResult], family: str) -> dict:
 
 def summary_line(family: str, s: dict) -> str:
     """One line: pass rate, the headline metric's mean and worst case with where, failures per metric."""
-    line = f"{family}: {s['passed']}/{s['cases']} passed ({100.0 * s['pass_rate']:.0f} %)"
-    extra = [f"{s[k]} {k}" for k in ("diverged", "held", "refused", "error") if s[k]]
+    if s.get("applicable") is None:                      # a summary written before the applicable counts
+        line = f"{family}: {s['passed']}/{s['cases']} passed ({100.0 * s['pass_rate']:.0f} %)"
+    else:
+        rate = f"{100.0 * s['pass_rate_applicable']:.0f} %" if s["applicable"] else "none applicable"
+        line = (f"{family}: {s['passed']}/{s['applicable']} applicable passed ({rate}; "
+                f"{s['passed']}/{s['cases']} of all)")
+    extra = [f"{s[k]} {k}" for k in ("diverged", "held", "error") if s[k]]
     if extra:
         line += " [" + ", ".join(extra) + "]"
+    if s["refused"]:
+        reasons = s.get("not_applicable_reasons") or {"refused": s["refused"]}
+        line += f"; not applicable {s['refused']} (" + ", ".join(f"{n}: {k}" for k, n in reasons.items()) + ")"
+    if s.get("sag_below_resolution"):
+        residual = s["metrics"].get(SAG_RESIDUAL, {})
+        line += f"; sag below resolution {s['sag_below_resolution']}"
+        if residual.get("worst") is not None:
+            line += f" (residual beyond the static accuracy worst {residual['worst']:.3g} mm at {residual['where']})"
     m = s["metrics"].get(HEADLINE[family])
     if m and "worst" in m:
         mean = f"mean {m['mean']:.3g}, " if m["mean"] is not None else ""
@@ -101,14 +142,18 @@ def summary_line(family: str, s: dict) -> str:
 
 
 def case_line(r: CaseResult) -> str:
-    metrics = ", ".join(f"{k} {f'{v:.4g}' if _measured(v) else 'not measured'}{'' if r.checks.get(k, True) else ' (out)'}"
-                        for k, v in r.metrics.items())
+    """One line: family, status (a refused case: "n/a", its note "not applicable: <reason>"), where,
+    the metrics ("(out)" where out of band, "(not judged)" where reported only) and the note."""
+    if not applicable(r):
+        return f"{r.spec.family:8s} {'n/a':8s} {where(r)}: not applicable: {r.note}"
+    metrics = ", ".join(f"{k} {f'{v:.4g}' if _measured(v) else 'not measured'}"
+                        f"{'' if r.checks.get(k, True) else ' (out)'}" for k, v in r.metrics.items())
     return f"{r.spec.family:8s} {r.status:8s} {where(r)}: {metrics}{' - ' + r.note if r.note else ''}"
 
 
 def case_dict(r: CaseResult) -> dict:
-    return {**asdict(r.spec), "status": r.status, "note": r.note, "wall_s": r.wall_s, "cpu_s": r.cpu_s,
-            "metrics": r.metrics, "checks": r.checks}
+    return {**asdict(r.spec), "status": r.status, "applicable": applicable(r), "note": r.note, "wall_s": r.wall_s,
+            "cpu_s": r.cpu_s, "metrics": r.metrics, "checks": r.checks}
 
 
 class CaseLog:
@@ -166,7 +211,11 @@ def _plant(r: CaseResult) -> str:
 
 
 def _rate(rs) -> str:
-    return f"{sum(r.passed for r in rs)}/{len(rs)}" if rs else "-"
+    """passed/applicable, and the not applicable (refused) cases where there are any: "9/12 (8 n/a)"."""
+    if not rs:
+        return "-"
+    n_a = sum(not applicable(r) for r in rs)
+    return f"{sum(r.passed for r in rs)}/{len(rs) - n_a}" + (f" ({n_a} n/a)" if n_a else "")
 
 
 def write(results: list[CaseResult], meta: dict, outdir) -> tuple[dict, list[Path]]:
@@ -258,7 +307,7 @@ def plot_family(results: list[CaseResult], family: str, path: Path) -> Path:
         s = family_summary(rs, family)
         a = load_robot(robot).a                                   # the frame's anchors bound the view
         ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", xlim=(a[:, 0].min(), a[:, 0].max()),
-               ylim=(a[:, 1].min(), a[:, 1].max()), title=f"{robot}: {s['passed']}/{s['cases']} in band")
+               ylim=(a[:, 1].min(), a[:, 1].max()), title=f"{robot}: {s['passed']}/{s['applicable']} applicable in band ({s['not_applicable']} n/a)")
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=7)
     fig.suptitle(f"cdpr validate, {family}: worst {metric} per pose (plants round robin: mismatched seeds and nominal)",
