@@ -709,6 +709,7 @@ class CFCCoupling:
 
 NO_HAND_OVER = np.zeros(6)          # x_comp while nothing is handed over (shared, read-only)
 NO_HAND_OVER.flags.writeable = False
+_NOT_AT_REST = object()             # (ContactHandOver._rest: is no filter output, not even None)
 
 
 class ContactHandOver:
@@ -726,6 +727,7 @@ class ContactHandOver:
         self.dt = dt
         self.filter = LowPass(T_c, dt)
         self.share = 1.0
+        self._rest: object = _NOT_AT_REST      # the filter's output array while it rests at 0.0 (update)
 
     def set_time_constant(self, T_c: float) -> None:
         self.filter.set_time_constant(T_c)
@@ -733,7 +735,12 @@ class ContactHandOver:
     def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
         """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]; while it is 0 (the
         CFC's output not applied, or no contact force to hand over), :data:`NO_HAND_OVER`."""
-        F_c, = self.filter.update_floats((state.F_d if state.state in FORCE_CONTROLLED else 0.0,))
+        u = state.F_d if state.state in FORCE_CONTROLLED else 0.0
+        if u == 0.0 and self.filter.y is self._rest:
+            F_c = 0.0            # at rest at 0.0 the PT1 stays there: 0.0 + α (±0.0 - 0.0) is 0.0
+        else:
+            F_c, = self.filter.update_floats((u,))
+            self._rest = self.filter.y if F_c == 0.0 and math.copysign(1.0, F_c) > 0.0 else _NOT_AT_REST
         if state.state in CFC_PAUSED:
             self.share = 0.0
         elif state.state in (CONTACT, RELEASE):
