@@ -49,6 +49,8 @@ from cdpr_control.control.safety import all_finite
 from cdpr_control.model.memo import Memo
 
 IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
+NO_TARE = np.zeros(3)   # HybridForceControl.F_tare without a tare (shared, read-only: +0.0 each)
+NO_TARE.flags.writeable = False
 STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "brake", LOST: "contact lost",
                CONTACT: "force control", RELEASE: "release"}
@@ -243,7 +245,7 @@ class HybridForceControl:
         self.integrator = 0.0
         self.saturated = False
         self.F_prev: float | None = None
-        self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
+        self.F_tare = NO_TARE                  # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
@@ -380,7 +382,7 @@ class HybridForceControl:
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
             # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
-            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
+            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else NO_TARE
         F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
         # the unfiltered contact force of this period: the PT1 (T_F, for the PID) lags a rising
@@ -459,7 +461,9 @@ class HybridForceControl:
         the same numbers). z_t, F_d,0 and x = R_t [0 0 x_t] are the same each period: read-only
         arrays shared by the periods while z_t, F_d,0 and x_t do not change (the full path copies
         or builds them each period); tests/control/test_hpfc_idle_path.py compares the two paths."""
-        F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
+        # F_vec - 0.0 is F_vec (-0.0 - 0.0 is -0.0): without a tare, a copy
+        F_vec = F_vec.copy() if self.F_tare is NO_TARE else np.array(
+            [a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
         self.F_prev = F
         active = self.enabled                                    # (enabled or state != I)
