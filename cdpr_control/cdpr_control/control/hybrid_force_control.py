@@ -46,8 +46,11 @@ import numpy as np
 from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.safety import all_finite
+from cdpr_control.model.memo import Memo
 
 IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
+NO_TARE = np.zeros(3)   # HybridForceControl.F_tare without a tare (shared, read-only: +0.0 each)
+NO_TARE.flags.writeable = False
 STATES = (IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "brake", LOST: "contact lost",
                CONTACT: "force control", RELEASE: "release"}
@@ -227,6 +230,8 @@ class HPFCState:
 class HybridForceControl:
     """The contact state machine of Fig. 5.4 with the PID (5.3): F_d,0 and w -> x_d,HPFC."""
 
+    idle_path = True        # state I unwanted through _idle_state (False: the full path, its reference)
+
     def __init__(self, robot, dt: float, params: HPFCParams | None = None, enabled: bool = False):
         self.robot = robot
         self.dt = dt
@@ -240,7 +245,7 @@ class HybridForceControl:
         self.integrator = 0.0
         self.saturated = False
         self.F_prev: float | None = None
-        self.F_tare = np.zeros(3)              # N, the contact force measured in free space at the tare
+        self.F_tare = NO_TARE                  # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
@@ -250,6 +255,7 @@ class HybridForceControl:
         self.braking = False                   # B has begun to slow down (it does not speed up again)
         self.brake_speed = 0.0                 # m/s, B's top speed (_brake_speed)
         self.force_filter = LowPass(0.0, dt)
+        self._idle = Memo(read_only=True)      # (z_t, F_d,0, x) of the idle state (_idle_state)
         self.set_params(params or HPFCParams())
 
     def set_params(self, params: HPFCParams) -> None:
@@ -371,10 +377,12 @@ class HybridForceControl:
             F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
+        if self.state == IDLE and self.idle_path and not (self.enabled and F_d >= p.F_th):
+            return self._idle_state(F_d0, key, F_d, F_vec)       # I, not wanted: most periods
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
             # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
-            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else np.zeros(3)
+            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else NO_TARE
         F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
         # the unfiltered contact force of this period: the PT1 (T_F, for the PID) lags a rising
@@ -444,6 +452,33 @@ class HybridForceControl:
         # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, active, self.z_t.copy(), F_d0.copy(),
                          F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
+
+    def _idle_state(self, F_d0: np.ndarray, key: bytes, F_d: float, F_vec: np.ndarray) -> HPFCState:
+        """The rest of :meth:`update` in state I while not wanted (disabled, or F_d < F_th), after the
+        force filter. None of the full path's other branches acts there (no tare, no transition;
+        x_t, v_t, the integral part and the saturation flag stay as they are): only F_prev and
+        active_periods change, and F_vec, F and e_F are computed as there (the same operations, so
+        the same numbers). z_t, F_d,0 and x = R_t [0 0 x_t] are the same each period: read-only
+        arrays shared by the periods while z_t, F_d,0 and x_t do not change (the full path copies
+        or builds them each period); tests/control/test_hpfc_idle_path.py compares the two paths."""
+        # F_vec - 0.0 is F_vec (-0.0 - 0.0 is -0.0): without a tare, a copy
+        F_vec = F_vec.copy() if self.F_tare is NO_TARE else np.array(
+            [a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
+        F = float(self.z_t @ F_vec)
+        self.F_prev = F
+        active = self.enabled                                    # (enabled or state != I)
+        self.active_periods = self.active_periods + 1 if active else 0
+        x_t = self.x_t
+        z_t, F_d0, x = self._idle((key, self.z_t.tobytes(), x_t, math.copysign(1.0, x_t)),
+                                  self._idle_constants, F_d0, x_t)
+        return HPFCState(IDLE, active, z_t, F_d0, F_vec, F_d, F, F_d - F, x_t, self.v_t, self.integrator,
+                         self.saturated, x)
+
+    def _idle_constants(self, F_d0: np.ndarray, x_t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(z_t, F_d,0, x) of :meth:`_idle_state`, built as :meth:`update` builds them."""
+        z_x, z_y, z_z = self.z_t.tolist()
+        return (self.z_t.copy(), F_d0.copy(),
+                np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0]))    # R_t [0 0 x_t]
 
     def absorb(self, dx: float) -> None:
         """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
@@ -676,6 +711,11 @@ class CFCCoupling:
         return f_set, f_ff, paused, F_a
 
 
+NO_HAND_OVER = np.zeros(6)          # x_comp while nothing is handed over (shared, read-only)
+NO_HAND_OVER.flags.writeable = False
+_NOT_AT_REST = object()             # (ContactHandOver._rest: is no filter output, not even None)
+
+
 class ContactHandOver:
     """The hand-over offset x_comp of section 5.1.2 (part of :class:`HybridForceStage`).
 
@@ -691,21 +731,29 @@ class ContactHandOver:
         self.dt = dt
         self.filter = LowPass(T_c, dt)
         self.share = 1.0
+        self._rest: object = _NOT_AT_REST      # the filter's output array while it rests at 0.0 (update)
 
     def set_time_constant(self, T_c: float) -> None:
         self.filter.set_time_constant(T_c)
 
     def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
-        """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]."""
-        F_c, = self.filter.update_floats((state.F_d if state.state in FORCE_CONTROLLED else 0.0,))
+        """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]; while it is 0 (the
+        CFC's output not applied, or no contact force to hand over), :data:`NO_HAND_OVER`."""
+        u = state.F_d if state.state in FORCE_CONTROLLED else 0.0
+        if u == 0.0 and self.filter.y is self._rest:
+            F_c = 0.0            # at rest at 0.0 the PT1 stays there: 0.0 + α (±0.0 - 0.0) is 0.0
+        else:
+            F_c, = self.filter.update_floats((u,))
+            self._rest = self.filter.y if F_c == 0.0 and math.copysign(1.0, F_c) > 0.0 else _NOT_AT_REST
         if state.state in CFC_PAUSED:
             self.share = 0.0
         elif state.state in (CONTACT, RELEASE):
             self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
         F_ff = self.share * F_c if state.state in (CONTACT, RELEASE) else (0.0 if state.state in CFC_PAUSED else F_c)
+        if not (F_ff != 0.0 and cfc_on and math.isfinite(F_ff) and k_t > 0.0):
+            return NO_HAND_OVER
         x_comp = np.zeros(6)
-        if F_ff != 0.0 and cfc_on and math.isfinite(F_ff) and k_t > 0.0:
-            x_comp[:3] = -F_ff / k_t * state.z_t
+        x_comp[:3] = -F_ff / k_t * state.z_t
         return x_comp
 
 
@@ -727,6 +775,8 @@ class HybridForceStage:
                  enabled: bool = False):
         self.control = HybridForceControl(robot, dt, params, enabled=enabled)
         self.hand_over = ContactHandOver(T_c, dt)
+        self._x: np.ndarray | None = None      # the last x without a hand-over and its output (update)
+        self._output: np.ndarray | None = None
 
     @property
     def k_t(self) -> float:
@@ -742,7 +792,15 @@ class HybridForceStage:
         """F_d,0 (3,) [N], the measured wrench w (6,), cfc_on: Δq_CFC applied (in the last period)
         -> (the period's HPFCState, x_d,HPFC + x_comp (6,) [m, rad])."""
         s = self.control.update(F_d0, w)
-        return s, s.x + self.hand_over.update(s, self.k_t, cfc_on)
+        x_comp = self.hand_over.update(s, self.k_t, cfc_on)
+        if x_comp is not NO_HAND_OVER:
+            return s, s.x + x_comp
+        # x + 0.0 is x + np.zeros(6) (the same numbers, -0.0 becoming 0.0 alike); the idle state's x
+        # is one read-only array the periods share (HybridForceControl._idle_state): so is its output
+        if s.x is not self._x:                 # (a reference held: identity cannot be reused)
+            self._x, self._output = s.x, s.x + 0.0
+            self._output.flags.writeable = False
+        return s, self._output
 
 
 class ContactCableForceControl:
