@@ -30,6 +30,25 @@ EXCURSION_S = 0.1           # ... for longer than this (simulated time) (issue 2
 LOOP_GAP_S = 1.0            # simulated time a fault may keep the loop from commanding (issue 28)
 
 
+def excursions(stamps: np.ndarray, f: np.ndarray, cable) -> list[tuple[int, int]]:
+    """(first, last) stamps [ns] of the stretches in which some force of f (n, m) at ``stamps`` (n,)
+    (sorted) is out of [0.5 f_min, 1.5 f_max] for longer than 100 ms; a stretch still running at
+    the end counts to the last stamp."""
+    low, high = FORCE_BAND
+    out = np.any((f < low * cable.f_min) | (f > high * cable.f_max), axis=1)
+    found, started = [], None
+    for t, bad, last in zip(stamps, out, [*stamps[1:], None]):
+        if bad and started is None:
+            started = t
+        if started is not None and (not bad or last is None):
+            end = t if bad else previous
+            if end - started > EXCURSION_S * 1e9:
+                found.append((int(started), int(end)))
+            started = None
+        previous = t
+    return found
+
+
 class FaultGraph:
     """The closed loop without its visualisation, started in ``mode``, and a probe beside it."""
 
@@ -52,12 +71,23 @@ class FaultGraph:
         self.spinner = Spinner()
         self.collector = self.spinner.add(Collector, topics=TOPICS, qos=QoSProfile(depth=10000))
         self.probe = self.spinner.add(Node, node_name="fault_probe")
-        self.launcher = Launcher(description, mode=mode).start()
-        self.wait_running()
+        self.launcher = Launcher(description, mode=mode)
+        try:
+            self.launcher.start()
+            self.wait_running()
+        except BaseException:
+            self.close()            # (a graph that does not start is stopped too: no fixture will)
+            raise
 
     def close(self) -> None:
-        self.launcher.stop()
-        self.spinner.close()
+        try:
+            self.launcher.stop()
+        finally:
+            self.spinner.close()
+
+    def node(self, name: str):
+        """A node of the graph by name (composed: the object in this process)."""
+        return next(n for n in self.launcher.nodes if n.get_name() == name)
 
     # -- observing ------------------------------------------------------------------------------
     def commands(self) -> list[tuple[int, np.ndarray]]:
@@ -115,27 +145,60 @@ class FaultGraph:
         wait_for(lambda: any(m.state == state for m in self.collector.messages("/program_status")[-3:]),
                  timeout=timeout, what=f"program state {state}")
 
+    def push(self, force_x: float, duration: float) -> int:
+        """A rectangular pulse of ``force_x`` [N] along x for ``duration`` [s] at the platform's
+        origin, through the simulator's ``sim/apply_wrench`` service (the hand's way); -> the stamp
+        [ns] of its first simulated period (composed graphs only: read from the simulator)."""
+        from cdpr_msgs.srv import ApplyWrench
+        from geometry_msgs.msg import Vector3, Wrench
+
+        client = self.probe.create_client(ApplyWrench, "/sim/apply_wrench")
+        try:
+            assert client.wait_for_service(timeout_sec=30.0), "no /sim/apply_wrench"
+            request = ApplyWrench.Request(wrench=Wrench(force=Vector3(x=float(force_x))),
+                                          shape=ApplyWrench.Request.SHAPE_RECTANGLE, duration=float(duration))
+            future = client.call_async(request)
+            wait_for(future.done, timeout=120.0, what="the sim/apply_wrench answer")
+            assert future.result().success, future.result().message
+        finally:
+            self.probe.destroy_client(client)
+        pulse = self.node("winch_platform_sim").sim._pulse
+        assert pulse is not None and pulse.wrench[0] == force_x
+        return int(round(pulse.t_start * 1e9))
+
+    def wait_stamp(self, stamp: int, timeout: float = 120.0) -> None:
+        """Until the loop has commanded the period ``stamp`` [ns] (simulated time)."""
+        wait_for(lambda: self.newest_command() >= stamp, timeout=timeout,
+                 what=f"the loop to reach {stamp * 1e-9:.3f} s of simulated time")
+
     # -- checks ---------------------------------------------------------------------------------
+    def forces(self, since_stamp: int = 0, until_stamp: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The simulated cable forces (the plant's, /ground_truth/cable_forces) by stamp: stamps [ns] (n,), f (n, m)."""
+        forces = sorted((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, np.asarray(m.f))
+                        for m in self.collector.messages("/ground_truth/cable_forces")
+                        if m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec >= since_stamp)
+        forces = [(t, f) for t, f in forces if until_stamp is None or t <= until_stamp]
+        if not forces:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, self.robot.m))
+        return np.array([t for t, _ in forces]), np.vstack([f for _, f in forces])
+
+    def excursions(self, since_stamp: int = 0, until_stamp: int | None = None) -> list[tuple[int, int]]:
+        """(first, last) stamps [ns] of every stretch of periods in which some simulated cable force
+        was out of [0.5 f_min, 1.5 f_max] for more than 100 ms (issue 28)."""
+        stamps, f = self.forces(since_stamp, until_stamp)
+        return excursions(stamps, f, self.robot.cable)
+
     def check_forces(self, since_stamp: int = 0) -> None:
         """No simulated cable force (the plant's, /ground_truth/cable_forces) out of
         [0.5 f_min, 1.5 f_max] for more than 100 ms of simulated time, and no gap of more than 1 s
         of simulated time between two commands: the loop ran through the fault."""
-        forces = sorted((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, np.asarray(m.f))
-                        for m in self.collector.messages("/ground_truth/cable_forces")
-                        if m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec >= since_stamp)
-        assert forces, "no /ground_truth/cable_forces"
-        c = self.robot.cable
+        # (unbound calls: tests/faults/test_fault_checks.py checks this on a stand-in of the recordings)
+        stamps, f = FaultGraph.forces(self, since_stamp)
+        assert len(stamps), "no /ground_truth/cable_forces"
         low, high = FORCE_BAND
-        out = np.array([np.any((f < low * c.f_min) | (f > high * c.f_max)) for _, f in forces])
-        stamps = np.array([t for t, _ in forces])
-        started = None
-        for t, bad in zip(stamps, out):
-            if bad and started is None:
-                started = t
-            elif not bad:
-                started = None
-            assert started is None or t - started <= EXCURSION_S * 1e9, \
-                f"a cable force out of [{low} f_min, {high} f_max] from {started * 1e-9:.3f} s to {t * 1e-9:.3f} s"
+        for first, last in excursions(stamps, f, self.robot.cable):
+            raise AssertionError(f"a cable force out of [{low} f_min, {high} f_max] from {first * 1e-9:.3f} s "
+                                 f"to {last * 1e-9:.3f} s")
         commands = sorted(t for t, _ in self.commands() if t >= since_stamp)
         assert len(commands) > 1 and np.diff(commands).max() <= LOOP_GAP_S * 1e9, \
             f"the loop stopped for {np.diff(commands).max() * 1e-9:.3f} s of simulated time"
