@@ -188,18 +188,20 @@ class FaultGraph:
         stamps, f = self.forces(since_stamp, until_stamp)
         return excursions(stamps, f, self.robot.cable)
 
-    def check_forces(self, since_stamp: int = 0) -> None:
+    def check_forces(self, since_stamp: int = 0, until_stamp: int | None = None) -> None:
         """No simulated cable force (the plant's, /ground_truth/cable_forces) out of
         [0.5 f_min, 1.5 f_max] for more than 100 ms of simulated time, and no gap of more than 1 s
-        of simulated time between two commands: the loop ran through the fault."""
+        of simulated time between two commands: the loop ran through the fault (from
+        ``since_stamp`` to ``until_stamp`` [ns], None: to the newest)."""
         # (unbound calls: tests/faults/test_fault_checks.py checks this on a stand-in of the recordings)
-        stamps, f = FaultGraph.forces(self, since_stamp)
+        stamps, f = FaultGraph.forces(self, since_stamp, until_stamp)
         assert len(stamps), "no /ground_truth/cable_forces"
         low, high = FORCE_BAND
         for first, last in excursions(stamps, f, self.robot.cable):
             raise AssertionError(f"a cable force out of [{low} f_min, {high} f_max] from {first * 1e-9:.3f} s "
                                  f"to {last * 1e-9:.3f} s")
-        commands = sorted(t for t, _ in self.commands() if t >= since_stamp)
+        commands = sorted(t for t, _ in self.commands()
+                          if t >= since_stamp and (until_stamp is None or t <= until_stamp))
         assert len(commands) > 1 and np.diff(commands).max() <= LOOP_GAP_S * 1e9, \
             f"the loop stopped for {np.diff(commands).max() * 1e-9:.3f} s of simulated time"
 
