@@ -72,9 +72,10 @@ class Recording:
     # -- checks ---------------------------------------------------------------------------------
     def forces(self, since_stamp: int = 0, until_stamp: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The simulated cable forces (the plant's, /ground_truth/cable_forces) by stamp: stamps [ns] (n,), f (n, m)."""
-        forces = sorted((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, np.asarray(m.f))
-                        for m in self.collector.messages("/ground_truth/cable_forces")
-                        if m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec >= since_stamp)
+        # by stamp only (the simulator's start state repeats stamp 0); the arrival order within one
+        forces = sorted(((stamp, np.asarray(m.f)) for m in self.collector.messages("/ground_truth/cable_forces")
+                         if (stamp := m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec) >= since_stamp),
+                        key=lambda p: p[0])
         forces = [(t, f) for t, f in forces if until_stamp is None or t <= until_stamp]
         if not forces:
             return np.zeros(0, dtype=np.int64), np.zeros((0, self.robot.m))
