@@ -32,8 +32,8 @@ PUSHES = {
 
 def pushed(position, pushes: list, program: str | None = None) -> dict:
     """On a graph of its own (a push beyond the cables' rating settles the plant's cables for good:
-    after 900 N then 500 N every release of the hold tripped the watch again, so no later test could
-    use the graph), move to ``position`` [mm], push the platform (``pushes`` in a row), optionally
+    after 900 N then 500 N at home, the hold released, a move to the corner tripped the watch again
+    after each of five releases, so no later test could use the graph), move to ``position`` [mm], push the platform (``pushes`` in a row), optionally
     while ``program`` runs; watch until AFTER_S after the last push's end. -> {recording (what the
     graph recorded), start, began, end, until (stamps [ns]: before the program, the first push, the
     last push's end, the end of the watch), result (the program's, or None), watch (the fault that
