@@ -7,7 +7,9 @@ the same node layer (:class:`~cdpr_control.ros.base.CdprNode`: the callback guar
 or DDS), but every node, once the inputs of a period t_k are complete, only publishes a new
 message per per-period publisher: a shallow copy of a real message of that topic with a header
 stamped t_k. The skeleton simulator steps (a counter) on the winch command of t_k and publishes
-its outputs of t_k + T and /clock, as ``winch_platform_sim`` does.
+its outputs of t_k + T and /clock, as ``winch_platform_sim`` does; its lockstep watchdog (the
+start-up handshake, ``lockstep_timeout``, and no step while in-process deliveries of the period are
+still queued) is the real node's method, run on the skeleton's counter.
 
 The topology is derived from the real graph, not written down: :func:`derive` starts the real
 graph composed, reads every node's publishers, subscriptions, StampSync instances (their inputs,
@@ -47,10 +49,10 @@ from cdpr_control.ros.base import CdprNode
 from cdpr_control.ros.intraprocess import IntraProcess
 from cdpr_control.ros.runner import run_node
 from cdpr_control.ros.sync import StampSync, stamp_ns
+from cdpr_sim.nodes.winch_platform_sim import WinchPlatformSimNode
 
 MODULE = "skeleton"          # this module's name for the launcher (benchmarks/ on sys.path)
 SIM = "winch_platform_sim"
-HANDSHAKE_PERIOD = 0.5       # s, as winch_platform_sim: the t = 0 state repeated until the first command
 PER_PERIOD_MIN = 0.5         # messages per step from which a publisher counts as publishing every period
 START_TIMEOUT_S = 180.0
 
@@ -352,7 +354,7 @@ class SkeletonNode(CdprNode):
         for t in sorted(entry["timers"], key=lambda t: t["period_ns"])[1 if self.is_sim else 0:]:
             self.create_timer(t["period_ns"] * 1e-9, lambda: None, clock=RclpyClock(clock_type=ClockType(t["clock"])))
         if self.is_sim:
-            self._publish_state()
+            self._publish()
 
     def publish_period(self, outputs, t: int) -> None:
         """Period ``t`` of ``outputs``: new messages, copies of the templates stamped ``t``."""
@@ -431,7 +433,7 @@ class SkeletonNode(CdprNode):
             callback = self._on_command if on_topic.get(topic) else self._keep(topic)
             self.create_subscription(type_of(s["type"]), topic, callback, qos_of(s["qos"]), urgent=s["urgent"])
         first = min(entry["timers"], key=lambda t: t["period_ns"])    # its lockstep watchdog
-        self.create_timer(first["period_ns"] * 1e-9, self._watchdog,
+        self.create_timer(first["period_ns"] * 1e-9, self._lockstep_watchdog,
                           clock=RclpyClock(clock_type=ClockType(first["clock"])))
 
     def _on_command(self, msg) -> None:
@@ -445,19 +447,13 @@ class SkeletonNode(CdprNode):
     def _advance(self) -> None:
         self.sim.steps += 1
         self._waiting_since = time.monotonic()
-        self._publish_state()
+        self._publish()
 
-    def _watchdog(self) -> None:
-        now = time.monotonic()
-        if not self.got_command:
-            if now - self._last_handshake >= HANDSHAKE_PERIOD:
-                self._last_handshake = now
-                self._publish_state()
-        elif self.lockstep_timeout > 0.0 and now - self._waiting_since > self.lockstep_timeout:
-            self.missed_deadlines += 1
-            self._advance()
+    # the real simulator's watchdog (not a copy): it reads got_command, _last_handshake,
+    # lockstep_timeout, _waiting_since and missed_deadlines, and calls _advance and _publish
+    _lockstep_watchdog = WinchPlatformSimNode._lockstep_watchdog
 
-    def _publish_state(self) -> None:
+    def _publish(self) -> None:
         t = self.sim.steps * self.period_ns
         if self.clock_pub is not None:
             self.clock_pub.publish(Clock(clock=self.header(t).stamp))

@@ -1,5 +1,6 @@
 """The checks the fault tests make on what they recorded (tests/cdpr_test_nodes/fault_graph.py) fail
-where they must: a cable force out of its band for longer than 100 ms, a loop stopped for 1 s."""
+where they must: a cable force out of its band for longer than 100 ms, a loop stopped for 1 s; the
+excursions they find."""
 from types import SimpleNamespace
 
 import numpy as np
@@ -9,7 +10,7 @@ from cdpr_msgs.msg import CableForces
 from std_msgs.msg import Header
 
 from cdpr_control.model.robot import load_robot
-from cdpr_test_nodes.fault_graph import PERIOD_NS, ROBOT, FaultGraph
+from cdpr_test_nodes.fault_graph import PERIOD_NS, ROBOT, FaultGraph, Recording, excursions
 
 
 def recorded(forces: np.ndarray, command_stamps) -> SimpleNamespace:
@@ -47,3 +48,17 @@ def test_a_loop_stopped_for_more_than_a_second_fails():
     stamps = [*range(0, 500 * PERIOD_NS, PERIOD_NS), *range(1700 * PERIOD_NS, 3000 * PERIOD_NS, PERIOD_NS)]
     with pytest.raises(AssertionError, match="stopped"):
         FaultGraph.check_forces(recorded(f, stamps))
+
+
+def test_excursions_are_the_stretches_longer_than_100_ms_one_running_at_the_end_included():
+    robot = load_robot(ROBOT)
+    c = robot.cable
+    f = np.tile(c.f_min * 2.0, (1000, 1))
+    f[100:150, 0] = 0.0                                      # 50 ms slack: not one
+    f[300:420, 1] = 2.0 * c.f_max[1]                         # 120 ms beyond 1.5 f_max
+    f[880:, 2] = 0.4 * c.f_min[2]                            # from 880 ms to the last period (999 ms)
+    stamps = np.arange(1000) * PERIOD_NS
+    assert excursions(stamps, f, c) == [(300 * PERIOD_NS, 419 * PERIOD_NS), (880 * PERIOD_NS, 999 * PERIOD_NS)]
+    rec = Recording(robot, {"/ground_truth/cable_forces": recorded(f, []).collector.messages("")})
+    assert rec.excursions(350 * PERIOD_NS, 500 * PERIOD_NS) == []          # 70 ms of it in the window
+    assert rec.excursions(0, 950 * PERIOD_NS) == [(300 * PERIOD_NS, 419 * PERIOD_NS)]

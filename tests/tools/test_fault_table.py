@@ -28,7 +28,10 @@ def test_the_table_counts_tries_held_and_lost_from_junit(tmp_path):
         '<testcase classname="tests.faults.test_x" name="test_a[1]"/>'
         '<testcase classname="tests.faults.test_x" name="test_a[2]"><failure message="x"/></testcase>'
         '<testcase classname="tests.faults.test_x" name="test_b"><skipped/></testcase>'
+        '<testcase classname="tests.faults.test_x" name="test_c"><skipped type="pytest.xfail" message="open"/></testcase>'
         '</testsuite></testsuites>')
     counts = fault_table().outcomes(junit)
     a, b = counts[("tests/faults/test_x.py", "test_a")], counts[("tests/faults/test_x.py", "test_b")]
     assert (a["tries"], a["held"], a["lost"]) == (2, 1, 1) and (b["tries"], b["skipped"], b["held"]) == (1, 1, 0)
+    c = counts[("tests/faults/test_x.py", "test_c")]        # a known open fault (strict xfail) is lost
+    assert (c["tries"], c["lost"], c["skipped"], c["held"]) == (1, 1, 0, 0)
