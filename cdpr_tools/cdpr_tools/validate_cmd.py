@@ -11,6 +11,7 @@ import math
 import sys
 
 from cdpr_tools.validate.cases import FAMILIES
+from cdpr_tools.validate.friction import MODES as FRICTION_MODES
 from cdpr_tools.validate.sweep import DEFAULT_POSES, DEFAULT_SEEDS, MAX_JOBS, ROBOTS
 
 DEFAULT_OUT = "out/validation"
@@ -27,6 +28,9 @@ def add_parser(sub) -> None:
     p.add_argument("--poses", type=int, default=DEFAULT_POSES,
                    help=f"poses per robot (default {DEFAULT_POSES}; fewer: the first N of the grid, a third or more near the border)")
     p.add_argument("--jobs", type=int, default=1, help=f"processes, 1..{MAX_JOBS} (default 1)")
+    p.add_argument("--friction", default="identified", choices=FRICTION_MODES,
+                   help="the guiding cases' pulley friction: identified on each plant first, as a user runs the robot, "
+                   "the parameter files cached in OUTPUT/friction/ (default), or shipped (the robot file's)")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
     p.add_argument("--from-cases", metavar="FILE",
                    help="report the cases.jsonl of an earlier (or interrupted) run instead of running")
@@ -63,13 +67,14 @@ def run(args) -> int:
     if args.poses < 3:
         raise ValueError(f"--poses must be >= 3, got {args.poses}")
     print(f"[validate] {', '.join(robots)}; {', '.join(families)}; {args.poses} poses per robot; plants "
-          f"{', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s)", flush=True)
+          f"{', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s); "
+          f"guiding with {args.friction} friction", flush=True)
     progress = Progress("validate")
     command = "cdpr " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["validate"] else "cdpr validate"
     try:
         results, doc, figures = validate(robots, families, plant_list, args.poses, args.jobs, args.output,
                                          lambda done, total, r: progress.update(done / total, f"{r.spec.family} {r.status}"),
-                                         command)
+                                         command, args.friction, lambda line: print(line, flush=True))
     finally:
         progress.done()
     return _summarise(results, doc, figures, args.output)
@@ -93,6 +98,7 @@ def _report_cases(args) -> int:
     from pathlib import Path
 
     from cdpr_tools.validate import report
+    from cdpr_tools.validate.friction import FAMILIES as FRICTION_FAMILIES
     from cdpr_tools.validate.sweep import cpu_seconds
 
     path = Path(args.from_cases)
@@ -101,7 +107,10 @@ def _report_cases(args) -> int:
     results = report.read_cases(path)
     if not results:
         raise ValueError(f"--from-cases: {path} holds no case")
+    frictions = {f"{r.spec.robot} {report.plant_name(r)}": r.spec.friction for r in results
+                 if r.spec.family in FRICTION_FAMILIES}
     meta = {"command": f"cdpr validate --from-cases {path}", "from_cases": str(path),
-            "wall_s": sum(r.wall_s for r in results), "cpu_s": cpu_seconds(results)}
+            "wall_s": sum(r.wall_s for r in results), "cpu_s": cpu_seconds(results),
+            "friction": {"families": list(FRICTION_FAMILIES), "plants": frictions}}
     doc, figures = report.write(results, meta, args.output)
     return _summarise(results, doc, figures, args.output)

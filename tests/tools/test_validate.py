@@ -331,3 +331,95 @@ def test_ik_only_slack_is_reported_not_judged_but_f_max_is():
     assert criteria.band_for("force_below_f_min_N", "nominal", "ik_only") is None
     assert criteria.band_for("force_above_f_max_N", "nominal", "ik_only") is not None
     assert not criteria.band_for("force_below_f_min_N", "mismatched", "force_control").holds(3.0)
+
+
+# ---- the guiding family's friction, identified on each plant (validate.friction) ----------------
+
+def _fake_identification(calls):
+    """identify_on_plant's stand-in: a parameter file whose values are the robot file's scaled by
+    1 + seed / 10 (the nominal plant: the robot file's), so that each plant's file is known."""
+    from cdpr_tools.identify.friction import write_parameter_file
+
+    def identify_on_plant(robot_name, plant, seed, path, progress=None):
+        calls.append((robot_name, plant, seed))
+        fr = load_robot(robot_name).friction
+        scale = 1.0 + 0.1 * seed
+        fits = [SimpleNamespace(cable=i, **{k: float(scale * getattr(fr, k)[i]) for k in ("mu", "sigma", "F_pv")})
+                for i in range(len(fr.mu))]
+        write_parameter_file(fits, path)
+    return identify_on_plant
+
+
+def test_guiding_cases_run_with_the_friction_identified_on_their_own_plant(tmp_path, monkeypatch, capsys):
+    """`cdpr validate --family guiding`: each plant's friction is identified once before the cases
+    (cached in the output directory, reused by a later run), and the guiding case of the
+    mismatched seed 2 pose compensates seed 2's identified friction, not the robot file's; the case
+    records it (cases.jsonl, the report); --friction shipped gives the robot file's."""
+    import json
+
+    import cdpr_sim.hand_guiding as hand_guiding
+    from cdpr_tools.cli import main
+    from cdpr_tools.validate import friction
+
+    calls, runs = [], []
+    monkeypatch.setattr(friction, "identify_on_plant", _fake_identification(calls))
+
+    def guiding_run(*args, loop_params=None, config=None, **kwargs):    # the runs' loop, then refused
+        runs.append((config.plant, config.plant_seed, loop_params))
+        raise ValueError("stopped by the test")
+    monkeypatch.setattr(hand_guiding, "guiding_run", guiding_run)
+
+    robot = load_robot("ipanema3")
+    out = tmp_path / "v"
+    argv = ["validate", "--family", "guiding", "--robot", "ipanema3", "--poses", "4", "-o", str(out)]
+    assert main(argv) == 1                                      # every case refused by the stand-in
+    assert sorted(calls) == [("ipanema3", "mismatched", 1), ("ipanema3", "mismatched", 2),
+                             ("ipanema3", "mismatched", 3), ("ipanema3", "nominal", 0)]
+    assert len(runs) == 4
+    for plant, plant_seed, loop in runs:
+        scale = 1.0 + 0.1 * (plant_seed if plant == "mismatched" else 0)
+        for name in ("mu", "sigma", "F_pv"):
+            np.testing.assert_allclose(getattr(loop.friction, name), scale * getattr(robot.friction, name), rtol=1e-12)
+    (seed2,) = [loop for plant, seed, loop in runs if plant == "mismatched" and seed == 2]
+    assert not np.allclose(seed2.friction.mu, robot.friction.mu)
+    cases = [json.loads(line) for line in (out / "cases.jsonl").read_text().splitlines()]
+    for c in cases:
+        name = f"ipanema3_{c['plant']}" + ("" if c["plant"] == "nominal" else f"_seed{c['seed']}")
+        assert c["friction"]["source"] == "identified" and c["friction"]["file"].endswith(f"friction/{name}.yaml")
+    (c2,) = [c for c in cases if c["seed"] == 2]
+    np.testing.assert_allclose(c2["friction"]["mu"], 1.2 * robot.friction.mu)
+    np.testing.assert_allclose(c2["friction"]["deviation_percent"]["mu"], 20.0)
+    assert "friction identified" in (out / "validation.txt").read_text()
+    doc = json.loads((out / "validation.json").read_text())
+    assert doc["meta"]["friction"]["plants"]["ipanema3 mismatched seed 2"]["file"] == c2["friction"]["file"]
+    assert "identified into" in capsys.readouterr().out
+
+    runs.clear()                                                # a later run reuses the files
+    assert main(argv) == 1 and len(calls) == 4 and len(runs) == 4
+    assert "reused from" in capsys.readouterr().out
+    assert read_cases(out / "cases.jsonl")[1].spec.friction["source"] == "identified"      # --from-cases keeps it
+
+    runs.clear()
+    assert main(argv + ["--friction", "shipped", "-o", str(tmp_path / "s")]) == 1
+    assert len(calls) == 4 and [loop for *_, loop in runs] == [None] * 4              # the shipped loop
+    assert all(r.spec.friction == {"source": "shipped"} for r in read_cases(tmp_path / "s" / "cases.jsonl"))
+
+
+def test_the_sweep_identifies_friction_on_the_cases_plant(tmp_path, monkeypatch):
+    """identify_on_plant records the friction run on the plant and seed it is given (the plant
+    seed, not only the noise: the experiments' bug of session 10) and writes the fit's file."""
+    from cdpr_tools.identify import experiments
+    from cdpr_tools.identify import friction as identify_friction
+    from cdpr_tools.validate import friction
+
+    recorded = []
+    monkeypatch.setattr(experiments, "record_friction_run",
+                        lambda bag, robot, **kw: recorded.append(kw) or bag)
+    fits = [SimpleNamespace(cable=i, mu=0.01 + i, sigma=1e3, F_pv=2.0) for i in range(8)]
+    monkeypatch.setattr(identify_friction, "identify", lambda bag, robot, **kw: (None, fits))
+    monkeypatch.setattr("cdpr_tools.bag.BagReader", lambda path: path)
+    path = friction.parameter_path(tmp_path, "ipanema3", "mismatched", 3)
+    path.parent.mkdir(parents=True)
+    friction.identify_on_plant("ipanema3", "mismatched", 3, path)
+    assert recorded == [{"seed": 3, "plant": "mismatched", "plant_seed": 3}]
+    assert friction.read_parameters(path)["mu"] == [0.01 + i for i in range(8)]

@@ -2,7 +2,8 @@
 :class:`cdpr_control.control.loop.ControlLoop` against the simulator (:func:`cdpr_sim.closed_loop.run`).
 
 * contact (a): hybrid position/force control (section 5.1) pressing on a floor below the tool;
-* guiding (b): hand guiding (section 5.2) at rest, pushed, and released for the eigenfrequency (5.12);
+* guiding (b): hand guiding (section 5.2) at rest, pushed, and released for the eigenfrequency (5.12),
+  with the friction identified on the plant first (``cdpr validate --friction``, :mod:`.friction`);
 * payload (c): a payload step (section 4.1.3) under force control and under IK-only with load compensation;
 * program (d): a G-code program through the workspace's border region under force control and IK-only.
 
@@ -105,6 +106,9 @@ class CaseSpec:
     plant: str                   # mismatched or nominal
     seed: int                    # the mismatched plant's seed (0 for nominal)
     variant: dict = field(default_factory=dict)
+    # the pulley friction of the case's friction compensation (validate.friction): {"source":
+    # "shipped"} the robot file's; {"source": "identified", "file", "mu", "sigma", "F_pv", ...}
+    friction: dict = field(default_factory=lambda: {"source": "shipped"})
 
 
 @dataclass
@@ -287,13 +291,18 @@ def _admittance_values(robot_name: str) -> dict:
 def _guided(spec: CaseSpec, robot, overrides: dict, segments, duration: float):
     """The library's hand-guiding run (:func:`cdpr_sim.hand_guiding.guiding_run`: the shipped
     configuration, zones about the pose shrunk to the WFW where they leave it) at the pose, switched
-    on at GUIDING_ENABLE, the hand pushing ``segments`` -> (recorder, GuidingRun or None, ok)."""
+    on at GUIDING_ENABLE, the hand pushing ``segments`` -> (recorder, GuidingRun or None, ok). The
+    friction compensation has the case's friction (``spec.friction``: identified on the plant or
+    the robot file's, :mod:`cdpr_tools.validate.friction`)."""
     from cdpr_sim.hand_guiding import guiding_run
+
+    from cdpr_tools.validate.friction import loop_params
 
     rec = Recorder(robot)
     try:
         g = guiding_run(segments, duration, overrides, robot_name=spec.robot, before_step=rec, x_hold=spec.x,
-                        config=sim_config(spec), enable_at=GUIDING_ENABLE)
+                        config=sim_config(spec), enable_at=GUIDING_ENABLE,
+                        loop_params=loop_params(spec.robot, spec.friction))
     except Diverged:
         return rec, None, False
     return rec, g, True
@@ -361,7 +370,8 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     user switches it on a running robot): at rest with nobody pushing for REST_TIME, then a push
     in the variant's direction, held, released; then the eigenfrequency of (5.12) with the robot's
     EIGEN zone (:func:`_eigen_case`). Zones that would leave the WFW at the pose are shrunk to fit,
-    and the note says so.
+    and the note says so. Both runs compensate the pulley friction of ``spec.friction`` (the sweep:
+    identified on the case's plant, as a user runs the robot); the note says which.
 
     The push is what a user can legitimately apply at the pose: PUSH_SHARE w_max scaled by
     :func:`push_scale` (the hand's share of the cable forces within the pose's reserve). Where that
@@ -371,6 +381,8 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     not a failure)."""
     from cdpr_control.control.admittance_zones import per_axis
     from cdpr_sim.hand import Segment
+
+    from cdpr_tools.validate.friction import text as friction_text
 
     robot = load_robot(spec.robot)
     w_max = per_axis(_admittance_values(spec.robot)["w_max"], "w_max")
@@ -385,7 +397,7 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
         rec, g, ok = _guided(spec, robot, {}, segments, t_push + PUSH_HOLD + PUSH_AFTER)
     except ValueError as exc:
         return CaseResult(spec, {}, {}, "refused", f"hand guiding refused at this pose: {exc}")
-    notes = [] if g is None or g.clipping is None else [g.clipping.text()]
+    notes = [friction_text(spec.friction)] + ([] if g is None or g.clipping is None else [g.clipping.text()])
     if capacity.beyond:
         notes.append(f"beyond capacity: the pose carries {100 * capacity.scale:.3g} % of the {np.linalg.norm(nominal):.3g} N "
                      f"push (share {capacity.share_N:.3g} N, margin {capacity.margin_N:.3g} N pushed): pushed "

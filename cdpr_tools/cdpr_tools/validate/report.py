@@ -13,6 +13,7 @@ from cdpr_control.model.robot import load_robot
 
 from cdpr_tools.validate.cases import CaseResult
 from cdpr_tools.validate.criteria import band_for
+from cdpr_tools.validate.friction import FAMILIES as FRICTION_FAMILIES
 
 SAG_RESIDUAL = "sag_residual_beyond_accuracy_mm"     # a payload case whose sag was below the resolution
 
@@ -29,6 +30,8 @@ def where(r: CaseResult) -> str:
         pose += f" c {np.rad2deg(s.x[5]):+.0f} deg"
     plant = "nominal" if s.plant == "nominal" else f"mismatched seed {s.seed}"
     variant = ", ".join(f"{k} {_short(v)}" for k, v in s.variant.items() if k != "poses")
+    if s.family in FRICTION_FAMILIES:           # which friction the compensation had (validate.friction)
+        variant += f", friction {s.friction.get('source', 'shipped')}"
     return f"{s.robot} {pose}{' (border)' if s.border and s.pose_index >= 0 else ''}, {plant}, {variant}"
 
 
@@ -187,7 +190,8 @@ def read_cases(path) -> list[CaseResult]:
             d = json.loads(line)
         except json.JSONDecodeError:
             continue
-        spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__})
+        # (a case recorded before the sweep recorded its friction ran with the robot file's: the default)
+        spec = CaseSpec(**{k: d[k] for k in CaseSpec.__dataclass_fields__ if k in d})
         metrics = {k: float("nan") if v is None else float(v) for k, v in d["metrics"].items()}
         results.append(CaseResult(spec, metrics, d["checks"], d["status"], d["note"], d["wall_s"],
                                   d.get("cpu_s", float("nan"))))
@@ -199,14 +203,14 @@ def to_json(results: list[CaseResult], meta: dict) -> dict:
     return {"meta": meta,
             "summary": {f: family_summary(results, f) for f in families},
             "per_robot_plant": {f"{robot} {plant}": {f: _rate([r for r in results if r.spec.family == f
-                                                              and r.spec.robot == robot and _plant(r) == plant])
+                                                              and r.spec.robot == robot and plant_name(r) == plant])
                                                       for f in families}
                                 for robot in sorted({r.spec.robot for r in results})
-                                for plant in sorted({_plant(r) for r in results})},
+                                for plant in sorted({plant_name(r) for r in results})},
             "cases": [case_dict(r) for r in results]}
 
 
-def _plant(r: CaseResult) -> str:
+def plant_name(r: CaseResult) -> str:
     return "nominal" if r.spec.plant == "nominal" else f"mismatched seed {r.spec.seed}"
 
 

@@ -13,12 +13,14 @@ import itertools
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import replace
 
 import numpy as np
 
 from cdpr_control.model.robot import load_robot
 
 from cdpr_tools.validate.cases import (CONTACT_FRACTIONS, FAMILIES, FLOOR_STIFFNESS, PAYLOAD_FRACTIONS, PUSH_DIRECTIONS, CaseResult, CaseSpec, run_case)
+from cdpr_tools.validate.friction import FAMILIES as FRICTION_FAMILIES
 from cdpr_tools.validate.grid import sweep_poses
 
 ROBOTS = ("ipanema3", "ipanema3_mini")
@@ -105,8 +107,14 @@ def _timed(spec: CaseSpec) -> list[CaseResult]:
     return out
 
 
-def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate"):
-    """Plan, run and report the sweep -> (results, the JSON document, figure paths)."""
+def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate",
+             friction_mode: str = "identified", log=print):
+    """Plan, run and report the sweep -> (results, the JSON document, figure paths).
+
+    The guiding family runs with ``friction_mode``'s friction (:mod:`.friction`): identified, the
+    friction of each (robot, plant, seed) among its cases is identified before the cases run
+    (:func:`with_friction`; reused from ``outdir`` when there); its time is the meta's
+    ``friction_wall_s``, not the cases'."""
     import platform
 
     from cdpr_tools.validate import report
@@ -115,13 +123,51 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
     per_robot = [plan(robot, families, plant_list, n_poses)[1] for robot in robots]
     specs = [spec for group in itertools.zip_longest(*per_robot) for spec in group if spec is not None]
     start = time.perf_counter()
-    with report.CaseLog(outdir) as log:
-        results = run_all(specs, jobs, progress, log.write)
+    specs, frictions = with_friction(specs, friction_mode, outdir, jobs, log)
+    friction_wall = time.perf_counter() - start
+    start = time.perf_counter()
+    with report.CaseLog(outdir) as case_log:
+        results = run_all(specs, jobs, progress, case_log.write)
     meta = {"command": command, "robots": list(robots), "families": list(families),
             "plants": [list(p) for p in plant_list], "poses": n_poses, "jobs": jobs,
-            "wall_s": time.perf_counter() - start, "cpu_s": cpu_seconds(results), "host": platform.node()}
+            "wall_s": time.perf_counter() - start, "cpu_s": cpu_seconds(results), "host": platform.node(),
+            "friction": {"mode": friction_mode, "families": list(FRICTION_FAMILIES), "wall_s": friction_wall,
+                         "plants": frictions}}
     doc, figures = report.write(results, meta, outdir)
     return results, doc, figures
+
+
+def with_friction(specs, mode: str, outdir, jobs: int = 1, log=print) -> tuple[list, dict]:
+    """The specs with their friction (:attr:`CaseSpec.friction`) -> (specs, {"<robot> <plant>":
+    record}). ``mode`` identified: the cases of FRICTION_FAMILIES get the friction identified on
+    their (robot, plant, seed), each identified once (in ``jobs`` processes) or reused from
+    ``outdir``; shipped, and the other families: the robot file's."""
+    from cdpr_tools.validate import friction
+
+    if mode not in friction.MODES:
+        raise ValueError(f"--friction must be one of {', '.join(friction.MODES)}, got {mode!r}")
+    if mode == "shipped":
+        return list(specs), {}
+    keys = sorted({(s.robot, s.plant, s.seed) for s in specs if s.family in FRICTION_FAMILIES})
+    if jobs == 1 or len(keys) < 2:
+        records = [friction.identified(outdir, *key) for key in keys]
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            records = list(pool.map(friction.identified, [outdir] * len(keys), *zip(*keys)))
+    by_key = {}
+    for key, (record, reused) in zip(keys, records):
+        by_key[key] = record
+        d = record["deviation_percent"]
+        log(f"[validate] {_plant_name(*key)}: friction {'reused from' if reused else 'identified into'} "
+            f"{record['file']}; mu / sigma / F_pv up to {d['mu']:.3g} / {d['sigma']:.3g} / {d['F_pv']:.3g} % "
+            "from the robot file's")
+    specs = [replace(s, friction=by_key[(s.robot, s.plant, s.seed)]) if s.family in FRICTION_FAMILIES else s
+             for s in specs]
+    return specs, {_plant_name(*key): record for key, record in by_key.items()}
+
+
+def _plant_name(robot: str, plant: str, seed: int) -> str:
+    return f"{robot} {plant}" + (f" seed {seed}" if plant != "nominal" else "")
 
 
 def cpu_seconds(results) -> float:
