@@ -18,6 +18,9 @@ from cdpr_tools.bag import BagReader
 from cdpr_tools.identify import experiments, friction
 
 SEEDS = (1, 2, 3)
+# identified here: seed 2 (plant seed 1 is identified in tests/tools/test_identify.py; one other seed catches
+# experiments that ignore plant_seed; seed 3, same path, measured 0.6 / 1.0 / 3.7 %: docs/validation.md)
+IDENTIFIED_SEEDS = (2,)
 NOISE_SEED = 7            # one noise for every plant: only the plant differs between the runs
 # the stop-and-go part of tests/conftest.py's short run, the fast part of the full one (30 mm at
 # 0.17-0.5 m/s): with conftest's 10 mm at 0.2-0.4 m/s the lower cables' F_pv came out 9 % off
@@ -30,7 +33,7 @@ def ipanema3():
     return load_robot("ipanema3")
 
 
-@pytest.fixture(scope="module", params=SEEDS, ids=lambda s: f"plant_seed_{s}")
+@pytest.fixture(scope="module", params=IDENTIFIED_SEEDS, ids=lambda s: f"plant_seed_{s}")
 def identified(request, ipanema3, tmp_path_factory):
     """(plant seed, identified parameters {name: (m,)}) of the seed's short friction run."""
     seed = request.param
