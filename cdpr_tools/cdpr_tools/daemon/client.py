@@ -8,7 +8,6 @@ decides what it sees or runs (RMW implementation, static peers, this package's l
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import json
 import os
@@ -19,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Iterator
+
+from cdpr_tools.file_lock import locked
 
 NO_DAEMON_ENV = "CDPR_NO_DAEMON"  # set to 1: every command discovers the graph itself
 IDLE_TIMEOUT = 1800.0  # s without a command after which a daemon exits
@@ -179,20 +180,9 @@ def _open(path: Path) -> Connection:
     return Connection(sock)
 
 
-@contextlib.contextmanager
-def _starting(path: Path) -> Iterator[None]:
-    """One command at a time starts the daemon of ``path`` (the others wait, then connect)."""
-    with open(path.with_suffix(".lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
 def start_daemon(path: Path, idle_timeout: float = IDLE_TIMEOUT) -> Connection:
     """Start a daemon at ``path`` unless one answers there already; a connection to it."""
-    with _starting(path):
+    with locked(path.with_suffix(".lock")):   # one command at a time starts it; the others wait, then connect
         with contextlib.suppress(FileNotFoundError, ConnectionRefusedError):
             return _open(path)  # another command started it meanwhile
         with contextlib.suppress(FileNotFoundError):
@@ -229,7 +219,7 @@ def daemon_pid(path: Path) -> int | None:
 
 def _kill_hung(path: Path) -> None:
     """A daemon that accepts connections but no commands is killed; the next command starts another."""
-    with _starting(path):
+    with locked(path.with_suffix(".lock")):   # one command at a time starts it; the others wait, then connect
         pid = daemon_pid(path)
         if pid is not None:
             os.kill(pid, signal.SIGKILL)

@@ -14,12 +14,12 @@ mismatched plants miss by 15-37 % on the IPAnema 3 (cdpr_sim.plant).
 """
 from __future__ import annotations
 
-import fcntl
 import os
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from cdpr_tools.file_lock import locked
 
 MODES = ("identified", "shipped")
 FAMILIES = ("guiding",)          # the families --friction applies to; the others run with the robot file's
@@ -68,25 +68,14 @@ def identify_on_plant(robot_name: str, plant: str, seed: int, path: Path, progre
     os.replace(tmp, path)                              # a reader sees the whole file or none
 
 
-@contextmanager
-def _locked(path: Path):
-    """An exclusive lock on ``path``.lock (two sweeps, or two processes of one, sharing the directory)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path.with_suffix(".lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
 def identified(outdir, robot_name: str, plant: str, seed: int, progress=None) -> tuple[dict, bool]:
     """The friction identified on (robot, plant, seed) -> (the cases' friction record, reused): the
     parameter file (identified now, under a file lock, if the output directory has none; reused:
     it was there), its values and how far they are from the robot file's (``deviation_percent``:
     worst cable per parameter)."""
     path = parameter_path(outdir, robot_name, plant, seed)
-    with _locked(path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with locked(path.with_suffix(".lock")):         # two sweeps, or two processes of one, share the directory
         reused = path.is_file()
         if not reused:
             identify_on_plant(robot_name, plant, seed, path, progress)
