@@ -713,7 +713,6 @@ class CFCCoupling:
 
 NO_HAND_OVER = np.zeros(6)          # x_comp while nothing is handed over (shared, read-only)
 NO_HAND_OVER.flags.writeable = False
-_NOT_AT_REST = object()             # (ContactHandOver._rest: is no filter output, not even None)
 
 
 class ContactHandOver:
@@ -731,7 +730,6 @@ class ContactHandOver:
         self.dt = dt
         self.filter = LowPass(T_c, dt)
         self.share = 1.0
-        self._rest: object = _NOT_AT_REST      # the filter's output array while it rests at 0.0 (update)
 
     def set_time_constant(self, T_c: float) -> None:
         self.filter.set_time_constant(T_c)
@@ -739,12 +737,7 @@ class ContactHandOver:
     def update(self, state: "HPFCState", k_t: float, cfc_on: bool) -> np.ndarray:
         """One period after :meth:`HybridForceControl.update` -> x_comp (6,) [m]; while it is 0 (the
         CFC's output not applied, or no contact force to hand over), :data:`NO_HAND_OVER`."""
-        u = state.F_d if state.state in FORCE_CONTROLLED else 0.0
-        if u == 0.0 and self.filter.y is self._rest:
-            F_c = 0.0            # at rest at 0.0 the PT1 stays there: 0.0 + α (±0.0 - 0.0) is 0.0
-        else:
-            F_c, = self.filter.update_floats((u,))
-            self._rest = self.filter.y if F_c == 0.0 and math.copysign(1.0, F_c) > 0.0 else _NOT_AT_REST
+        F_c, = self.filter.update_floats((state.F_d if state.state in FORCE_CONTROLLED else 0.0,))
         if state.state in CFC_PAUSED:
             self.share = 0.0
         elif state.state in (CONTACT, RELEASE):
@@ -775,8 +768,6 @@ class HybridForceStage:
                  enabled: bool = False):
         self.control = HybridForceControl(robot, dt, params, enabled=enabled)
         self.hand_over = ContactHandOver(T_c, dt)
-        self._x: np.ndarray | None = None      # the last x without a hand-over and its output (update)
-        self._output: np.ndarray | None = None
 
     @property
     def k_t(self) -> float:
@@ -793,14 +784,9 @@ class HybridForceStage:
         -> (the period's HPFCState, x_d,HPFC + x_comp (6,) [m, rad])."""
         s = self.control.update(F_d0, w)
         x_comp = self.hand_over.update(s, self.k_t, cfc_on)
-        if x_comp is not NO_HAND_OVER:
-            return s, s.x + x_comp
-        # x + 0.0 is x + np.zeros(6) (the same numbers, -0.0 becoming 0.0 alike); the idle state's x
-        # is one read-only array the periods share (HybridForceControl._idle_state): so is its output
-        if s.x is not self._x:                 # (a reference held: identity cannot be reused)
-            self._x, self._output = s.x, s.x + 0.0
-            self._output.flags.writeable = False
-        return s, self._output
+        # x + 0.0 is x + np.zeros(6) (the same numbers, -0.0 becoming 0.0 alike) and a new array:
+        # the idle state's x is read-only and shared by the periods
+        return s, s.x + (0.0 if x_comp is NO_HAND_OVER else x_comp)
 
 
 class ContactCableForceControl:
