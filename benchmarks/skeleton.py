@@ -47,9 +47,9 @@ from rosgraph_msgs.msg import Clock
 
 from cdpr_control.ros.base import CdprNode
 from cdpr_control.ros.intraprocess import IntraProcess
+from cdpr_control.ros.lockstep import lockstep_watchdog
 from cdpr_control.ros.runner import run_node
 from cdpr_control.ros.sync import StampSync, stamp_ns
-from cdpr_sim.nodes.winch_platform_sim import WinchPlatformSimNode
 
 MODULE = "skeleton"          # this module's name for the launcher (benchmarks/ on sys.path)
 SIM = "winch_platform_sim"
@@ -449,9 +449,9 @@ class SkeletonNode(CdprNode):
         self._waiting_since = time.monotonic()
         self._publish()
 
-    # the real simulator's watchdog (not a copy): it reads got_command, _last_handshake,
-    # lockstep_timeout, _waiting_since and missed_deadlines, and calls _advance and _publish
-    _lockstep_watchdog = WinchPlatformSimNode._lockstep_watchdog
+    # the real simulator's watchdog (not a copy, and without importing the simulator - pybullet -
+    # in each of the skeleton's processes: the one-process-per-node floor then took over 180 s to start)
+    _lockstep_watchdog = lockstep_watchdog
 
     def _publish(self) -> None:
         t = self.sim.steps * self.period_ns

@@ -45,7 +45,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.intraprocess import IntraProcess, has_subscribers
+from cdpr_control.ros.intraprocess import has_subscribers
+from cdpr_control.ros.lockstep import lockstep_watchdog
 from cdpr_control.ros.conversions import pose_to_msg, twist_to_msg, wrench_from_msg, wrench_to_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
@@ -60,7 +61,6 @@ from cdpr_sim.startup import startup_state
 
 #: /clock as ROS publishes it (rclcpp::ClockQoS; rclpy's TimeSource subscribes best effort, depth 1)
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-HANDSHAKE_PERIOD = 0.5     # s, repeat of the t = 0 state until the first command
 MAX_CATCH_UP = 20          # periods one free-running timer tick may advance
 LATENCY_WINDOW = 1000      # free running: published states awaiting their command, at most
 
@@ -291,20 +291,7 @@ class WinchPlatformSimNode(CdprNode):
         self._waiting_since = time.monotonic()
         self._publish()
 
-    def _lockstep_watchdog(self) -> None:
-        if IntraProcess.of(self.context).pending():
-            # the graph in this process is still computing the period (slow, not stopped; e.g. the
-            # process was descheduled on a loaded machine): neither repeat nor advance, or the run
-            # would depend on the machine's load
-            return
-        now = time.monotonic()
-        if not self.got_command:
-            if now - self._last_handshake >= HANDSHAKE_PERIOD:
-                self._last_handshake = now
-                self._publish()
-        elif self.lockstep_timeout > 0.0 and now - self._waiting_since > self.lockstep_timeout:
-            self.missed_deadlines += 1
-            self._advance()
+    _lockstep_watchdog = lockstep_watchdog      # (cdpr_control/ros/lockstep.py, shared with the graph benchmark)
 
     def _free_running_tick(self) -> None:
         due = int((time.monotonic() - self._wall_start) * self.realtime_factor / self.dt) + self._steps_at_start
