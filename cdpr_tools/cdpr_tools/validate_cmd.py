@@ -2,8 +2,9 @@
 over each shipped robot's wrench-feasible workspace, both plants, in process (docs/validation.md).
 
 Exit status 1 when any case is out of its band (or diverged, was refused or could not run), 0 when
-every case is within; a one-line summary per family on stdout, JSON, one line per case and a figure
-per family in the output directory.
+every case is within; a one-line summary per family on stdout, JSON, one line per case and two
+figures per family (the map of the poses, the distribution of its main criteria) in the output
+directory. ``--figures SWEEP`` renders those figures from an earlier sweep's output directory.
 """
 from __future__ import annotations
 
@@ -34,6 +35,10 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
     p.add_argument("--from-cases", metavar="FILE",
                    help="report the cases.jsonl of an earlier (or interrupted) run instead of running")
+    p.add_argument("--figures", metavar="SWEEP",
+                   help="render the figures of an earlier sweep (its output directory, or its cases.jsonl) into "
+                   "-o instead of running: per family the pass/fail map of the poses and the distribution of its "
+                   "main criteria (e.g. --figures out/validation -o docs/figures)")
     p.set_defaults(run=run)
 
 
@@ -59,6 +64,8 @@ def run(args) -> int:
     from cdpr_tools.progress import Progress
     from cdpr_tools.validate.sweep import plants, validate
 
+    if args.figures:
+        return _figures(args)
     if args.from_cases:
         return _report_cases(args)
     robots = _names(args.robot, ROBOTS, "robot")
@@ -114,3 +121,12 @@ def _report_cases(args) -> int:
             "friction": {"families": list(FRICTION_FAMILIES), "plants": frictions}}
     doc, figures = report.write(results, meta, args.output)
     return _summarise(results, doc, figures, args.output)
+
+
+def _figures(args) -> int:
+    """The figures of an earlier sweep (:func:`cdpr_tools.validate.figures.from_sweep`)."""
+    from cdpr_tools.validate.figures import from_sweep
+
+    paths = from_sweep(args.figures, args.output)
+    print(f"[validate] {len(paths)} figures in {args.output}: " + ", ".join(p.name for p in paths))
+    return 0

@@ -1,5 +1,5 @@
-"""The sweep's results: JSON, one line per case (text), one summary line per family and a figure
-per family (the poses of each robot coloured by the family's headline metric against its band)."""
+"""The sweep's results: JSON, one line per case (text), one summary line per family, the pass
+rates per robot and plant, and two figures per family (:mod:`.figures`)."""
 from __future__ import annotations
 
 import json
@@ -8,8 +8,6 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-
-from cdpr_control.model.robot import load_robot
 
 from cdpr_tools.validate.cases import CaseResult
 from cdpr_tools.validate.criteria import band_for
@@ -223,13 +221,16 @@ def _rate(rs) -> str:
 
 
 def write(results: list[CaseResult], meta: dict, outdir) -> tuple[dict, list[Path]]:
-    """validation.json, validation.txt (one line per case) and validation_<family>.png in outdir."""
+    """validation.json, validation.txt (one line per case) and per family its map and distribution
+    figures (:func:`cdpr_tools.validate.figures.render`) in outdir."""
+    from cdpr_tools.validate.figures import render
+
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     doc = to_json(results, meta)
     (outdir / "validation.json").write_text(dumps(doc, indent=1))
     (outdir / "validation.txt").write_text("\n".join(case_line(r) for r in results) + "\n")
-    figures = [plot_family(results, family, outdir / f"validation_{family}.png") for family in doc["summary"]]
+    figures = render(results, outdir)
     return doc, figures
 
 
@@ -259,64 +260,3 @@ def _json_default(v):
     if isinstance(v, np.ndarray):
         return v.tolist()
     return str(v)
-
-
-def plot_family(results: list[CaseResult], family: str, path: Path) -> Path:
-    """Per robot, the poses seen from above (x, y) coloured by the family's headline metric (the
-    worst of the pose's cases), the colour scale split at the band's limit; cases out of band are
-    ringed in red, refused or errored ones drawn as grey crosses."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import TwoSlopeNorm
-
-    metric = HEADLINE[family]
-    robots = sorted({r.spec.robot for r in results if r.spec.family == family})
-    fig, axes = plt.subplots(1, len(robots), figsize=(5.2 * len(robots), 4.4), squeeze=False)
-    for ax, robot in zip(axes[0], robots):
-        rs = [r for r in results if r.spec.family == family and r.spec.robot == robot]
-        by_pose = {}
-        for r in rs:
-            key = tuple(np.round(r.spec.x[:3], 4)) if r.spec.pose_index >= 0 else tuple(np.round(r.spec.variant["poses"][0], 4))
-            by_pose.setdefault(key, []).append(r)
-        pts, vals, bad, skipped = [], [], [], []
-        for key, group in by_pose.items():
-            measured = [r for r in group if _measured(r.metrics.get(metric)) and r.status not in ("refused", "error")]
-            if not measured:
-                skipped.append(key)
-                continue
-            worst = max(measured, key=lambda r: badness(metric, r.metrics[metric], r.spec.plant))
-            pts.append(key)
-            vals.append(worst.metrics[metric])
-            bad.append(any(not r.passed for r in group))
-        band = band_for(metric, "nominal")
-        limit = band.hi if band is not None and band.hi is not None else None
-        if pts:
-            pts, vals = np.array(pts), np.array(vals, dtype=float)
-            shown = np.where(np.isfinite(vals), vals, np.nanmax(np.r_[vals[np.isfinite(vals)], 0.0]) * 2 + 1.0)
-            lo, hi = float(shown.min()), float(shown.max())
-            norm = (TwoSlopeNorm(limit, min(lo, limit - 1e-9), max(hi, limit + 1e-9)) if limit is not None else None)
-            sc = ax.scatter(pts[:, 0], pts[:, 1], c=shown, cmap="coolwarm", norm=norm, s=45, zorder=3)
-            ring = np.array(bad)
-            ax.scatter(pts[ring, 0], pts[ring, 1], s=130, facecolors="none", edgecolors="red", lw=1.2, zorder=2,
-                       label="a case out of band")
-            cb = fig.colorbar(sc, ax=ax)
-            cb.set_label(metric + (f" (band {band.text()})" if band else ""))
-            if limit is not None:
-                cb.ax.axhline(limit, color="k", lw=1.5)
-        if skipped:
-            sk = np.array(skipped)
-            ax.scatter(sk[:, 0], sk[:, 1], marker="x", color="0.5", s=40, label="refused / error")
-        s = family_summary(rs, family)
-        a = load_robot(robot).a                                   # the frame's anchors bound the view
-        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", xlim=(a[:, 0].min(), a[:, 0].max()),
-               ylim=(a[:, 1].min(), a[:, 1].max()), title=f"{robot}: {s['passed']}/{s['applicable']} applicable in band ({s['not_applicable']} n/a)")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="best", fontsize=7)
-    fig.suptitle(f"cdpr validate, {family}: worst {metric} per pose (plants round robin: mismatched seeds and nominal)",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=70)
-    plt.close(fig)
-    return path
