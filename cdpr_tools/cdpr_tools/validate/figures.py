@@ -211,8 +211,11 @@ def _strip(ax, rs, metric: str, plants: list[str]) -> None:
     values as triangles at the top of the axis."""
     values = np.array([float(r.metrics[metric]) for r in rs], dtype=float)
     finite = values[np.isfinite(values)]
-    bands = {p: band_for(metric, r.spec.plant, r.spec.variant.get("controller")) for r in rs
-             for p in [plant_label(r)]}
+    bands = {}                 # a plant's band: that of its judged cases (a reference controller's are not)
+    for r in rs:
+        band = band_for(metric, r.spec.plant, r.spec.variant.get("controller"))
+        if band is not None:
+            bands.setdefault(plant_label(r), band)
     limits = [v for b in bands.values() if b is not None for v in (b.lo, b.hi) if v is not None]
     span = np.r_[finite, limits] if len(finite) or limits else np.r_[0.0, 1.0]
     lo, hi = float(span.min()), float(span.max())
