@@ -744,10 +744,23 @@ def border_program(robot, poses) -> str:
     return "\n".join(lines) + "\n"
 
 
+def shipped_limits(robot_name: str):
+    """The interpolator's limits of the shipped configuration: the ``gcode_interpreter`` section of
+    the robot's parameter file over the node's defaults (the graph gives the node that file), as the
+    node builds them (``limits_from``)."""
+    from cdpr_control.nodes.gcode_interpreter import limits_from, parameters
+
+    robot = load_robot(robot_name)
+    values = {p.name: p.default for p in parameters(robot)}
+    values.update(file_section(robot_name, "gcode_interpreter"))
+    return limits_from(values)
+
+
 def program_case(spec: CaseSpec) -> CaseResult:
-    """The border program under ``spec.variant["controller"]`` (force_control or ik_only): pose
-    error (ground truth against the set-point) and the cable forces against the robot's limits
-    from 0.1 s on (the start-up raises them to the planned f_min).
+    """The border program under ``spec.variant["controller"]`` (force_control or ik_only), at the
+    interpolator's limits of the shipped configuration (:func:`shipped_limits`): pose error (ground
+    truth against the set-point) and the cable forces against the robot's limits from 0.1 s on (the
+    start-up raises them to the planned f_min).
 
     ik_only is the reference (criteria.NOT_JUDGED): it commands lengths, its cables slacken on the
     way to the border, and its slack is reported, not judged. Its force watch is off, as for the
@@ -764,7 +777,7 @@ def program_case(spec: CaseSpec) -> CaseResult:
     text = border_program(robot, spec.variant["poses"])
     parsed = parse_gcode(text, start_pose=robot.home)
     check_program(parsed, robot)                                   # GCodeError: the path leaves the workspace
-    interp = Interpolator(parsed, dt=DT)
+    interp = Interpolator(parsed, shipped_limits(spec.robot), dt=DT)
     inner, x_d = program(interp), []
 
     def source(t):                                  # the set-point of each period, as given to the loop
