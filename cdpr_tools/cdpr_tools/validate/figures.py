@@ -32,7 +32,7 @@ CRITERIA = {"contact": ("overshoot_percent",),
 LABELS = {"overshoot_percent": "contact force overshoot [%]",
           "rest_wrench_percent": "user wrench at rest [% of w_max]",
           "eigenfrequency_error_percent": "eigenfrequency error to (5.12) [%]",
-          "estimate_error_percent": "payload estimate error from 1 s after the step [%]",
+          "estimate_error_percent": "estimate error from 1 s after the step [%]",
           "sag_cut_percent": "sag cut [%]",
           "force_below_f_min_N": "lowest cable force below f_min [N]",
           "position_error_max_mm": "largest position error [mm]"}
@@ -145,7 +145,7 @@ def map_figure(results: list[CaseResult], family: str, path: Path) -> Path:
                    xlabel="x [m]", ylabel=f"{axis} [m]")
             ax.grid(alpha=0.3)
             view = "from above (x-y)" if axis == "y" else "from the side (x-z)"
-            title = f"{name}, {view}: passed {counts['passed']}, failed {counts['failed']}, n/a {counts['n/a']}"
+            title = f"{name}, {view}; cases passed {counts['passed']}, failed {counts['failed']}, n/a {counts['n/a']}"
             if worst is not None:
                 title += f"\nworst {metric} {_value_text(metric, float(worst.metrics[metric]))}: {where_short(worst)}"
             ax.set_title(title, fontsize=7)
@@ -173,7 +173,7 @@ def distribution_figure(results: list[CaseResult], family: str, path: Path) -> P
     rs_family = [r for r in results if r.spec.family == family]
     robots = sorted({r.spec.robot for r in rs_family})
     metrics = [m for m in CRITERIA.get(family, ()) if any(m in r.metrics for r in rs_family)]
-    fig, axes = plt.subplots(max(len(metrics), 1), len(robots), figsize=(5.6 * len(robots), 3.9 * max(len(metrics), 1) + 0.6),
+    fig, axes = plt.subplots(max(len(metrics), 1), len(robots), figsize=(5.8 * len(robots), 4.0 * max(len(metrics), 1) + 0.6),
                              squeeze=False)
     for row, metric in enumerate(metrics):
         for col, name in enumerate(robots):
@@ -188,9 +188,11 @@ def distribution_figure(results: list[CaseResult], family: str, path: Path) -> P
             if finite:
                 text += f"\nmean {np.mean(finite):.3g}"
             if worst is not None:
-                text += f", worst {_value_text(metric, float(worst.metrics[metric]))} at {where_short(worst)}"
+                text += f", worst {_value_text(metric, float(worst.metrics[metric]))}"
             if len(measured) < len(rs):
                 text += f"; not measured in {len(rs) - len(measured)}"
+            if worst is not None:
+                text += f"\nworst at {where_short(worst)}"
             ax.set_title(text, fontsize=7)
             ax.set(ylabel=label(metric), xlabel="plant (mismatched: its seed)")
     handles = [Line2D([], [], ls="", marker="o", color=c, label=k) for k, c in
