@@ -153,6 +153,8 @@ def test_bench_area_has_pass_rates_per_family_robot_and_plant_with_the_worst_cas
     mini_nominal = area["per_robot_plant"]["ipanema3_mini nominal"]
     assert mini_nominal["program"]["passed"] == 1 and mini_nominal["program"]["pass_rate"] == 0.5
     assert mini_nominal["program"]["criteria"]["force_below_f_min_N"]["worst"] == 1.27
+    assert "program to [0.050, -0.100, 0.040], nominal, controller force_control" in \
+        mini_nominal["program"]["criteria"]["force_below_f_min_N"]["where"]         # the program's target named
     assert area["per_robot_plant"]["ipanema3 mismatched seed 2"]["contact"]["worst"] == 31.0
     assert (area["python_calibration_us"], area["python_calibration_after_us"]) == (0.5, 0.7)
     assert np.isfinite(area["pass_rate"])

@@ -23,7 +23,10 @@ HEADLINE = {"contact": "overshoot_percent", "guiding": "rest_wrench_percent",
 def where(r: CaseResult) -> str:
     """The case's robot, pose, plant and variant, in one phrase."""
     s = r.spec
-    pose = "program" if s.pose_index < 0 else f"#{s.pose_index} [{', '.join(f'{v:.3f}' for v in s.x[:3])}]"
+    if s.pose_index < 0:                        # a program: its border targets
+        pose = "program to " + ", ".join("[" + ", ".join(f"{v:.3f}" for v in x[:3]) + "]" for x in s.variant["poses"])
+    else:
+        pose = f"#{s.pose_index} [{', '.join(f'{v:.3f}' for v in s.x[:3])}]"
     if s.pose_index >= 0 and s.x[5]:
         pose += f" c {np.rad2deg(s.x[5]):+.0f} deg"
     plant = "nominal" if s.plant == "nominal" else f"mismatched seed {s.seed}"
