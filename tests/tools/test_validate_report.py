@@ -108,8 +108,8 @@ def test_figures_per_family_name_robot_and_plant_with_units_and_bands(recorded, 
             assert [ax.get_xlabel() for ax in fig.axes] == ["x [m]"] * 4
             assert sorted(ax.get_ylabel() for ax in fig.axes) == ["y [m]", "y [m]", "z [m]", "z [m]"]
     contact = next(fig for fig, path, _ in saved if path.name == "validation_contact.png")
-    assert "worst overshoot_percent never settled: #4" in texts(contact)       # the infinite overshoot, where
-    assert "worst overshoot_percent 31 %: #1" in texts(contact) and "mismatched seed 2" in texts(contact)
+    assert "worst overshoot_percent never settled (out of band): #4" in texts(contact)       # the infinite overshoot, where
+    assert "worst overshoot_percent 31 % (out of band): #1" in texts(contact) and "mismatched seed 2" in texts(contact)
     payload = next(fig for fig, path, _ in saved if path.name == "validation_payload.png")
     assert "n/a 1" in texts(payload)                                           # the refused case
 

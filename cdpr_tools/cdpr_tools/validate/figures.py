@@ -147,7 +147,10 @@ def map_figure(results: list[CaseResult], family: str, path: Path) -> Path:
             view = "from above (x-y)" if axis == "y" else "from the side (x-z)"
             title = f"{name}, {view}; cases passed {counts['passed']}, failed {counts['failed']}, n/a {counts['n/a']}"
             if worst is not None:
-                title += f"\nworst {metric} {_value_text(metric, float(worst.metrics[metric]))}: {where_short(worst)}"
+                value = float(worst.metrics[metric])
+                held = band_for(metric, worst.spec.plant, worst.spec.variant.get("controller")).holds(value)
+                title += (f"\nworst {metric} {_value_text(metric, value)} ({'in' if held else 'out of'} band): "
+                          f"{where_short(worst)}")
             ax.set_title(title, fontsize=7)
     handles = [Line2D([], [], ls="", marker="o", color=c, label=f"{k}") for k, c in OUTCOMES.items()]
     handles += [Line2D([], [], ls="", marker="D", mfc="w", mec="k", label="border pose (within 10 %)"),
