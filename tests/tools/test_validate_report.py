@@ -169,3 +169,26 @@ def test_the_program_case_runs_at_the_interpolators_shipped_limits(monkeypatch):
     monkeypatch.setattr(cases, "file_section", lambda robot, node: {"j_max": 5.0} if node == "gcode_interpreter" else {})
     limits = cases.shipped_limits("ipanema3")
     assert limits.translation.jerk == 5.0 and limits.translation.acceleration == Limits().translation.acceleration
+
+
+def test_the_program_case_says_where_its_lowest_cable_force_was():
+    """The note names the lowest cable force's cable, time and platform position: the force is the
+    metric's (f_min minus it), the time within the program, the position on its path."""
+    import re
+
+    from cdpr_control.model.robot import load_robot
+    from cdpr_tools.validate.cases import run_case
+    from cdpr_tools.validate.grid import sweep_poses
+
+    robot = load_robot("ipanema3_mini")
+    border = [p for p in sweep_poses(robot, 3) if p.border][0]
+    (r,) = run_case(CaseSpec("program", "ipanema3_mini", -1, list(robot.home),
+                             True, "nominal", 0, {"controller": "force_control", "poses": [border.x[:3].tolist()]}))
+    m = re.match(r"lowest cable force (\S+) N \(cable (\d)\) at (\S+) s, platform at \[(.*)\]$", r.note)
+    assert m, r.note
+    f_min = float(np.max(robot.cable.f_min))
+    assert float(m[1]) == pytest.approx(f_min - r.metrics["force_below_f_min_N"], rel=1e-3)
+    assert 0.1 <= float(m[3]) <= r.metrics["duration_s"] and 1 <= int(m[2]) <= robot.m
+    p, a, b = np.array([float(v) for v in m[4].split(",")]), np.asarray(robot.home[:3]), border.x[:3]
+    s = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    assert np.linalg.norm(p - (a + s * (b - a))) < 0.02            # on the path home -> border -> home

@@ -798,10 +798,15 @@ def program_case(spec: CaseSpec) -> CaseResult:
         x_d = np.array(x_d[:len(t)])                # period k's set-point, period k's outcome
         e = 1e3 * np.linalg.norm(x[:, :3] - x_d[:, :3], axis=1)
         settled = t >= 0.1
+        below = np.broadcast_to(robot.cable.f_min, f[settled].shape) - f[settled]
+        k, c = np.unravel_index(np.argmax(below), below.shape)
         metrics.update(position_error_rms_mm=float(np.sqrt(np.mean(e ** 2))), position_error_max_mm=float(e.max()),
-                       force_below_f_min_N=float((robot.cable.f_min - f[settled]).max()),
+                       force_below_f_min_N=float(below[k, c]),
                        force_above_f_max_N=float((f[settled] - robot.cable.f_max).max()))
-    return judge(spec, metrics, not ok, "" if ok else f"diverged at {rec.diverged_at:.3f} s", rec.held)
+        # where the lowest force was: the worst case's where within the program
+        note = (f"lowest cable force {f[settled][k, c]:.4g} N (cable {c + 1}) at {t[settled][k]:.3f} s, platform at "
+                f"[{', '.join(f'{v:.3f}' for v in x[settled][k, :3])}]")
+    return judge(spec, metrics, not ok, note if ok else f"diverged at {rec.diverged_at:.3f} s", rec.held)
 
 
 RUNNERS = {"contact": contact_case, "guiding": guiding_case, "payload": payload_case, "program": program_case}
