@@ -230,7 +230,8 @@ class ControlLoop:
             samples["ospc"] = OffsetSample(t, True, x_ospc)
             if hpfc is not None:
                 samples["hybrid_force_controller"] = OffsetSample(t, hpfc.active, x_hpfc)
-            samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
+            if outputs:
+                samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
         offset, offset_faults = self.offsets.update(t, samples)
         faults += offset_faults
         tripped = self.watch.update(f, robot.cable.f_min, robot.cable.f_max, x_d, offset, dq_cfc, dist.f,
