@@ -81,22 +81,9 @@ class NumpyLoadCompensation(LoadCompensation):
         monkeypatch.undo()
 
     def set_params(self, p):
-        p.validate()
-        self.params = p
-        self.wrench_filter.set_window(p.T_filter)
-        self.force_filter.set_window(p.T_filter)
-        self.cog_filter.set_window(p.T_filter)
-        self.output_filter.set_time_constant(p.T_output)
-        self.settlement.set_params(p.settlement_ratio, p.settlement_time)
-        n = int(round(p.time_shift / self.dt))
-        if self.delay is None or len(self.delay) != n + 1:
-            last = None if self.delay is None else self.delay[(self.delay_index - 1) % len(self.delay)]
-            self.delay = None if last is None else np.tile(last, (n + 1, 1))
-            self.delay_index = 0
-            self._delay_n = n
-        if not p.enabled:
-            self.x_lc = np.zeros(6)
-            self.output_filter.reset(np.zeros(6))
+        super().set_params(p)
+        if isinstance(self.delay, list):                # rebuilt by the library as rows of floats
+            self.delay = np.array(self.delay, dtype=float)
 
     def _shifted(self, x_d, xdot_d, xddot_d):
         sample = np.concatenate((x_d, xdot_d, xddot_d))
@@ -147,26 +134,6 @@ class NumpyLoadCompensation(LoadCompensation):
                     self.settlement.reset(self.f_ref)
                 self.settlement.update(f, lcm.cable.total_free_length(self.robot, ik.q))
         return f, finite
-        if finite:
-            try:
-                cog = self.cog if p.torque else None
-                w_c = compensating_wrench(self.m_c, self.robot.gravity, cog, rotation_matrix(x_d[3:]))
-                if p.offset_model == "secant":
-                    dx = secant_offset(self.robot, ik, f, w_c, self._reference_forces(), self.f_slack,
-                                       settlement=self.settlement.s if self.settlement.ratio > 0.0 else None)
-                else:
-                    k_l = cable_stiffness_model(self.robot, ik, f, p.stiffness_model, self.f_slack)
-                    dx = compliance(ik, f, k_l) @ w_c
-                target = twist_to_pose_offset(dx, x_d[3:])
-                if np.all(np.isfinite(target)):
-                    self.x_target = target
-            except np.linalg.LinAlgError:
-                pass
-        step = self.dt * np.repeat((p.v_max, p.omega_max), 3)
-        change = self.output_filter.update(self.x_target) - self.x_lc
-        self.rate_limited = np.abs(change) > step
-        self.x_lc = self.x_lc + np.clip(change, -step, step)
-        return self.x_lc.copy()
 
 
 @pytest.mark.parametrize("size, T", [(1, 0.01), (2, 0.24), (8, 0.003), (12, 0.001), (2, 0.0)])

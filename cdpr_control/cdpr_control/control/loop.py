@@ -43,6 +43,10 @@ from cdpr_control.control.preconditions import check_force_control, planned_home
 from cdpr_control.control.safety import ForceWatch, SafetyConfig, SafetyMonitor, braking
 
 
+NO_FORCE = np.zeros(3)          # F_d,0 without a set-point's desired force (shared, read-only)
+NO_FORCE.flags.writeable = False
+
+
 @dataclass
 class ControlLoopParams:
     mode: str = "force_control"          # or "ik_only" (section 2.3.2)
@@ -183,12 +187,12 @@ class ControlLoop:
         if self.offset_stages:
             inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
             outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
-        w_models = [out.w_model for out in outputs.values() if out.w_model is not None]
+        w_models = [out.w_model for out in outputs.values() if out.w_model is not None] if outputs else None
         hpfc = x_hpfc = contact = None
         if self.hpfc is not None:
             # section 5.1.2: x_t takes over what the CFC's integral part handed over in the last period
             self.hpfc.take_over(self.contact.F_a)
-            hpfc, x_hpfc = self.hpfc.update(np.zeros(3) if F_d0 is None else F_d0, w, self._cfc_applied)
+            hpfc, x_hpfc = self.hpfc.update(NO_FORCE if F_d0 is None else F_d0, w, self._cfc_applied)
             contact = (hpfc.state, hpfc.F_d0, hpfc.F_vec)     # its expected contact force in the wrench
         self.force.set_user_wrench(w_user)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, w_model=sum(w_models) if w_models else None,
@@ -226,14 +230,15 @@ class ControlLoop:
             samples["ospc"] = OffsetSample(t, True, x_ospc)
             if hpfc is not None:
                 samples["hybrid_force_controller"] = OffsetSample(t, hpfc.active, x_hpfc)
-            samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
+            if outputs:
+                samples.update({name: OffsetSample(t, out.active, out.x) for name, out in outputs.items()})
         offset, offset_faults = self.offsets.update(t, samples)
         faults += offset_faults
         tripped = self.watch.update(f, robot.cable.f_min, robot.cable.f_max, x_d, offset, dq_cfc, dist.f,
-                                    None if braking(faults) else x)     # (braking, the robot lags by design)
+                                    x if not faults or not braking(faults) else None)   # (braking, the robot lags by design)
         if tripped is not None:
             faults.append(tripped)
-        hold = any(fault.holds for fault in faults)
+        hold = bool(faults) and any(fault.holds for fault in faults)     # (no fault: most periods)
         theta_d = self.command.update(x_d, [offset], dq_cfc, hold=hold,     # s = 0: IK only (2.3.2)
                                       safe=None if tripped is None else self.watch.safe, f=f)
         self.state = LoopState(f, x, w, dist.f, int(dist.status), dq_cfc, x_ospc, theta_d, faults,
