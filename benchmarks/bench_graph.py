@@ -57,7 +57,8 @@ import threading
 import time
 
 # a ROS domain of its own, so other graphs on this machine do not feed the probe (set before rclpy)
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+from cdpr_tools.file_lock import own_ros_domain  # noqa: E402
+_DOMAIN_LOCK = own_ros_domain(random.randint(1, 100))   # held for the process: test sessions skip it
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.experimental import EventsExecutor  # noqa: E402

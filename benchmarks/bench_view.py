@@ -45,7 +45,8 @@ import sys
 import threading
 import time
 
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+from cdpr_tools.file_lock import own_ros_domain  # noqa: E402
+_DOMAIN_LOCK = own_ros_domain(random.randint(1, 100))   # held for the process: test sessions skip it
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 

@@ -23,7 +23,8 @@ import statistics
 import sys
 import time
 
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+from cdpr_tools.file_lock import own_ros_domain  # noqa: E402
+_DOMAIN_LOCK = own_ros_domain(random.randint(1, 100))   # held for the process: test sessions skip it
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from bench_graph import (NODE_WINDOW_S, PERIOD_S, ROBOT, START_TIMEOUT_S, CallbackCpu,  # noqa: E402

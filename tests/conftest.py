@@ -1,9 +1,6 @@
 """Test-session environment: ROS 2 traffic stays on this machine, in a domain of its own."""
-import fcntl
 import os
 import random
-import tempfile
-from pathlib import Path
 
 # Discovery only on localhost (no multicast leaves the machine), and a random domain so that
 # concurrent test runs on one machine do not see each other's nodes.
@@ -21,25 +18,10 @@ os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 import pytest  # noqa: E402
 
+from cdpr_tools.file_lock import claim_ros_domain as claim_domain  # noqa: E402
+
 
 _NEXT_DOMAIN = [SESSION_DOMAIN]
-
-
-def claim_domain(first: int) -> tuple[int, object]:
-    """The first ROS domain from ``first`` on (cycling through 1..100) that no other test session on
-    this machine holds, and its lock (an flock on a file in the temporary directory, held until the
-    file is closed or the process ends). Random domains alone collided: with several sessions on one
-    machine, a module's graph received another session's /winch/state and /ground_truth/pose."""
-    for k in range(100):
-        domain = 1 + (first - 1 + k) % 100
-        lock = open(Path(tempfile.gettempdir()) / f"cdpr-test-ros-domain-{domain}.lock", "w")
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock.close()
-            continue
-        return domain, lock
-    raise RuntimeError("every ROS domain 1..100 is held by another test session on this machine")
 
 
 @pytest.fixture(scope="module", autouse=True)
