@@ -215,3 +215,53 @@ def test_a_sag_above_the_resolution_is_judged_by_its_cut(monkeypatch):
     result = cases._payload_result(spec, robot, 2.0, {}, -20.0, "")
     assert result.checks["sag_cut_percent"] and result.metrics["sag_cut_percent"] == pytest.approx(95.0)
     assert "sag_residual_beyond_accuracy_mm" not in result.metrics and result.status == "passed"
+
+
+def test_settlement_sag_is_the_pose_change_of_the_grown_lengths():
+    """Length growths that a known pose change dx would need (s = q(x + dx) - q(x)) give back its z
+    (least squares, exact to first order); the upper cables of the IPAnema 3 grown by 2 mm each at
+    constant forces lower the platform."""
+    from cdpr_control.model.kinematics import inverse_kinematics
+
+    robot = load_robot("ipanema3")
+    x = np.r_[-1.0, -1.0, 0.5, 0.0, 0.0, 0.05]
+    dx = np.r_[0.4e-3, -0.3e-3, -2e-3, 1e-4, -2e-4, 3e-4]
+    s = inverse_kinematics(robot, x + dx).q - inverse_kinematics(robot, x).q
+    assert cases.settlement_sag(robot, x, s) == pytest.approx(dx[2], abs=2e-6)
+    upper = inverse_kinematics(robot, x).AT[2] > 0           # cables pulling the platform up
+    assert cases.settlement_sag(robot, x, np.where(upper, 2e-3, 0.0)) < -1e-3
+
+
+def test_sag_diagnosis_splits_the_sag_into_what_the_controller_sees_and_the_rest(monkeypatch):
+    """A run whose platform sinks 1.0 mm while the controller's forward kinematics sees 0.4 mm of it,
+    the plant's cables having grown by a pose change of -0.5 mm, and still sinking 0.2 mm in the
+    last second: seen -0.4, unseen -0.6, settlement -0.5, drift -0.2 mm, and a sag cut out of band
+    says so in the note."""
+    from cdpr_control.model.kinematics import inverse_kinematics
+
+    robot = load_robot("ipanema3_mini")
+    rec, m_c, ok, hold = _stand_in(robot)
+    t = rec.array("t")
+    step = t > cases.PAYLOAD_REST + cases.PAYLOAD_RAMP
+    x = rec.array("x")
+    x[:, 2] = robot.home[2] - 0.8e-3 * step - 0.2e-3 * (t > t[-1] - 0.5)
+    rec.rows["x"] = list(x)
+    z_c = robot.home[2] - 0.4e-3 * step
+    rec.rows["state"] = [SimpleNamespace(x=np.r_[0.0, 0.0, z, 0.0, 0.0, 0.0]) for z in z_c]
+    dx = np.r_[0.0, 0.0, -0.5e-3, 0.0, 0.0, 0.0]
+    s = inverse_kinematics(robot, robot.home + dx).q - inverse_kinematics(robot, robot.home).q
+    rec.settlement = np.where(step[:, None], s, 0.0)
+    d = cases.sag_diagnosis(robot, robot.home, rec)
+    assert d["sag_seen_mm"] == pytest.approx(-0.4)
+    assert d["sag_unseen_mm"] == pytest.approx(-0.6)
+    assert d["settlement_sag_mm"] == pytest.approx(-0.5, abs=1e-3)
+    assert d["sag_drift_mm"] == pytest.approx(-0.2)
+    monkeypatch.setattr(cases, "_payload_run", lambda *a: (rec, m_c, ok, hold))
+    spec = CaseSpec("payload", "ipanema3_mini", 0, list(robot.home), False, "nominal", 0,
+                    {"fraction": 0.25, "controller": "force_control"})
+    failed = cases._payload_result(spec, robot, 2.0, {}, -2.0, "")        # 1.0 of 2.0 mm left: 50 %
+    assert failed.status == "failed"
+    assert "the controller sees -0.4 mm, -0.6 mm is unseen" in failed.note
+    assert "cable settlement: -0.5 mm" in failed.note and "-0.2 mm over the last second" in failed.note
+    passed = cases._payload_result(spec, robot, 2.0, {}, -20.0, "")       # 95 %: no diagnosis
+    assert passed.status == "passed" and passed.note == ""

@@ -520,11 +520,18 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
-    m_c, held = [], []
+    m_c, held, settlement, slack = [], [], [], []
+    warning = []
 
     def put_down(k, loop, sim):
         if k > 0:
             m_c.append(stage.compensation.m_c)
+            # for the diagnosis (sag_diagnosis): the plant's settlement, a truth the controller
+            # does not see, and the load compensation's own diagnostic of slack cables
+            settlement.append(np.array(sim.settlement.s, dtype=float))
+            slack.append(stage.compensation.slack_cables)
+            if not warning and (problem := stage.compensation.slack_problem()):
+                warning.append(f"{problem} (from {float(sim.output.t):.2f} s)")
             if loop.failure is not None and not held:
                 held.append((float(sim.output.t), loop.failure))
         i = k - n_rest
@@ -539,6 +546,9 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     rec = Recorder(robot, [put_down])
     ok = recorded_run(robot, rec, hold(x), PAYLOAD_REST + PAYLOAD_RAMP + PAYLOAD_DWELL, params,
                       x0=x, offset_stages={"load_compensation": stage}, config=sim_config(spec))
+    rec.settlement = np.array(settlement, dtype=float).reshape(-1, robot.m)
+    rec.slack_cables = np.array(slack, dtype=int)
+    rec.lc_warning = warning[0] if warning else None
     return rec, np.array(m_c, dtype=float), ok, (held[0] if held else None)
 
 
@@ -548,6 +558,77 @@ def _sag(rec) -> float:
     n = int(SAG_WINDOW / DT)
     rest = (t > PAYLOAD_REST - SAG_WINDOW) & (t <= PAYLOAD_REST)
     return float(z[-n:].mean() - z[rest].mean())
+
+
+def _windows(t) -> tuple[np.ndarray, np.ndarray]:
+    """(the unloaded rest's window, the dwell's last window) of the sag (SAG_WINDOW each) as masks."""
+    t = np.asarray(t, dtype=float)
+    return (t > PAYLOAD_REST - SAG_WINDOW) & (t <= PAYLOAD_REST), t > t[-1] - SAG_WINDOW + 0.5 * DT
+
+
+def _controller_z(rec) -> np.ndarray | None:
+    """The controller's own z [m] per period (the forward kinematics' pose), None where the run
+    recorded no loop state."""
+    states = rec.rows.get("state", [])
+    if len(states) != len(rec.rows["t"]) or any(s is None for s in states):
+        return None
+    return np.array([s.x[2] for s in states])
+
+
+def settlement_sag(robot, x, s) -> float:
+    """z [m] by which cable length growths s (m,) [m] at constant forces move the platform at x:
+    the z part of the least-squares pose change J dx = s, J = dq/dx of the inverse kinematics (2.2)
+    by central differences (a settled cable is longer by s_i at the same force; force control holds
+    the forces, so the platform moves rigidly)."""
+    from cdpr_control.model.kinematics import inverse_kinematics
+
+    x = np.asarray(x, dtype=float)
+    h = 1e-6
+    J = np.column_stack([(inverse_kinematics(robot, x + h * e).q - inverse_kinematics(robot, x - h * e).q) / (2 * h)
+                         for e in np.eye(6)])
+    return float(np.linalg.lstsq(J, np.asarray(s, dtype=float), rcond=None)[0][2])
+
+
+def sag_diagnosis(robot, x, rec) -> dict:
+    """Where a run's sag [mm] comes from (reported, not judged; NaN where the run did not record it):
+    ``sag_seen_mm``, the sag of the controller's own pose (the forward kinematics': what its OSPC
+    can act on); ``sag_unseen_mm``, the rest of the true sag, which the controller cannot see (the
+    forward kinematics' error under the payload); ``settlement_sag_mm``, the part of the true sag
+    the plant's cable settlement (section 4.1.3) accounts for (:func:`settlement_sag` of its growth
+    from the rest to the end, a truth of the simulator); ``sag_drift_mm``, the true z's change over
+    the dwell's last second (window mean against the window one second before: a transient still
+    under way, not a static sag)."""
+    t, z = rec.array("t"), rec.array("x")[:, 2]
+    nan = float("nan")
+    out = dict.fromkeys(("sag_seen_mm", "sag_unseen_mm", "settlement_sag_mm", "sag_drift_mm"), nan)
+    if not len(t):
+        return out
+    rest, end = _windows(t)
+    earlier = (t > t[-1] - 1.0 - SAG_WINDOW + 0.5 * DT) & (t <= t[-1] - 1.0 + 0.5 * DT)
+    if rest.any() and earlier.any():
+        out["sag_drift_mm"] = 1e3 * float(z[end].mean() - z[earlier].mean())
+    z_c = _controller_z(rec)
+    if z_c is not None and rest.any():
+        seen = z_c[end].mean() - z_c[rest].mean()
+        out["sag_seen_mm"] = 1e3 * float(seen)
+        out["sag_unseen_mm"] = 1e3 * float(z[end].mean() - z[rest].mean() - seen)
+    s = getattr(rec, "settlement", None)
+    if s is not None and len(s) == len(t) and rest.any():
+        out["settlement_sag_mm"] = 1e3 * settlement_sag(robot, x, s[end].mean(axis=0) - s[rest].mean(axis=0))
+    return out
+
+
+def diagnosis_note(metrics: dict) -> str:
+    """The note of a sag out of its band: how much of it the controller sees, the plant's settlement,
+    and the drift ("" without a recorded controller pose)."""
+    m = metrics
+    if not np.isfinite(m.get("sag_seen_mm", float("nan"))):
+        return ""
+    text = (f"of the residual {m['sag_mm']:.3g} mm the controller sees {m['sag_seen_mm']:.3g} mm, "
+            f"{m['sag_unseen_mm']:.3g} mm is unseen by its forward kinematics")
+    if np.isfinite(m["settlement_sag_mm"]) and abs(m["settlement_sag_mm"]) >= 0.05 * abs(m["sag_mm"]):
+        text += f" (the plant's cable settlement: {m['settlement_sag_mm']:.3g} mm)"
+    return text + f"; z moved {m['sag_drift_mm']:+.3g} mm over the last second"
 
 
 def static_accuracy(rec, z_d: float) -> float:
@@ -713,6 +794,12 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
                "static_accuracy_mm": accuracy, "sag_resolution_mm": resolution,
                "max_force_N": float(f.max()) if len(f) else float("nan"),
                "held_at_s": float("nan") if held is None else held[0]}
+    if usable:
+        metrics.update(sag_diagnosis(robot, spec.x, rec))
+    slack = getattr(rec, "slack_cables", None)
+    if slack is not None and len(slack) == len(after):
+        # the load compensation's own diagnostic: cables slack under the payload (x_d,LC cannot tension them)
+        metrics["slack_cables_after_step"] = float(slack[after].max()) if after.any() else float("nan")
     notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s", note_ref]
     unjudged = ()
     if abs(sag_reference) < resolution:
@@ -723,6 +810,13 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
         notes.append(f"{SAG_BELOW_RESOLUTION}: reference {sag_reference:.3g} mm below the resolution "
                      f"{resolution:.3g} mm (static accuracy {accuracy:.3g} mm with no payload), residual "
                      f"{sag:.3g} mm")
+        within = criteria.BANDS["sag_residual_beyond_accuracy_mm"].holds(metrics["sag_residual_beyond_accuracy_mm"])
+    else:
+        within = criteria.SAG_CUT[spec.plant].holds(metrics["sag_cut_percent"])
+    if usable and not within:
+        notes.append(diagnosis_note(metrics))
+    if getattr(rec, "lc_warning", None) and spec.variant.get("controller") == "ik_lc":
+        notes.append(f"the load compensation warned: {rec.lc_warning}")
     held_text = rec.held or (None if held is None else f"held by the force watch at {held[0]:.3f} s ({held[1]})")
     return judge(spec, metrics, not ok, "; ".join(n for n in notes if n), held_text, unjudged)
 
