@@ -2,8 +2,9 @@
 
 A command discovers the graph itself, or runs inside the graph daemon (``cdpr_tools.daemon``),
 whose node knows the graph already: there ``graph_node`` hands out the daemon's shared node, spun
-by the daemon's executor, and waits poll instead of spinning. Lookups wait (up to a timeout) for
-the node or topic asked for, and fail with the names that do exist.
+by the daemon's executor, and waits look again (or wait for an event a callback sets) instead of
+spinning. Lookups wait (up to a timeout) for the node or topic asked for, and fail with the names
+that do exist.
 """
 from __future__ import annotations
 
