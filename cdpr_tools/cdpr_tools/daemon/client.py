@@ -2,9 +2,10 @@
 
 Kept free of rclpy and of everything a command the daemon answers does not need, so that such a
 command costs little more than the Python interpreter's start: the path of ``answer`` imports
-only ``json`` and ``socket`` beyond what the interpreter has loaded at its start (``os``, ``sys``,
-``pathlib``); starting, killing and stopping a daemon import the rest when they run
-(``tests/tools/test_cli_daemon.py`` checks the modules a served command imports). One daemon serves one
+only ``json``, ``socket``, ``zlib`` and ``contextlib`` beyond what the interpreter has loaded at
+its start (``os``, ``sys``, ``pathlib``); starting, killing and stopping a daemon import the rest
+when they run (``tests/tools/test_cli_daemon.py`` checks that a served command imports none of
+rclpy, argparse, yaml, numpy, subprocess, hashlib, threading). One daemon serves one
 graph: its socket's name holds the ROS domain, the discovery range and a digest of what else
 decides what it sees or runs (RMW implementation, static peers, this package's location).
 """
