@@ -3,17 +3,14 @@
 Each sub-command lives in its own module and registers itself through ``add_parser(subparsers)``;
 this file only assembles them, so ``cdpr --help`` lists what exists. A command line naming a
 command imports only that command's module; one the graph daemon answers (``cdpr_tools.daemon``)
-is handed to it before anything of ROS is imported here.
+is handed to it before anything else is imported here (argparse and the rest load only for a
+command that runs in this process).
 """
 from __future__ import annotations
 
-import argparse
-import importlib
 import os
-import signal
 import sys
 
-from cdpr_tools import progress
 from cdpr_tools.daemon import client as daemon_client
 
 # sub-command modules of cdpr_tools, in the order `cdpr --help` lists them
@@ -24,6 +21,8 @@ COMMANDS = ("demo", "robot", "program", "hand", "topic", "param", "node", "bag",
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The parser of every command, or, when ``argv`` starts with a command, of that one only
     (importing every command's module costs about a second; `cdpr param get` needs one)."""
+    import argparse
+    import importlib
     parser = argparse.ArgumentParser(
         prog="cdpr",
         description="Tools for the cdpr cable robot stack (ROS 2 Jazzy).",
@@ -44,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
         if answered is not None:
             return answered
         args = build_parser(argv).parse_args(argv)   # --help into a closed pipe is a closed pipe too
+        from cdpr_tools import progress
         progress.enable()  # long commands show how far they are (stderr)
         return run(args)
     except KeyboardInterrupt:
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
 def _closed_pipe() -> int:
     """The reader of stdout left (``cdpr robot | head``): end quietly with the status of a process
     ended by SIGPIPE, as coreutils do. stdout goes to /dev/null so the exit's own flush is quiet too."""
+    import signal
     try:
         fd = sys.stdout.fileno()
     except (AttributeError, OSError, ValueError):   # not a file (a test's captured stdout): nothing to flush

@@ -51,6 +51,9 @@ from cdpr_tools.ros_graph import _hidden_topic, keep_discovery_local, new_contex
 
 MODES = ("composed", "processes")
 STOP_TIMEOUT = 10.0  # s a child may take to exit after SIGINT before it gets SIGTERM
+# s an executor thread may take to end its callback after the stop; its nodes are destroyed after it
+# ends (destroyed under a running callback, they raised InvalidHandle at shutdown on a loaded machine)
+EXECUTOR_STOP_TIMEOUT = 30.0
 RECORDER_TIMEOUT = 60.0  # s the recorder may take to discover a composed graph's topics
 # child process: import the node module and call its main([module, --ros-args, ...])
 # A child stopped while it still imports its node's module (SIGINT/SIGTERM before its main runs)
@@ -350,6 +353,7 @@ class Launcher:
             return
         self._stopped = True
         self._stop.set()
+        stop_flag = time.monotonic()
         for process in self.processes.values():
             _signal(process, signal.SIGINT)
         for sig in (signal.SIGTERM, signal.SIGKILL):
@@ -360,15 +364,24 @@ class Launcher:
                     self._print(label, f"did not stop within {timeout:g} s, sending {sig.name}")
                     _signal(process, sig)
             timeout = 3.0
+        executors = {t.name: t for t in self._threads if t.name in ("cdpr-launch-graph", "cdpr-launch-recorder")}
         for thread in self._threads:
             if thread.is_alive():
-                thread.join(timeout)
-        for node in self.nodes:
-            node.destroy_node()
-        if self.recorder is not None:
+                thread.join(max(0.0, stop_flag + EXECUTOR_STOP_TIMEOUT - time.monotonic())
+                            if thread.name in executors else timeout)
+        busy = {name for name, thread in executors.items() if thread.is_alive()}
+        for name in sorted(busy):   # a callback that does not end: its nodes stay as they are until exit
+            self._print(name.removeprefix("cdpr-launch-"), f"still in a callback {EXECUTOR_STOP_TIMEOUT:g} s after "
+                        "the stop; its nodes are left to the process's exit")
+        if "cdpr-launch-graph" not in busy:
+            for node in self.nodes:
+                node.destroy_node()
+        recorder_thread = "cdpr-launch-recorder" if "cdpr-launch-recorder" in executors else "cdpr-launch-graph"
+        if self.recorder is not None and recorder_thread not in busy:
             self.recorder.destroy_node()
-        for context in self._contexts:
-            context.try_shutdown()
+        if not busy:
+            for context in self._contexts:
+                context.try_shutdown()
         self._tmpdir.cleanup()
         self._done.set()
 

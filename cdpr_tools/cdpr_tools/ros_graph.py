@@ -2,8 +2,9 @@
 
 A command discovers the graph itself, or runs inside the graph daemon (``cdpr_tools.daemon``),
 whose node knows the graph already: there ``graph_node`` hands out the daemon's shared node, spun
-by the daemon's executor, and waits poll instead of spinning. Lookups wait (up to a timeout) for
-the node or topic asked for, and fail with the names that do exist.
+by the daemon's executor, and waits look again (or wait for an event a callback sets) instead of
+spinning. Lookups wait (up to a timeout) for the node or topic asked for, and fail with the names
+that do exist.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 DISCOVERY_TIMEOUT = 5.0  # s to wait for a named node or topic to appear
 SPIN_PERIOD = 0.05  # s, executor wake-up while waiting
 POLL_PERIOD = 0.005  # s between looks at a shared node, which another thread spins
+WAKE_PERIOD = 0.1  # s, the longest wait for a ``wake`` event before looking again
 
 
 def keep_discovery_local() -> None:
@@ -93,17 +95,24 @@ def graph_node(purpose: str) -> Iterator[Node]:
         context.try_shutdown()
 
 
-def spin_until(node: Node, done: Callable[[], bool], timeout: float | None) -> bool:
+def spin_until(node: Node, done: Callable[[], bool], timeout: float | None,
+               wake: threading.Event | None = None) -> bool:
     """Spin ``node``'s executor until ``done()`` or ``timeout`` seconds; returns ``done()``.
 
-    A shared node (the daemon's) is spun by another thread: then this only looks at ``done()``.
+    A shared node (the daemon's) is spun by another thread: then this only looks at ``done()``,
+    every POLL_PERIOD, or when ``wake`` is set (by the callback that makes ``done()`` true: one
+    wake-up instead of one every 5 ms, each of which waits for a core on a loaded machine).
     """
     deadline = None if timeout is None else time.monotonic() + timeout
     while not done():
         if deadline is not None and time.monotonic() >= deadline:
             return done()
         if _is_shared(node):
-            time.sleep(POLL_PERIOD)
+            if wake is None:
+                time.sleep(POLL_PERIOD)
+            else:
+                wake.wait(WAKE_PERIOD if deadline is None else min(WAKE_PERIOD, max(0.0, deadline - time.monotonic())))
+                wake.clear()    # done() is looked at next, so a set between the two is not lost
             continue
         try:
             node.executor.spin_once(timeout_sec=SPIN_PERIOD)
@@ -114,7 +123,9 @@ def spin_until(node: Node, done: Callable[[], bool], timeout: float | None) -> b
 
 def spin_future(node: Node, future, timeout: float, what: str):
     """Result of a future (a service call), or ``TimeoutError`` naming ``what`` was waited for."""
-    if not spin_until(node, future.done, timeout):
+    wake = threading.Event()
+    future.add_done_callback(lambda _future: wake.set())
+    if not spin_until(node, future.done, timeout, wake):
         raise TimeoutError(f"no answer from {what} within {timeout:g} s")
     return future.result()
 

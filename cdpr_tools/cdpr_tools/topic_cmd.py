@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import threading
 import time
 from typing import Callable
 
@@ -164,12 +165,18 @@ def run_echo(args) -> int:
         # transient-local subscription): wait for a publisher, not only for the topic's name
         found = find_topic(node, topic, args.timeout, publishers=True)
         received: list = []  # appended by the executor (the daemon's thread), taken here
-        subscription = node.create_subscription(message_class(args.type or found), topic, received.append,
+        arrived = threading.Event()
+
+        def on_message(msg) -> None:
+            received.append(msg)
+            arrived.set()
+
+        subscription = node.create_subscription(message_class(args.type or found), topic, on_message,
                                                 adapted_qos(node, topic))
         try:
             printed = 0
             while limit is None or printed < limit:
-                if not spin_until(node, lambda: bool(received), None if limit is None else args.timeout):
+                if not spin_until(node, lambda: bool(received), None if limit is None else args.timeout, arrived):
                     raise TimeoutError(f"no message on {topic} within {args.timeout:g} s; "
                                        f"it has {node.count_publishers(topic)} publisher(s)")
                 _print_message(received.pop(0), args.field)

@@ -5,8 +5,9 @@ The commands are read from the documents (inline code and the lines of code bloc
 must parse with the real parser (an option or verb renamed since is a failure). Those that need no
 robot and finish at once run: `cdpr launch ... --show` resolves the launch file, its arguments and
 `--only`/`--exclude` (and starts nothing), `cdpr robot` and `cdpr program check` do their work.
-The rest (a graph to talk to, minutes of simulation) is parsed only; tests/tools/test_cli_*.py and
-the graph tests run those verbs.
+The rest (a graph to talk to, minutes of simulation) is parsed here; tests/tools/test_docs_graph_commands.py
+runs the concrete graph commands against the launched graph, tests/tools/test_cli_*.py and the graph
+tests run the other verbs.
 """
 from __future__ import annotations
 

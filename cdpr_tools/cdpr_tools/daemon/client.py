@@ -1,25 +1,25 @@
 """Client side of the graph daemon: where its socket is, starting it on first use, handing it a command.
 
-Kept free of rclpy (and of everything ``cdpr param get`` does not need), so that a command the
-daemon answers costs little more than the Python interpreter's start. One daemon serves one
+Kept free of rclpy and of everything a command the daemon answers does not need, so that such a
+command costs little more than the Python interpreter's start: the path of ``answer`` imports
+only ``json``, ``socket``, ``zlib`` and ``contextlib`` beyond what the interpreter has loaded at
+its start (``os``, ``sys``, ``pathlib``); starting, killing and stopping a daemon import the rest
+when they run (``tests/tools/test_cli_daemon.py`` checks that a served command imports none of
+rclpy, argparse, yaml, numpy, subprocess, hashlib, threading). One daemon serves one
 graph: its socket's name holds the ROS domain, the discovery range and a digest of what else
 decides what it sees or runs (RMW implementation, static peers, this package's location).
 """
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
-import signal
 import socket
-import subprocess
 import sys
 import time
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
-
-from cdpr_tools.file_lock import locked
 
 NO_DAEMON_ENV = "CDPR_NO_DAEMON"  # set to 1: every command discovers the graph itself
 IDLE_TIMEOUT = 1800.0  # s without a command after which a daemon exits
@@ -58,8 +58,9 @@ def socket_path() -> Path:
         raise DaemonUnavailable(f"{directory} belongs to someone else or is open to others")
     domain = os.environ.get("ROS_DOMAIN_ID", "") or "0"
     scope = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") or "SUBNET"
-    digest = hashlib.sha1("\0".join((os.environ.get("RMW_IMPLEMENTATION", ""), os.environ.get("ROS_STATIC_PEERS", ""),
-                                      str(Path(__file__).resolve().parent))).encode()).hexdigest()[:8]
+    # crc32, not hashlib: hashlib loads OpenSSL (20 ms of a served command's start on a loaded machine)
+    digest = "%08x" % zlib.crc32("\0".join((os.environ.get("RMW_IMPLEMENTATION", ""), os.environ.get("ROS_STATIC_PEERS", ""),
+                                             str(Path(__file__).resolve().parent))).encode())
     return directory / f"daemon-domain{domain}-{scope.lower()}-{digest}.sock"
 
 
@@ -182,6 +183,8 @@ def _open(path: Path) -> Connection:
 
 def start_daemon(path: Path, idle_timeout: float = IDLE_TIMEOUT) -> Connection:
     """Start a daemon at ``path`` unless one answers there already; a connection to it."""
+    import subprocess
+    from cdpr_tools.file_lock import locked
     with locked(path.with_suffix(".lock")):   # one command at a time starts it; the others wait, then connect
         with contextlib.suppress(FileNotFoundError, ConnectionRefusedError):
             return _open(path)  # another command started it meanwhile
@@ -219,6 +222,8 @@ def daemon_pid(path: Path) -> int | None:
 
 def _kill_hung(path: Path) -> None:
     """A daemon that accepts connections but no commands is killed; the next command starts another."""
+    import signal
+    from cdpr_tools.file_lock import locked
     with locked(path.with_suffix(".lock")):   # one command at a time starts it; the others wait, then connect
         pid = daemon_pid(path)
         if pid is not None:

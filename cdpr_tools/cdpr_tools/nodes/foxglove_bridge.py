@@ -45,7 +45,10 @@ from cdpr_tools.message_convert import message_class
 from cdpr_tools.ros_graph import TopicSelection, adapted_qos
 
 DEFAULT_PORT = 8765  # Foxglove's default for a live connection
-SERVICE_TIMEOUT = 2.0  # s a node may take to answer a parameter request
+# s a node may take to answer a parameter or service request: a composed lockstep graph answers its
+# services between slices of its loop, and on a loaded machine (load 22, RTF 0.06) that took over
+# 2 s (the old limit: a Foxglove parameter set came back empty); the wait holds one server thread
+SERVICE_TIMEOUT = 10.0
 DISCOVERY_PERIOD = 0.5  # s between looks for new topics (default of ``discovery_period``)
 WATCH_PERIOD = 0.05  # s at most from a client's subscribe to the bridge's ROS subscription
 
@@ -200,6 +203,7 @@ class FoxgloveBridge(Node):
         future.add_done_callback(lambda _: done.set())
         if not done.wait(SERVICE_TIMEOUT):
             future.cancel()
+            self.get_logger().warning(f"a request got no answer within {SERVICE_TIMEOUT:g} s")
             return None
         return future.result()
 
