@@ -1,12 +1,12 @@
 """The hand's reserve of the force set-point while a user guides (section 5.2, docs/admittance.md):
-every cable is planned within [f_min + r, f_max - r], r the largest cable force the user's wrench
-takes, so that the cables keep their limits when the hand lets go; without a user the distribution
-is the thesis'."""
+every cable is planned within [f_min + r, f_max - r], r RESERVE_RING times the largest cable force
+the user's wrench takes (the swing of a release, not only its static change), so that the cables
+keep their limits when the hand lets go; without a user the distribution is the thesis'."""
 import numpy as np
 import pytest
 
-from cdpr_control.control.force_setpoint import (RESERVE_RELEASE_TIME, RESERVE_SHARE, ForceSetpoint, MarginLP,
-    largest_margin, user_forces)
+from cdpr_control.control.force_setpoint import (RESERVE_RELEASE_TIME, RESERVE_RING, RESERVE_SHARE, ForceSetpoint,
+    MarginLP, largest_margin, user_forces)
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.dynamics import platform_wrench
@@ -31,7 +31,7 @@ def _at_rest(fs, robot, periods, w_user=None):
 
 def _expected_reserve(robot, w_user):
     AT = inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).AT
-    return float(np.abs(np.linalg.lstsq(AT, w_user, rcond=None)[0]).max())
+    return RESERVE_RING * float(np.abs(np.linalg.lstsq(AT, w_user, rcond=None)[0]).max())
 
 
 def test_without_a_user_the_distribution_is_the_minimal_tension():
@@ -46,7 +46,7 @@ def test_the_user_wrench_raises_every_cable_by_its_reserve_at_the_tension_rate()
     fs = ForceSetpoint(MINI, DT, params)
     _at_rest(fs, MINI, 50)
     r = _expected_reserve(MINI, HAND)
-    assert r > 2.0                                               # N: what a 13 N push puts on a cable
+    assert r > 2.0 * RESERVE_RING                                # N: what a 13 N push puts on a cable, twice
     rate = params.tension_rate * float(np.max(fs.distributor.f_max - fs.distributor.f_min))
     first = _at_rest(fs, MINI, 1, HAND)[-1]
     assert fs.reserve == pytest.approx(rate * DT)                # rises smoothly, not as a step
