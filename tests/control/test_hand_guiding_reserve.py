@@ -153,3 +153,29 @@ def test_the_user_forces_are_the_least_squares_forces():
     np.testing.assert_allclose(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0], rtol=1e-10)
     AT[5] = 0.0                                                  # rank-deficient: the least-squares fallback
     np.testing.assert_array_equal(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0])
+
+
+def _pushed_beyond(guided: bool):
+    """The force set-point at the sweep's Mini #19 [0.083, 0.186, 0.104] (border), the measured wrench
+    that of a 13 N hand along -y, which no cable forces within [f_min, f_max] balance there."""
+    x, zero = np.r_[0.0834, 0.1859, 0.1041, 0.0, 0.0, 0.0], np.zeros(6)
+    hand = np.r_[0.0, -13.0, 0.0, 0.0, 0.0, 0.0]
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    w = platform_wrench(MINI, x, zero, zero)
+    fs.set_user_wrench(None)
+    for _ in range(600):
+        fs.update(x, zero, zero, w)
+    fs.set_user_wrench(hand - np.sign(hand) * 0.5 if guided else None)
+    return [fs.update(x, zero, zero, w + hand) for _ in range(1500)]
+
+
+def test_a_guided_setpoint_the_limits_cannot_hold_is_clipped_to_them():
+    """A hand pushing a wrench the pose cannot balance within the limits: the distribution returns
+    its least-violating forces (section 3.6.2), above f_max here; while a user guides they are
+    clipped to [f_min, f_max] (the platform gives way; the force watch holds on the measured forces),
+    the status still says the wrench had no solution. Without a user the distribution is the thesis'."""
+    plain = _pushed_beyond(False)[-1]
+    assert plain.status != Status.FEASIBLE and plain.f.max() > 40.0 + 1e-3   # the case to clip
+    guided = _pushed_beyond(True)
+    assert all(r.f.max() <= r.f_max.max() + 1e-12 and r.f.min() >= r.f_min.min() - 1e-12 for r in guided)
+    assert guided[-1].status != Status.FEASIBLE

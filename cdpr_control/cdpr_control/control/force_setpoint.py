@@ -347,6 +347,20 @@ class ForceSetpoint:
             return result
         return replace(raised, f_min=result.f_min, f_max=result.f_max, violation=result.violation)
 
+    @staticmethod
+    def _within_limits(result: DistributionResult) -> DistributionResult:
+        """While a user guides: forces outside [f_min, f_max] (the hand pushes a wrench the pose cannot
+        balance within them, and the distribution returns its least-violating forces, section 3.6.2)
+        clipped to the limits; status and violation still say that the wrench had no solution.
+
+        A departure from the thesis (which does not guide beyond the workspace's capacity): the
+        clipped forces do not balance the hand, so the platform gives way to it instead of the
+        drives being sent a force beyond f_max; where the hand goes on pushing, the force watch
+        holds on the measured forces (docs/admittance.md, docs/validation.md "Hand guiding after
+        session 11": up to 0.26 N above f_max before the hold at the Mini's border poses)."""
+        f = np.clip(result.f, result.f_min, result.f_max)
+        return result if np.array_equal(f, result.f) else replace(result, f=f)
+
     def _contact_wrench(self, contact) -> np.ndarray | None:
         """Section 5.1.2: the correction that puts the expected contact reaction into the distributed
         wrench (:func:`expected_contact_wrench_of`) of contact = (state letter, F_d,0 (3,), F_vec (3,))
@@ -395,6 +409,6 @@ class ForceSetpoint:
         result = self.distributor.solve(AT, self.w_d, self.dt)               # (3.27)-(3.28)
         if self.w_user is not None or self.reserve > 0.0:
             self._hand_reserve(AT)
-            result = self._with_reserve(AT, result)
+            result = self._within_limits(self._with_reserve(AT, result))
         self.f_d = result.f
         return result
