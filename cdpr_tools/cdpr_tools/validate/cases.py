@@ -91,7 +91,12 @@ REST_TIME, PUSH_RISE, PUSH_HOLD, PUSH_AFTER = 0.5, 0.1, 1.0, 0.8
 EIGEN = {"ipanema3_mini": {"cdm": (395.4, 5.0, 10.0), "push": 2.0},
          "ipanema3": {"cdm": (11843.5, 150.0, 300.0), "push": 65.0}}
 EIGEN_ZONE = {"zones.rest.radius": 0.03, "zones.free.box": [0.05] * 6}   # the oscillation stays in the rest sphere
-EIGEN_PUSH, EIGEN_WINDOW = 0.2, 1.0                # s: push length, fitted window after the release
+# s: push length, fitted window after the release: two periods of the 1 Hz oscillation. Over one
+# (1 s, until session 11) the fit followed the platform's position error where the WFW shrinks the
+# zone and with it the push and the oscillation: the Mini's #29 (border, seed 2; rest sphere 0.94 mm)
+# swings 0.21 mm peak to peak with 0.13 mm rms between the true x and x_d, and read -2.73 % over 1 s,
+# +0.38 % over 2 s, +0.55 % over 3 s (x_d itself: 0.000 %; home: -0.09, -0.000, +0.001 %)
+EIGEN_PUSH, EIGEN_WINDOW = 0.2, 2.0
 
 
 class Diverged(Exception):
