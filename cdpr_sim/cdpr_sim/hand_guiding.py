@@ -58,7 +58,8 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
     params, zones, loaded, clipping = fitted_settings({**shipped.admittance, **overrides}, robot)
     controller = AdmittanceController(loaded, shipped.dt, params, zones)
     source, hand = HandGuiding(controller, x_hold), Hand(list(segments))
-    when = enable_at if callable(enable_at) else (lambda k, loop, sim, k_on=int(round(enable_at / shipped.dt)): k == k_on)
+    k_on = None if callable(enable_at) else int(round(enable_at / shipped.dt))
+    when = enable_at if k_on is None else (lambda k, loop, sim: k == k_on)
     enabled_at = []
 
     def step(k, loop, sim):

@@ -1,8 +1,8 @@
 """What a user can push at a pose (the validation sweep's guiding push, issue 25 decision (a)):
 :func:`cdpr_tools.validate.cases.push_scale` scales the nominal push so that the hand's share of
 the cable forces, RESERVE_RING times (the release's swing), stays within the hand's reserve the
-pose leaves (RESERVE_SHARE of the largest margin t, docs/admittance.md), and a pose that carries less than PUSH_MIN_SCALE of it is *beyond
-capacity*, judged on safety (criteria: no cable below 0.5 f_min for > 50 ms while the loop
+pose leaves (RESERVE_SHARE of the largest margin t, docs/admittance.md), and a pose that carries
+less than PUSH_MIN_SCALE of it is *beyond capacity*, judged on safety (criteria: no cable below 0.5 f_min for > 50 ms while the loop
 commands, no force set-point above f_max then, the cables back within their limits within 0.5 s of
 the release). Checked against an independent LP (scipy's HiGHS) of the margin."""
 import numpy as np

@@ -402,8 +402,8 @@ def _fitted(spec: CaseSpec, robot, overrides: dict):
     from cdpr_control.control.admittance import fitted_settings
     from cdpr_control.control.params import shipped_configuration
 
-    values = {**shipped_configuration(robot).admittance, "zones.origin": (np.asarray(spec.x, dtype=float) - robot.home).tolist(),
-              **overrides}
+    origin = (np.asarray(spec.x, dtype=float) - robot.home).tolist()
+    values = {**shipped_configuration(robot).admittance, "zones.origin": origin, **overrides}
     return fitted_settings(values, robot)
 
 
@@ -424,7 +424,8 @@ class PushCapacity:
 def push_scale(robot, x, push, tol: float = 1e-4) -> PushCapacity:
     """The largest share k in [0, 1] of the hand's wrench ``push`` (6,) [N, N m] for which the hand's
     share of the cable forces stays within the reserve the pose leaves: max_i |Δf_i(k h)| <=
-    RESERVE_SHARE * t(w + k h) / RESERVE_RING, Δf = (A^T)^+ h (:func:`~cdpr_control.control.force_setpoint.user_forces`)
+    RESERVE_SHARE * t(w + k h) / RESERVE_RING, Δf = (A^T)^+ h
+    (:func:`~cdpr_control.control.force_setpoint.user_forces`)
     and t the largest margin (:func:`~cdpr_control.control.force_setpoint.largest_margin`) of the
     model's static wrench w (2.33) with the push, within the distribution's planned limits (the
     parameter file's f_min, the robot's f_max): exactly the hand's reserve r = min(2 share, 0.7 t)
@@ -505,8 +506,8 @@ def guiding_case(spec: CaseSpec) -> CaseResult:
     margin_key = "push_min_force_N" if capacity.beyond else "push_force_margin_N"
     metrics = {"push_N": float(np.linalg.norm(push[:3])), "push_scale": capacity.scale,
                "beyond_capacity": float(capacity.beyond)}
-    metrics.update(dict.fromkeys(("enabled_at_s", "rest_motion_mm", "rest_wrench_percent", margin_key, "push_min_force_N",
-                                  "safety_slack_s", "setpoint_above_f_max_N", "held_slack_s", "held_min_force_N",
+    metrics.update(dict.fromkeys(("enabled_at_s", "rest_motion_mm", "rest_wrench_percent", margin_key,
+                                  "push_min_force_N", "safety_slack_s", "setpoint_above_f_max_N", "held_slack_s", "held_min_force_N",
                                   "recovery_s"), float("nan")))
     held = rec.held
     if ok:
