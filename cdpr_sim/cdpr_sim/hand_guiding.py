@@ -25,12 +25,15 @@ class GuidingRun:
     source: HandGuiding      # its .outputs: the AdmittanceOutput of every period
     hand: Hand
     clipping: Clipping | None   # how the zones were shrunk to fit the wrench-feasible workspace (None: as configured)
+    enabled_at: float | None = None   # s: when hand guiding was switched on (None: never)
 
 
 def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = None, robot_name: str = "ipanema3_mini",
                 loop_params: ControlLoopParams | None = None, before_step=None, x_hold=None,
-                config: SimConfig = SimConfig(), enable_at: float = 0.0) -> GuidingRun:
-    """Hand guiding enabled at ``enable_at`` [s], holding ``x_hold`` (default home), the hand pushing
+                config: SimConfig = SimConfig(), enable_at=0.0) -> GuidingRun:
+    """Hand guiding enabled at ``enable_at`` [s] (or, a callable ``enable_at(k, loop, sim) -> bool``,
+    in the first period it returns true: switched on by a condition, e.g. the platform having
+    settled; ``GuidingRun.enabled_at`` says when), holding ``x_hold`` (default home), the hand pushing
     ``segments``, with the robot's parameter file (``overrides``: further flat
     ``admittance_controller`` parameters; ``loop_params``: instead of the file's loop).
 
@@ -55,14 +58,17 @@ def guiding_run(segments=(), duration: float = 1.0, overrides: dict | None = Non
     params, zones, loaded, clipping = fitted_settings({**shipped.admittance, **overrides}, robot)
     controller = AdmittanceController(loaded, shipped.dt, params, zones)
     source, hand = HandGuiding(controller, x_hold), Hand(list(segments))
-    k_enable = int(round(enable_at / shipped.dt))
+    k_on = None if callable(enable_at) else int(round(enable_at / shipped.dt))
+    when = enable_at if k_on is None else (lambda k, loop, sim: k == k_on)
+    enabled_at = []
 
     def step(k, loop, sim):
-        if k == k_enable:
+        if not enabled_at and when(k, loop, sim):
             controller.enable()
+            enabled_at.append(k * shipped.dt)
         hand.apply(sim)
         if before_step is not None:
             before_step(k, loop, sim)
 
     result = run(robot, source, duration, loop_params or shipped.loop, x0=x_hold, before_step=step, config=config)
-    return GuidingRun(result, source, hand, clipping)
+    return GuidingRun(result, source, hand, clipping, enabled_at[0] if enabled_at else None)

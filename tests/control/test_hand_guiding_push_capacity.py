@@ -1,15 +1,16 @@
 """What a user can push at a pose (the validation sweep's guiding push, issue 25 decision (a)):
 :func:`cdpr_tools.validate.cases.push_scale` scales the nominal push so that the hand's share of
-the cable forces stays within the hand's reserve the pose leaves (RESERVE_SHARE of the largest
-margin t, docs/admittance.md), and a pose that carries less than PUSH_MIN_SCALE of it is *beyond
-capacity*, judged on safety (criteria: no cable below 0.5 f_min for > 50 ms, no force set-point
-above f_max). Checked against an independent LP (scipy's HiGHS) of the margin."""
+the cable forces, RESERVE_RING times (the release's swing), stays within the hand's reserve the
+pose leaves (RESERVE_SHARE of the largest margin t, docs/admittance.md), and a pose that carries
+less than PUSH_MIN_SCALE of it is *beyond capacity*, judged on safety (criteria: no cable below 0.5 f_min for > 50 ms while the loop
+commands, no force set-point above f_max then, the cables back within their limits within 0.5 s of
+the release). Checked against an independent LP (scipy's HiGHS) of the margin."""
 import numpy as np
 import pytest
 from scipy.optimize import linprog
 
 from cdpr_control import kernels
-from cdpr_control.control.force_setpoint import RESERVE_SHARE
+from cdpr_control.control.force_setpoint import RESERVE_RING, RESERVE_SHARE
 from cdpr_control.model.robot import load_robot
 from cdpr_tools.validate import criteria
 from cdpr_tools.validate.cases import PUSH_MIN_SCALE, PushCapacity, hold_is_safe_reaction, push_scale
@@ -52,7 +53,7 @@ def test_the_push_scale_is_where_the_hands_share_meets_the_reserve(x, direction)
     w = weight(MINI, x)
     assert cap.share_N == pytest.approx(share(MINI, x, h), rel=1e-9)
     assert cap.margin_N == pytest.approx(margin(MINI, x, w + h), abs=1e-6)
-    gap = lambda k: RESERVE_SHARE * margin(MINI, x, w + k * h) - k * cap.share_N  # noqa: E731
+    gap = lambda k: RESERVE_SHARE * margin(MINI, x, w + k * h) - RESERVE_RING * k * cap.share_N  # noqa: E731
     if cap.scale == 1.0:
         assert gap(1.0) >= 0.0
     else:                      # the boundary: within at k, not just above it
@@ -77,7 +78,7 @@ def test_a_pose_without_margin_carries_no_push():
     h = np.r_[0.0, 0.0, 13.0, 0, 0, 0]
     cap = push_scale(MINI, x, h)
     assert cap.scale < 0.05
-    assert RESERVE_SHARE * margin(MINI, x, weight(MINI, x) + 0.05 * h) < 0.05 * cap.share_N
+    assert RESERVE_SHARE * margin(MINI, x, weight(MINI, x) + 0.05 * h) < RESERVE_RING * 0.05 * cap.share_N
 
 
 def test_safety_criteria_of_a_push_beyond_capacity():
@@ -93,6 +94,30 @@ def test_safety_criteria_of_a_push_beyond_capacity():
     assert criteria.above_limit(f_d, 40.0) == 0.5 and not criteria.BANDS["setpoint_above_f_max_N"].holds(0.5)
     f_d[5, 1] = np.nan                      # a NaN set-point is never within
     assert not criteria.BANDS["setpoint_above_f_max_N"].holds(criteria.above_limit(f_d, 40.0))
+
+
+def test_slack_counts_only_while_the_loop_commands_and_the_cables_must_recover():
+    """The lead's decision (session 11): slack while the loop holds (a hand still pushing a wrench
+    the pose cannot balance) is reported, not judged; a run of slack split by the hold is two runs;
+    after the release every cable is back within [f_min, f_max] within recovery_s."""
+    f = np.full((400, 8), 10.0)
+    f[100:300, 2] = 1.0                    # 200 ms below 0.5 f_min
+    acting = np.ones(400, dtype=bool)
+    assert criteria.slack_time(f, 2.5, 1e-3, where=acting) == pytest.approx(0.2)
+    acting[140:400] = False                # held from 40 ms into the slack on
+    assert criteria.slack_time(f, 2.5, 1e-3, where=acting) == pytest.approx(0.04)
+    assert criteria.slack_time(f, 2.5, 1e-3, where=~acting) == pytest.approx(0.16)
+    acting[200:210] = True                 # commanding again for 10 ms within the slack: a second run
+    assert criteria.slack_time(f, 2.5, 1e-3, where=acting) == pytest.approx(0.04)
+    f_min, f_max = MINI.cable.f_min, MINI.cable.f_max
+    assert criteria.recovery_time(f[300:], f_min, f_max, 1e-3) == 0.0
+    assert criteria.recovery_time(f[250:], f_min, f_max, 1e-3) == pytest.approx(0.05)
+    g = f.copy()
+    g[320, 5] = 40.5                       # above f_max later, once: recovered only after it
+    assert criteria.recovery_time(g[250:], f_min, f_max, 1e-3) == pytest.approx(0.071)
+    g[-1, 0] = 4.9                         # still outside at the end: never recovered
+    assert criteria.recovery_time(g[250:], f_min, f_max, 1e-3) == np.inf
+    assert criteria.BANDS["recovery_s"].holds(0.5) and not criteria.BANDS["recovery_s"].holds(0.501)
 
 
 def test_a_hold_passes_only_beyond_capacity_and_only_from_the_push_on():

@@ -1,12 +1,12 @@
 """The hand's reserve of the force set-point while a user guides (section 5.2, docs/admittance.md):
-every cable is planned within [f_min + r, f_max - r], r the largest cable force the user's wrench
-takes, so that the cables keep their limits when the hand lets go; without a user the distribution
-is the thesis'."""
+every cable is planned within [f_min + r, f_max - r], r RESERVE_RING times the largest cable force
+the user's wrench takes (the swing of a release, not only its static change), so that the cables
+keep their limits when the hand lets go; without a user the distribution is the thesis'."""
 import numpy as np
 import pytest
 
-from cdpr_control.control.force_setpoint import (RESERVE_RELEASE_TIME, RESERVE_SHARE, ForceSetpoint, MarginLP,
-    largest_margin, user_forces)
+from cdpr_control.control.force_setpoint import (RESERVE_RELEASE_TIME, RESERVE_RING, RESERVE_SHARE, ForceSetpoint,
+    MarginLP, largest_margin, user_forces)
 from cdpr_control.force_distribution import Status
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.dynamics import platform_wrench
@@ -31,7 +31,7 @@ def _at_rest(fs, robot, periods, w_user=None):
 
 def _expected_reserve(robot, w_user):
     AT = inverse_kinematics(robot, np.asarray(robot.home, dtype=float)).AT
-    return float(np.abs(np.linalg.lstsq(AT, w_user, rcond=None)[0]).max())
+    return RESERVE_RING * float(np.abs(np.linalg.lstsq(AT, w_user, rcond=None)[0]).max())
 
 
 def test_without_a_user_the_distribution_is_the_minimal_tension():
@@ -46,7 +46,7 @@ def test_the_user_wrench_raises_every_cable_by_its_reserve_at_the_tension_rate()
     fs = ForceSetpoint(MINI, DT, params)
     _at_rest(fs, MINI, 50)
     r = _expected_reserve(MINI, HAND)
-    assert r > 2.0                                               # N: what a 13 N push puts on a cable
+    assert r > 2.0 * RESERVE_RING                                # N: what a 13 N push puts on a cable, twice
     rate = params.tension_rate * float(np.max(fs.distributor.f_max - fs.distributor.f_min))
     first = _at_rest(fs, MINI, 1, HAND)[-1]
     assert fs.reserve == pytest.approx(rate * DT)                # rises smoothly, not as a step
@@ -153,3 +153,29 @@ def test_the_user_forces_are_the_least_squares_forces():
     np.testing.assert_allclose(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0], rtol=1e-10)
     AT[5] = 0.0                                                  # rank-deficient: the least-squares fallback
     np.testing.assert_array_equal(user_forces(AT, HAND), np.linalg.lstsq(AT, HAND, rcond=None)[0])
+
+
+def _pushed_beyond(guided: bool):
+    """The force set-point at the sweep's Mini #19 [0.083, 0.186, 0.104] (border), the measured wrench
+    that of a 13 N hand along -y, which no cable forces within [f_min, f_max] balance there."""
+    x, zero = np.r_[0.0834, 0.1859, 0.1041, 0.0, 0.0, 0.0], np.zeros(6)
+    hand = np.r_[0.0, -13.0, 0.0, 0.0, 0.0, 0.0]
+    fs = ForceSetpoint(MINI, DT, control_loop_params(MINI).force)
+    w = platform_wrench(MINI, x, zero, zero)
+    fs.set_user_wrench(None)
+    for _ in range(600):
+        fs.update(x, zero, zero, w)
+    fs.set_user_wrench(hand - np.sign(hand) * 0.5 if guided else None)
+    return [fs.update(x, zero, zero, w + hand) for _ in range(1500)]
+
+
+def test_a_guided_setpoint_the_limits_cannot_hold_is_clipped_to_them():
+    """A hand pushing a wrench the pose cannot balance within the limits: the distribution returns
+    its least-violating forces (section 3.6.2), above f_max here; while a user guides they are
+    clipped to [f_min, f_max] (the platform gives way; the force watch holds on the measured forces),
+    the status still says the wrench had no solution. Without a user the distribution is the thesis'."""
+    plain = _pushed_beyond(False)[-1]
+    assert plain.status != Status.FEASIBLE and plain.f.max() > 40.0 + 1e-3   # the case to clip
+    guided = _pushed_beyond(True)
+    assert all(r.f.max() <= r.f_max.max() + 1e-12 and r.f.min() >= r.f_min.min() - 1e-12 for r in guided)
+    assert guided[-1].status != Status.FEASIBLE

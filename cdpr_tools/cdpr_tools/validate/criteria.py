@@ -49,7 +49,13 @@ BANDS = {
     # safety while guided, every guiding case; the only push criteria of a pose *beyond capacity*
     # (cases.push_scale: the pose carries less than cases.PUSH_MIN_SCALE of the nominal push, which is
     # applied; the force watch's or the controller's hold is then the safe reaction, not a failure)
-    "safety_slack_s": Band(None, 0.05, "no cable below 0.5 f_min for > 50 ms (safety holds)"),
+    # (counted while the loop does not hold, the lead's decision of session 11: a hand that keeps
+    # pushing a wrench the pose cannot balance slackens a cable whatever the held robot does; that
+    # slack is reported as held_slack_s / held_min_force_N, not judged, and recovery_s judges the end)
+    "safety_slack_s": Band(None, 0.05, "no cable below 0.5 f_min for > 50 ms while the controller commands "
+                                       "(the safety layer holds before)"),
+    # after the hand lets go every cable is back within [f_min, f_max] within this and stays there
+    "recovery_s": Band(None, 0.5, "cables within [f_min, f_max] within 0.5 s of the release"),
     # (the set-point of the periods the loop does not hold: while it holds, the joint command restores
     # the force watch's last safe forces, and the live set-point does not reach the drives)
     "setpoint_above_f_max_N": Band(None, 0.0, "no force set-point above f_max to the drives (safety holds)"),
@@ -125,9 +131,23 @@ def longest_run(mask, dt: float) -> float:
     return best * dt
 
 
-def slack_time(f, f_min, dt: float) -> float:
-    """Longest time [s] any one cable stays below its f_min (f (N, m) [N])."""
-    return longest_run(np.asarray(f) < np.asarray(f_min), dt)
+def slack_time(f, f_min, dt: float, where=None) -> float:
+    """Longest time [s] any one cable stays below its f_min (f (N, m) [N]); ``where`` (N,) bool:
+    only the samples where it is true count (a run of slack interrupted by a false sample is two)."""
+    mask = np.asarray(f) < np.asarray(f_min)
+    if where is not None:
+        mask = mask & np.asarray(where, dtype=bool).reshape(-1, 1)
+    return longest_run(mask, dt)
+
+
+def recovery_time(f, f_min, f_max, dt: float) -> float:
+    """Time [s] from the first sample of f (N, m) until every cable is within [f_min, f_max] for
+    good (0: never outside; inf: still outside at the last sample)."""
+    f = np.asarray(f, dtype=float).reshape(len(f), -1)
+    outside = np.flatnonzero(((f < np.asarray(f_min)) | (f > np.asarray(f_max)) | ~np.isfinite(f)).any(axis=1))
+    if not len(outside):
+        return 0.0
+    return float("inf") if outside[-1] == len(f) - 1 else float((outside[-1] + 1) * dt)
 
 
 # ---- hand guiding (b) ---------------------------------------------------------------------------
