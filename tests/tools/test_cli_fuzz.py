@@ -198,6 +198,20 @@ def check_refused(code, out: str, err: str, named: str) -> None:
         assert [line for line in lines if line.startswith("cdpr ")] == [message], err
 
 
+# numbers a bag or a client cannot wait for, or that overflow its nanosecond times; patterns that
+# do not compile (issue 28: `--start-offset 1e300` answered "cannot convert float infinity to
+# integer", `--clock 1e300` spun for ever ignoring SIGTERM, `-x (` an re error naming no argument)
+ARGUMENTS = [(["bag", "play", "BAG", option, value], option)
+             for option, value in (("--start-offset", "1e300"), ("--delay", "1e300"), ("--delay", "-1"),
+                                   ("--wait-for-subscribers", "inf"), ("--clock", "1e300"), ("--clock", "-5"),
+                                   ("-r", "nan"))] + \
+    [(["bag", "record", "-a", option, value], option)
+     for option, value in (("--stop-after", "1e300"), ("--stop-after", "-1"), ("-d", "1e300"), ("-x", "("),
+                           ("-x", "[a-"))] + \
+    [(["program", "run", "rectangle", option, value], option)
+     for option, value in (("--timeout", "nan"), ("--timeout", "-1"), ("--timeout", "0"),
+                           ("--server-timeout", "-1"), ("--server-timeout", "inf"))]
+
 # fixed by the bag reader's work (issue 28): a file that is no MCAP is refused naming it
 BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", "{empty_mcap}"], "{empty_mcap}"),
               (["bag", "reindex", "{not_a_bag}"], "{not_a_bag}")] + \
@@ -207,7 +221,7 @@ BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", 
 
 
 @pytest.mark.parametrize("argv, named",
-                         ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + BAG_READER,
+                         ROBOT + PROGRAM + PARAM_LOAD + LAUNCH + BAG + IDENTIFY + ANALYZE + BAG_READER + ARGUMENTS,
                          ids=lambda v: " ".join(v) if isinstance(v, list) else None)
 def test_bad_input_is_refused_in_one_line_naming_it(files, capsys, argv, named):
     check_refused(*in_process(expand(argv, files), capsys), expand([named], files)[0])
