@@ -216,9 +216,16 @@ def _directory_metadata(path: Path) -> tuple[dict | None, str | None]:
 
 
 def _embedded_metadata_records(records) -> dict | None:
+    """The rosbag2 metadata a file carries in its metadata record; None when it has none or the
+    record is damaged (it lies outside the chunks, under no CRC, and only repeats what the
+    chunks tell)."""
     for record in records:
         if record.name == "rosbag2" and "serialized_metadata" in record.metadata:
-            return yaml.safe_load(record.metadata["serialized_metadata"])
+            try:
+                metadata = yaml.safe_load(record.metadata["serialized_metadata"])
+            except (yaml.YAMLError, RecursionError):
+                return None
+            return metadata if isinstance(metadata, dict) else None
     return None
 
 

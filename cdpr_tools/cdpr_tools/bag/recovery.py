@@ -355,6 +355,12 @@ class _Walk:
         self.seen: dict[tuple, int] = {}      # (times, size, CRC) of intact chunks -> their offset
         self.unknown: dict[int, list] = {}    # channel id -> [messages, first and last chunk offset]
         self.after_data_end = False
+        # where to look for the next chunk when a record cannot be read: from just after the end of
+        # the last chunk whose CRC held (its end is sure), or after the start of a damaged chunk whose length
+        # fields agreed (a byte inserted or deleted in it keeps them agreeing but moves its true end,
+        # and the records read after it were read out of step: the next chunk may start before the
+        # record found unreadable, and searching from there would lose it)
+        self.resync = len(MAGIC) + 1
 
     def run(self) -> McapLayout:
         pos = len(MAGIC)
@@ -382,7 +388,7 @@ class _Walk:
             return self.size
         allowed = _SUMMARY_RECORDS if self.after_data_end else _DATA_RECORDS
         if opcode not in allowed or end > self.size:
-            return self._skip(pos, self._next_chunk(pos + 1), "an unreadable part")
+            return self._unreadable(pos, "an unreadable part")
         if opcode == Opcode.MESSAGE_INDEX and self.pending is not None:
             self._count_index(pos, end)
             return end
@@ -393,8 +399,20 @@ class _Walk:
             try:
                 self._add(_parse(opcode, bytes(self.buf[pos + _HEAD.size:end])))
             except ChunkError:
-                return self._skip(pos, self._next_chunk(pos + 1), "an unreadable record")
+                return self._unreadable(pos, "an unreadable record")
         return end
+
+    def _unreadable(self, pos: int, what: str) -> int:
+        """Skip to the next chunk, searched from :attr:`resync`, after an unreadable record at ``pos``."""
+        resume = self._next_chunk(min(self.resync, pos + 1))
+        if resume > pos:
+            return self._skip(pos, resume, what)
+        # a chunk begins before the record: the record was read out of step (after a damaged chunk,
+        # reported on its own, or a damaged index record); nothing is skipped, the walk steps back
+        self._close_pending()
+        self.found.damage.append(Damage(self.found.path.name, pos, pos, 0,
+                                        f"{what}, read out of step: the walk went on with the chunk at byte {resume}"))
+        return resume
 
     def _chunk(self, pos: int) -> int:
         self._close_pending()
@@ -405,13 +423,16 @@ class _Walk:
             if end is None:                   # its length cannot be trusted: look for the next chunk
                 return self._skip(pos, self._next_chunk(pos + 1), f"a damaged chunk ({exc})")
             self.pending = {"start": pos, "end": end, "lost": 0, "indexed": False, "why": str(exc)}
+            self.resync = pos + 1
             return end
         key = _CHUNK.unpack_from(self.buf, pos + _HEAD.size)[:4]
         if key in self.seen:
             self.found.damage.append(Damage(self.found.path.name, pos, pos + ref.length, 0,
                                             f"a repeated copy of the chunk at byte {self.seen[key]}"))
+            self.resync = pos + ref.length + 1
             return pos + ref.length
         self.seen[key] = pos
+        self.resync = pos + ref.length + 1
         self.found.chunks.append(ref)
         for record in records:
             self._add(record, pos)
