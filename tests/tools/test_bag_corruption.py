@@ -1,6 +1,6 @@
 """Bags that lose only what is damaged (issue 28): a multi-chunk bag is damaged in many ways at
-several positions (bit flips, zeroed ranges, truncations, duplicated and reordered chunks, garbage
-footers), and each reader keeps exactly what the damage allows.
+several positions (bit flips, zeroed ranges, truncations, bytes inserted or deleted, duplicated
+and reordered chunks, garbage footers), and each reader keeps exactly what the damage allows.
 
 What survives is computed from the chunk boundaries of the undamaged file (its summary's chunk
 index, read with ``mcap``'s own reader), not from the code under test: a chunk survives when none
@@ -132,6 +132,34 @@ def reordered_chunks(data, chunks, at):
     return data[:a] + data[b:c] + data[a:b] + data[c:], set(EXPECTED)
 
 
+def _all_but(chunks, hit) -> set[int]:
+    return {t for c in chunks if c is not hit for t in c[2]}
+
+
+def bytes_inserted_in_a_chunk(data, chunks, at):
+    """100 bytes inserted in the middle of a chunk: its length fields still agree, but its true end
+    moved, and what follows is read out of step until the next chunk is found again."""
+    hit = _chunk_at(chunks, at)
+    middle = hit[0] + hit[1] // 2
+    return data[:middle] + random.Random(int(at * 100)).randbytes(100) + data[middle:], _all_but(chunks, hit)
+
+
+def byte_deleted_from_a_chunk(data, chunks, at):
+    """One byte gone from the middle of a chunk: the next chunk now starts a byte before where the
+    damaged chunk's length says it ends (issue 28: the walk started looking after it, and lost it)."""
+    hit = _chunk_at(chunks, at)
+    middle = hit[0] + hit[1] // 2
+    return data[:middle] + data[middle + 1:], _all_but(chunks, hit)
+
+
+def byte_deleted_from_an_index(data, chunks, at):
+    """One byte gone from the message index records after an intact chunk: no message is lost."""
+    offset, length, _ = _chunk_at(chunks, at)
+    following = next(c[0] for c in chunks if c[0] > offset)
+    cut = offset + length + (following - offset - length) // 2
+    return data[:cut] + data[cut + 1:], set(EXPECTED)
+
+
 def garbage_footer(data, chunks, at):
     damaged = bytearray(data)
     damaged[-30:] = random.Random(int(at * 100)).randbytes(30)
@@ -160,6 +188,8 @@ CASES = [(bit_flip_in_records, at) for at in POSITIONS] \
        for at in POSITIONS[::2]] \
     + [(zeroed(4096), 0.3), (zeroed(65536), 0.7)] \
     + [(damage, at) for damage in (duplicated_chunk, reordered_chunks) for at in (0.1, 0.9)] \
+    + [(damage, at) for damage in (bytes_inserted_in_a_chunk, byte_deleted_from_a_chunk) for at in POSITIONS[::2]] \
+    + [(byte_deleted_from_an_index, at) for at in (0.3, 0.7)] \
     + [(bit_flip_in_the_summary, at) for at in (0.3, 0.6, 0.9)] \
     + [(garbage_footer, 0.0), (garbage_footer, 0.5), (footer_pointing_into_the_data, 0.5),
        (garbage_after_the_footer, 0.0), (bit_flip_in_records, 0.0), (truncated, 0.999)]
@@ -291,3 +321,17 @@ def test_messages_whose_channel_record_is_lost_are_counted_lost(original, tmp_pa
     assert sum(d.lost for d in lost) == intact > 0
     assert cdpr(["bag", "reindex", str(bag_path)]) == 1
     assert "cannot repair" in capsys.readouterr().err
+
+
+def test_a_damaged_rosbag2_metadata_record_costs_nothing(original, tmp_path, capsys):
+    """The rosbag2 metadata record (outside the chunks, under no CRC) with a control character in its
+    YAML: the messages are all there, play exits 0 (issue 28: a YAML traceback)."""
+    path, data, _ = original
+    at = data.index(b"serialized_metadata") + 40
+    bag = tmp_path / "run"
+    shutil.copytree(path, bag)
+    (bag / "run_0.mcap").write_bytes(data[:at] + b"\x18" + data[at + 1:])
+    reader = BagReader(bag)
+    assert reader.message_count == N == len(list(reader.messages()))
+    assert cdpr(["bag", "play", str(bag), "-r", "1000000"]) == 0
+    assert f"published {N} messages" in capsys.readouterr().out
