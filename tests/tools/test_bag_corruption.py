@@ -322,16 +322,3 @@ def test_messages_whose_channel_record_is_lost_are_counted_lost(original, tmp_pa
     assert cdpr(["bag", "reindex", str(bag_path)]) == 1
     assert "cannot repair" in capsys.readouterr().err
 
-
-def test_a_damaged_rosbag2_metadata_record_costs_nothing(original, tmp_path, capsys):
-    """The rosbag2 metadata record (outside the chunks, under no CRC) with a control character in its
-    YAML: the messages are all there, play exits 0 (issue 28: a YAML traceback)."""
-    path, data, _ = original
-    at = data.index(b"serialized_metadata") + 40
-    bag = tmp_path / "run"
-    shutil.copytree(path, bag)
-    (bag / "run_0.mcap").write_bytes(data[:at] + b"\x18" + data[at + 1:])
-    reader = BagReader(bag)
-    assert reader.message_count == N == len(list(reader.messages()))
-    assert cdpr(["bag", "play", str(bag), "-r", "1000000"]) == 0
-    assert f"published {N} messages" in capsys.readouterr().out

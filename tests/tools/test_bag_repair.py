@@ -175,3 +175,17 @@ def test_a_damaged_metadata_yaml_is_ignored_with_a_warning_and_rebuilt(split_bag
     assert cdpr(["bag", "reindex", str(bag)]) == 0
     assert f"metadata.yaml: rebuilt ({N} messages" in capsys.readouterr().out
     assert BagReader(bag).problems == [] and rosbags_times(bag) == list(map(log_time, range(N)))
+
+
+def test_a_damaged_rosbag2_metadata_record_costs_nothing(split_bag, tmp_path, capsys):
+    """The rosbag2 metadata record of a file (outside the chunks, under no CRC) with a control
+    character in its YAML: every message is there, play exits 0 (issue 28: a YAML traceback)."""
+    bag, chunks = copy(split_bag, tmp_path)
+    last = bag / max(chunks, key=lambda n: int(n[4:-5]))            # the writer puts it in the last file
+    data = last.read_bytes()
+    at = data.index(b"serialized_metadata") + 40
+    last.write_bytes(data[:at] + b"\x18" + data[at + 1:])
+    reader = BagReader(bag)
+    assert reader.message_count == N == len(list(reader.messages())) and reader.damage == []
+    assert cdpr(["bag", "play", str(bag), "-r", "1000000"]) == 0
+    assert f"published {N} messages" in capsys.readouterr().out
