@@ -211,6 +211,9 @@ ARGUMENTS = [(["bag", "play", "BAG", option, value], option)
     [(["program", "run", "rectangle", option, value], option)
      for option, value in (("--timeout", "nan"), ("--timeout", "-1"), ("--timeout", "0"),
                            ("--server-timeout", "-1"), ("--server-timeout", "inf"))]
+ARGUMENTS += [(["param", "list", "--spin-time", "nan"], "--spin-time"),
+              (["param", "get", "/x", "y", "--timeout", "-1"], "--timeout"),
+              (["param", "set", "/x", "y", "1", "--timeout", "inf"], "--timeout")]
 
 # fixed by the bag reader's work (issue 28): a file that is no MCAP is refused naming it
 BAG_READER = [(["bag", "info", "{not_a_bag}"], "{not_a_bag}"), (["bag", "info", "{empty_mcap}"], "{empty_mcap}"),
@@ -257,3 +260,13 @@ def test_a_closed_pipe_ends_quietly_as_coreutils_do(argv):
         process.wait()
         process.stderr.close()
     assert err == "" and code == 141            # 128 + SIGPIPE, the status of `yes | head -0`
+
+
+@pytest.mark.parametrize("text", ["!!binary_AAA", "{a: 1", "[1, 2", "[" * 2000])
+def test_a_parameter_value_that_is_not_yaml_is_a_string(text):
+    """`cdpr param set NODE NAME VALUE`: VALUE is read as YAML, as `ros2 param set` does; what does not
+    parse is the text itself (issue 28: a tag or scanner error escaped as a YAML caret message)."""
+    from rcl_interfaces.msg import ParameterType
+    from cdpr_tools.param_cmd import parameter_value
+    value = parameter_value(text)
+    assert value.type == ParameterType.PARAMETER_STRING and value.string_value == text
