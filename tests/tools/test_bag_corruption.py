@@ -152,6 +152,21 @@ def byte_deleted_from_a_chunk(data, chunks, at):
     return data[:middle] + data[middle + 1:], _all_but(chunks, hit)
 
 
+def stray_opcode(opcode: int, name: str):
+    """A byte inserted into a chunk whose last byte now reads as ``opcode``: the walk, out of step by
+    a byte, meets that record at the chunk's claimed end, its length made of the real index record's
+    bytes (issue 28: taken for the data end, every chunk after it was dropped as "summary, messages
+    lost: 0"; taken for a message index, two intact chunks were jumped over)."""
+    def damage(data, chunks, at):
+        hit = _chunk_at(chunks, at)
+        damaged = bytearray(data)
+        damaged[hit[0] + hit[1] - 1] = opcode
+        middle = hit[0] + hit[1] // 2
+        return bytes(damaged[:middle] + b"\xa5" + damaged[middle:]), _all_but(chunks, hit)
+    damage.__name__ = f"stray_{name}_after_a_shifted_chunk"
+    return damage
+
+
 def byte_deleted_from_an_index(data, chunks, at):
     """One byte gone from the message index records after an intact chunk: no message is lost."""
     offset, length, _ = _chunk_at(chunks, at)
@@ -190,6 +205,8 @@ CASES = [(bit_flip_in_records, at) for at in POSITIONS] \
     + [(damage, at) for damage in (duplicated_chunk, reordered_chunks) for at in (0.1, 0.9)] \
     + [(damage, at) for damage in (bytes_inserted_in_a_chunk, byte_deleted_from_a_chunk) for at in POSITIONS[::2]] \
     + [(byte_deleted_from_an_index, at) for at in (0.3, 0.7)] \
+    + [(stray_opcode(opcode, name), at) for opcode, name in ((0x0F, "data_end"), (0x07, "message_index"))
+       for at in (0.1, 0.5)] \
     + [(bit_flip_in_the_summary, at) for at in (0.3, 0.6, 0.9)] \
     + [(garbage_footer, 0.0), (garbage_footer, 0.5), (footer_pointing_into_the_data, 0.5),
        (garbage_after_the_footer, 0.0), (bit_flip_in_records, 0.0), (truncated, 0.999)]

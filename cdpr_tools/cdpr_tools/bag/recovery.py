@@ -33,7 +33,7 @@ import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, MessageIndex, Metadata, Schema, Statistics
+from mcap.records import Attachment, Channel, Message, MessageIndex, Metadata, Schema, Statistics
 from mcap.writer import CompressionType, IndexType, Writer
 
 from cdpr_tools.bag.qos import parse_profiles
@@ -228,7 +228,7 @@ def _chunk_records(data: bytes) -> list:
 def _parse(opcode: int, content: bytes):
     """A schema, channel, metadata, message index or statistics record from its content bytes."""
     kind = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.METADATA: Metadata,
-            Opcode.MESSAGE_INDEX: MessageIndex, Opcode.STATISTICS: Statistics}[opcode]
+            Opcode.MESSAGE_INDEX: MessageIndex, Opcode.STATISTICS: Statistics, Opcode.ATTACHMENT: Attachment}[opcode]
     stream = ReadDataStream(io.BytesIO(content))
     try:
         record = kind.read(stream)
@@ -387,7 +387,7 @@ class _Walk:
             self.found.complete = True
             return self.size
         allowed = _SUMMARY_RECORDS if self.after_data_end else _DATA_RECORDS
-        if opcode not in allowed or end > self.size:
+        if opcode not in allowed or end > self.size or not _plausible(self.buf, pos, opcode, length):
             return self._unreadable(pos, "an unreadable part")
         if opcode == Opcode.MESSAGE_INDEX and self.pending is not None:
             self._count_index(pos, end)
@@ -501,6 +501,33 @@ class _Walk:
                 found.damage.append(Damage(found.path.name, first, last, count,
                                            f"the messages of channel {cid} in the chunks from byte {first} to "
                                            f"{last}: its channel record was in a damaged part"))
+
+
+def _plausible(buf, pos: int, opcode: int, length: int) -> bool:
+    """Whether a record outside the chunks (under no CRC) can be what its opcode says: after damage
+    the walk may read out of step, and a stray byte taken for the data end (which ends the search
+    for chunks) or for a message index with a large length (which jumps over chunks) loses the
+    intact chunks after it. The header comes first only; the data end holds a 4-byte CRC; a message
+    index holds a channel id and a length-prefixed list of 16-byte entries; an attachment parses
+    to its length and matches its CRC (when it has one)."""
+    if opcode == Opcode.HEADER:
+        return pos == len(MAGIC)
+    if opcode == Opcode.DATA_END:
+        return length == 4
+    if opcode == Opcode.MESSAGE_INDEX:
+        if length < _MESSAGE_INDEX.size:
+            return False
+        entries = _MESSAGE_INDEX.unpack_from(buf, pos + _HEAD.size)[1]
+        return entries % 16 == 0 and length == _MESSAGE_INDEX.size + entries
+    if opcode == Opcode.ATTACHMENT:
+        content = bytes(buf[pos + _HEAD.size:pos + _HEAD.size + length])
+        try:
+            _parse(opcode, content)
+        except ChunkError:
+            return False
+        (crc,) = struct.unpack_from("<I", content, len(content) - 4)   # it covers all before it
+        return crc in (0, zlib.crc32(content[:-4]))
+    return True
 
 
 def _consistent_end(buf, pos: int) -> int | None:
