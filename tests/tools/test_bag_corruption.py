@@ -1,5 +1,5 @@
 """Bags that lose only what is damaged (issue 28): a multi-chunk bag is damaged in many ways at
-several positions (bit flips, zeroed ranges, truncations, bytes inserted or deleted, duplicated
+several positions (bit flips, zeroed ranges, truncations, bytes inserted or deleted (one, or a range), duplicated
 and reordered chunks, garbage footers), and each reader keeps exactly what the damage allows.
 
 What survives is computed from the chunk boundaries of the undamaged file (its summary's chunk
@@ -167,6 +167,36 @@ def stray_opcode(opcode: int, name: str):
     return damage
 
 
+def deleted(size):
+    """``size`` bytes cut out from the middle of a chunk on: the chunks the range touches are lost,
+    those after it come a range earlier than the damaged chunk's length says it ends."""
+    def damage(data, chunks, at):
+        hit = _chunk_at(chunks, at)
+        start = hit[0] + hit[1] // 2
+        return data[:start] + data[start + size:], \
+            {t for offset, length, times in chunks if not (offset < start + size and start < offset + length)
+             for t in times}
+    damage.__name__ = f"deleted_{size}"
+    return damage
+
+
+def chunk_opcode_where_a_shortened_chunk_claims_to_end(data, chunks, at):
+    """Bytes cut out of a chunk K (its length fields intact) so that the next, shorter chunk now ends
+    before K's claimed end, and a chunk opcode there (K+1's index record's, overwritten: no message in
+    it): the walk meets a chunk record with a bad length after an intact chunk it has passed over
+    (issue 28: it searched on after that record, and lost the intact chunk)."""
+    k = chunks.index(_chunk_at(chunks, at))
+    k = next(j for j in range(max(k, 1), len(chunks) - 1) if chunks[j][1] - chunks[j + 1][1] >= 60)
+    (offset, length, _), (next_offset, next_length, _) = chunks[k], chunks[k + 1]
+    index_of_next = next_offset + next_length                 # where K+1's message index records start
+    cut = index_of_next - (offset + length)                   # K's claimed end lands there
+    first = offset + 49                                       # the first byte after K's header fields
+    assert first + cut <= next_offset                         # K+1 itself is not touched
+    damaged = bytearray(data)
+    damaged[index_of_next] = 0x06
+    return bytes(damaged[:first] + damaged[first + cut:]), _all_but(chunks, chunks[k])
+
+
 def byte_deleted_from_an_index(data, chunks, at):
     """One byte gone from the message index records after an intact chunk: no message is lost."""
     offset, length, _ = _chunk_at(chunks, at)
@@ -205,6 +235,8 @@ CASES = [(bit_flip_in_records, at) for at in POSITIONS] \
     + [(damage, at) for damage in (duplicated_chunk, reordered_chunks) for at in (0.1, 0.9)] \
     + [(damage, at) for damage in (bytes_inserted_in_a_chunk, byte_deleted_from_a_chunk) for at in POSITIONS[::2]] \
     + [(byte_deleted_from_an_index, at) for at in (0.3, 0.7)] \
+    + [(deleted(5000), at) for at in POSITIONS[::2]] + [(deleted(20000), 0.5)] \
+    + [(chunk_opcode_where_a_shortened_chunk_claims_to_end, 0.9)] \
     + [(stray_opcode(opcode, name), at) for opcode, name in ((0x0F, "data_end"), (0x07, "message_index"))
        for at in (0.1, 0.5)] \
     + [(bit_flip_in_the_summary, at) for at in (0.3, 0.6, 0.9)] \

@@ -421,7 +421,7 @@ class _Walk:
         except ChunkError as exc:
             end = _consistent_end(self.buf, pos)
             if end is None:                   # its length cannot be trusted: look for the next chunk
-                return self._skip(pos, self._next_chunk(pos + 1), f"a damaged chunk ({exc})")
+                return self._unreadable(pos, f"a damaged chunk ({exc})")
             self.pending = {"start": pos, "end": end, "lost": 0, "indexed": False, "why": str(exc)}
             self.resync = pos + 1
             return end
