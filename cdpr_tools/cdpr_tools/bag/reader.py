@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 from rclpy.serialization import deserialize_message
 
+from cdpr_control.model.yaml_file import YamlFileError, load_yaml
 from cdpr_tools.bag.qos import parse_profiles
 from cdpr_tools.bag.recovery import ChunkError, Damage, McapLayout, NotMcapError, layout, split_order
 from cdpr_tools.message_convert import field_value, message_class
@@ -195,24 +196,22 @@ def _directory_metadata(path: Path) -> tuple[dict | None, str | None]:
     meta = path / "metadata.yaml" if path.is_dir() else None
     if meta is None or not meta.is_file():
         return None, None
+    ignored = "; ignored: the bag's .mcap files are read by their names; `cdpr bag reindex` writes it again"
     try:
-        data = yaml.safe_load(meta.read_text(encoding="utf-8"))
-        if data is None:
-            return None, None                  # emptied: the files tell (issue 28)
-        info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
-        if not isinstance(info, dict):
-            raise ValueError("no rosbag2_bagfile_information mapping in it")
-        files = info.get("relative_file_paths")
-        if files is not None and not (isinstance(files, list) and all(isinstance(f, str) for f in files)):
-            raise ValueError("relative_file_paths is not a list of file names")
+        data = load_yaml(meta, "bag metadata file")
+    except YamlFileError as exc:            # names the file and the problem (encoding, YAML, nesting)
+        return None, f"{exc}{ignored}"
+    if data is None:
+        return None, None                   # emptied: the files tell (issue 28)
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    files = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(info, dict):
+        why = "no rosbag2_bagfile_information mapping in it"
+    elif files is not None and not (isinstance(files, list) and all(isinstance(f, str) for f in files)):
+        why = "relative_file_paths is not a list of file names"
+    else:
         return info, None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
-        reason = (exc.strerror if isinstance(exc, OSError) else
-                  "not UTF-8 text" if isinstance(exc, UnicodeDecodeError) else
-                  "not valid YAML" if isinstance(exc, yaml.YAMLError) else
-                  "nested too deep" if isinstance(exc, RecursionError) else str(exc))
-        return None, (f"{meta}: cannot be used ({reason}); ignored: the bag's .mcap files are read by their "
-                      "names; `cdpr bag reindex` writes it again")
+    return None, f"{meta}: cannot be used ({why}){ignored}"
 
 
 def _embedded_metadata_records(records) -> dict | None:
