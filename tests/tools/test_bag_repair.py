@@ -3,6 +3,7 @@ chunk in one of its files, a split bag with a file that is no MCAP at all, a reb
 fit on the disk, and a damaged metadata.yaml. Each asserts how many messages survive against what
 the damage allows (computed from the undamaged files' chunk indexes, read with ``mcap``'s reader),
 what the exit status is, and that reindex never reports a message it did not write."""
+import random
 import resource
 import shutil
 import subprocess
@@ -197,8 +198,8 @@ def test_random_damage_keeps_every_chunk_it_did_not_touch(tmp_path, compression)
     places: the reader never raises, returns only recorded messages, each once, in order, keeps
     every chunk the damage did not touch, reports damage whenever it lost something, and reindex
     gives a file that reads back with the same messages and no damage. (A 1000-case run of the same
-    found the stray data-end and the resynchronisation losses the named cases above pin down.)"""
-    import random
+    found the stray data-end and the resynchronisation losses that named cases in
+    test_bag_corruption.py pin down.)"""
     source = tmp_path / "source"
     with BagWriter(source, chunk_size=CHUNK, compression=compression) as bag:
         for i in range(1000):
