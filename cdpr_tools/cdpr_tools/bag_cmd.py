@@ -7,6 +7,7 @@ these commands read bags from ``ros2 bag`` in turn.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import threading
 from datetime import datetime, timezone
@@ -16,7 +17,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from cdpr_control.analysis.arguments import non_negative, positive
-from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, BagPlayer
+from cdpr_tools.bag.player import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ, MAX_SECONDS, BagPlayer
 from cdpr_tools.bag.reader import BagReader, CorruptBagError
 from cdpr_tools.bag.recovery import RepairError, reindex
 from cdpr_tools.bag.recorder import BagRecorder, default_bag_name
@@ -37,16 +38,16 @@ def add_parser(sub) -> None:
     r.add_argument("-a", "--all", action="store_true", help="record every topic (the default without TOPICS)")
     r.add_argument("-o", "--output", help="bag directory, or a path ending in .mcap for a single file "
                                           "(default: bags/rosbag2_<date>-<time>)")
-    r.add_argument("-x", "--exclude", default="", help="regular expression of topics not to record")
+    r.add_argument("-x", "--exclude", type=_regex, default="", help="regular expression of topics not to record")
     r.add_argument("--include-hidden-topics", action="store_true", help="also record hidden topics (/_...)")
     r.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the wall clock")
-    r.add_argument("--stop-after", type=non_negative, metavar="SEC", help="stop recording after SEC seconds")
+    r.add_argument("--stop-after", type=_seconds, metavar="SEC", help="stop recording after SEC seconds")
     r.add_argument("--compression", choices=("none", "zstd", "lz4"), default="zstd",
                    help="compress each MCAP chunk (default zstd, in the writer process); every reader of "
                         "MCAP decompresses it")
     r.add_argument("-b", "--max-bag-size", type=_byte_count, default=0, metavar="BYTES",
                    help="split into files of about BYTES (rosbag2's numbered files, one metadata.yaml; 0: one file)")
-    r.add_argument("-d", "--max-bag-duration", type=non_negative, default=0.0, metavar="SEC",
+    r.add_argument("-d", "--max-bag-duration", type=_seconds, default=0.0, metavar="SEC",
                    help="split into files of SEC seconds of log time (0: one file)")
     r.set_defaults(run=run_record)
 
@@ -60,14 +61,14 @@ def add_parser(sub) -> None:
                                      "relative timing.")
     y.add_argument("bag", help="bag directory or .mcap file")
     y.add_argument("-r", "--rate", type=positive, default=1.0, help="playback speed factor (default 1.0)")
-    y.add_argument("--clock", type=positive, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
+    y.add_argument("--clock", type=_clock_hz, nargs="?", const=DEFAULT_CLOCK_HZ, default=0.0, metavar="HZ",
                    help=f"publish /clock from the bag time at HZ (default {DEFAULT_CLOCK_HZ:g} Hz when given)")
     y.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
-    y.add_argument("--start-offset", type=non_negative, default=0.0, metavar="SEC",
+    y.add_argument("--start-offset", type=_seconds, default=0.0, metavar="SEC",
                    help="start SEC seconds into the bag")
     y.add_argument("-l", "--loop", action="store_true", help="play the bag again and again until Ctrl-C")
-    y.add_argument("-d", "--delay", type=non_negative, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
-    y.add_argument("--wait-for-subscribers", type=non_negative, default=0.0, metavar="SEC",
+    y.add_argument("-d", "--delay", type=_seconds, default=0.0, metavar="SEC", help="wait SEC seconds before playing")
+    y.add_argument("--wait-for-subscribers", type=_seconds, default=0.0, metavar="SEC",
                    help="wait up to SEC seconds until every topic has a subscriber")
     y.add_argument("--remap", nargs="+", type=_remap, default=[], metavar="FROM:=TO",
                    help="publish bag topic FROM on topic TO (as ros2 bag play --remap)")
@@ -81,6 +82,32 @@ def add_parser(sub) -> None:
                                      "new metadata.yaml. Exits 1 when nothing could be read.")
     x.add_argument("bag", help="bag directory or .mcap file")
     x.set_defaults(run=run_reindex)
+
+
+def _seconds(text: str) -> float:
+    """A duration [s]: finite, >= 0 and at most MAX_SECONDS (argparse type; beyond it a bag's
+    nanosecond times and a thread's wait overflow)."""
+    value = non_negative(text)
+    if value > MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_SECONDS:g} s (31 years), got {text!r}")
+    return value
+
+
+def _clock_hz(text: str) -> float:
+    """A /clock rate [Hz] in (0, MAX_CLOCK_HZ] (argparse type)."""
+    value = positive(text)
+    if value > MAX_CLOCK_HZ:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_CLOCK_HZ:g} Hz, got {text!r}")
+    return value
+
+
+def _regex(text: str) -> str:
+    """A Python regular expression (argparse type)."""
+    try:
+        re.compile(text)
+    except re.error as exc:
+        raise argparse.ArgumentTypeError(f"not a regular expression: {text!r} ({exc})") from None
+    return text
 
 
 def _byte_count(text: str) -> int:
@@ -150,6 +177,8 @@ def run_reindex(args) -> int:
     try:
         report = reindex(args.bag)
     except RepairError as exc:
+        for line in exc.report:             # what was repaired nevertheless (other files of the bag)
+            print(line)
         print(f"cdpr bag reindex: error: {exc}", file=sys.stderr)
         return 1
     for line in report:

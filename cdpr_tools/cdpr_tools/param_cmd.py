@@ -19,6 +19,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.parameter import Parameter, get_parameter_value, parameter_value_to_python
 
+from cdpr_control.analysis.arguments import non_negative, positive
 from cdpr_tools.daemon.client import add_no_daemon
 from cdpr_control.model.yaml_file import load_yaml
 from cdpr_tools.ros_graph import (
@@ -60,7 +61,7 @@ def add_parser(sub) -> None:
 
     ls = verbs.add_parser("list", help="parameter names of one node or of every node")
     ls.add_argument("node", nargs="?", help="node name (default: every node)")
-    ls.add_argument("--spin-time", type=float, default=0.5, metavar="SEC",
+    ls.add_argument("--spin-time", type=non_negative, default=0.5, metavar="SEC",
                     help="without NODE: list once the graph has not changed for SEC seconds (default 0.5)")
     _common(ls)
     ls.set_defaults(run=run_list)
@@ -106,7 +107,7 @@ def add_parser(sub) -> None:
 
 
 def _common(p) -> None:
-    p.add_argument("--timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
+    p.add_argument("--timeout", type=positive, default=DISCOVERY_TIMEOUT, metavar="SEC",
                    help=f"wait up to SEC seconds for the node and its answers (default {DISCOVERY_TIMEOUT:g})")
     add_no_daemon(p)
 
@@ -182,8 +183,8 @@ def parameter_value(text: str) -> ParameterValue:
     """A command-line value read as YAML, as ``ros2 param set`` does; ValueError saying why not."""
     try:
         python = yaml.safe_load(text)
-    except yaml.YAMLError:
-        python = text
+    except (yaml.YAMLError, RecursionError):   # not YAML ('{a: 1', '!!tag x'): the text itself, a string
+        return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=text)
     ints = python if isinstance(python, list) else [python]
     for v in ints:
         if isinstance(v, int) and not isinstance(v, bool) and not _INT64[0] <= v <= _INT64[1]:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 
 from cdpr_control import programs
+from cdpr_control.analysis.arguments import non_negative, positive
 from cdpr_control.motion.gcode import parse_gcode
 from cdpr_control.motion.program import GCodeError
 from cdpr_control.motion.program_check import check_program
@@ -27,8 +28,9 @@ def add_parser(sub) -> None:
     run = verbs.add_parser("run", help="run a program through the RunProgram action of a running graph")
     run.add_argument("program", help="G-code file or shipped program name")
     run.add_argument("--action", default="/run_program", help="action name (default /run_program)")
-    run.add_argument("--timeout", type=float, default=3600.0, help="wall-clock limit [s]")
-    run.add_argument("--server-timeout", type=float, default=DISCOVERY_TIMEOUT, metavar="SEC",
+    run.add_argument("--timeout", type=positive, default=3600.0, metavar="SEC",
+                     help="wall-clock limit from sending the program to its end [s] (default 3600)")
+    run.add_argument("--server-timeout", type=non_negative, default=DISCOVERY_TIMEOUT, metavar="SEC",
                      help=f"wait up to SEC seconds for the graph's action server (default {DISCOVERY_TIMEOUT:g})")
     run.set_defaults(run=_run)
 

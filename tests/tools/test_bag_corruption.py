@@ -1,6 +1,6 @@
 """Bags that lose only what is damaged (issue 28): a multi-chunk bag is damaged in many ways at
-several positions (bit flips, zeroed ranges, truncations, duplicated and reordered chunks, garbage
-footers), and each reader keeps exactly what the damage allows.
+several positions (bit flips, zeroed ranges, truncations, bytes inserted or deleted (one, or a range), duplicated
+and reordered chunks, garbage footers), and each reader keeps exactly what the damage allows.
 
 What survives is computed from the chunk boundaries of the undamaged file (its summary's chunk
 index, read with ``mcap``'s own reader), not from the code under test: a chunk survives when none
@@ -132,6 +132,79 @@ def reordered_chunks(data, chunks, at):
     return data[:a] + data[b:c] + data[a:b] + data[c:], set(EXPECTED)
 
 
+def _all_but(chunks, hit) -> set[int]:
+    return {t for c in chunks if c is not hit for t in c[2]}
+
+
+def bytes_inserted_in_a_chunk(data, chunks, at):
+    """100 bytes inserted in the middle of a chunk: its length fields still agree, but its true end
+    moved, and what follows is read out of step until the next chunk is found again."""
+    hit = _chunk_at(chunks, at)
+    middle = hit[0] + hit[1] // 2
+    return data[:middle] + random.Random(int(at * 100)).randbytes(100) + data[middle:], _all_but(chunks, hit)
+
+
+def byte_deleted_from_a_chunk(data, chunks, at):
+    """One byte gone from the middle of a chunk: the next chunk now starts a byte before where the
+    damaged chunk's length says it ends (issue 28: the walk started looking after it, and lost it)."""
+    hit = _chunk_at(chunks, at)
+    middle = hit[0] + hit[1] // 2
+    return data[:middle] + data[middle + 1:], _all_but(chunks, hit)
+
+
+def stray_opcode(opcode: int, name: str):
+    """A byte inserted into a chunk whose last byte now reads as ``opcode``: the walk, out of step by
+    a byte, meets that record at the chunk's claimed end, its length made of the real index record's
+    bytes (issue 28: taken for the data end, every chunk after it was dropped as "summary, messages
+    lost: 0"; taken for a message index, two intact chunks were jumped over)."""
+    def damage(data, chunks, at):
+        hit = _chunk_at(chunks, at)
+        damaged = bytearray(data)
+        damaged[hit[0] + hit[1] - 1] = opcode
+        middle = hit[0] + hit[1] // 2
+        return bytes(damaged[:middle] + b"\xa5" + damaged[middle:]), _all_but(chunks, hit)
+    damage.__name__ = f"stray_{name}_after_a_shifted_chunk"
+    return damage
+
+
+def deleted(size):
+    """``size`` bytes cut out from the middle of a chunk on: the chunks the range touches are lost,
+    those after it come a range earlier than the damaged chunk's length says it ends."""
+    def damage(data, chunks, at):
+        hit = _chunk_at(chunks, at)
+        start = hit[0] + hit[1] // 2
+        return data[:start] + data[start + size:], \
+            {t for offset, length, times in chunks if not (offset < start + size and start < offset + length)
+             for t in times}
+    damage.__name__ = f"deleted_{size}"
+    return damage
+
+
+def chunk_opcode_where_a_shortened_chunk_claims_to_end(data, chunks, at):
+    """Bytes cut out of a chunk K (its length fields intact) so that the next, shorter chunk now ends
+    before K's claimed end, and a chunk opcode there (K+1's index record's, overwritten: no message in
+    it): the walk meets a chunk record with a bad length after an intact chunk it has passed over
+    (issue 28: it searched on after that record, and lost the intact chunk)."""
+    k = chunks.index(_chunk_at(chunks, at))
+    k = next(j for j in range(max(k, 1), len(chunks) - 1) if chunks[j][1] - chunks[j + 1][1] >= 60)
+    (offset, length, _), (next_offset, next_length, _) = chunks[k], chunks[k + 1]
+    index_of_next = next_offset + next_length                 # where K+1's message index records start
+    cut = index_of_next - (offset + length)                   # K's claimed end lands there
+    first = offset + 49                                       # the first byte after K's header fields
+    assert first + cut <= next_offset                         # K+1 itself is not touched
+    damaged = bytearray(data)
+    damaged[index_of_next] = 0x06
+    return bytes(damaged[:first] + damaged[first + cut:]), _all_but(chunks, chunks[k])
+
+
+def byte_deleted_from_an_index(data, chunks, at):
+    """One byte gone from the message index records after an intact chunk: no message is lost."""
+    offset, length, _ = _chunk_at(chunks, at)
+    following = next(c[0] for c in chunks if c[0] > offset)
+    cut = offset + length + (following - offset - length) // 2
+    return data[:cut] + data[cut + 1:], set(EXPECTED)
+
+
 def garbage_footer(data, chunks, at):
     damaged = bytearray(data)
     damaged[-30:] = random.Random(int(at * 100)).randbytes(30)
@@ -160,6 +233,12 @@ CASES = [(bit_flip_in_records, at) for at in POSITIONS] \
        for at in POSITIONS[::2]] \
     + [(zeroed(4096), 0.3), (zeroed(65536), 0.7)] \
     + [(damage, at) for damage in (duplicated_chunk, reordered_chunks) for at in (0.1, 0.9)] \
+    + [(damage, at) for damage in (bytes_inserted_in_a_chunk, byte_deleted_from_a_chunk) for at in POSITIONS[::2]] \
+    + [(byte_deleted_from_an_index, at) for at in (0.3, 0.7)] \
+    + [(deleted(5000), at) for at in POSITIONS[::2]] + [(deleted(20000), 0.5)] \
+    + [(chunk_opcode_where_a_shortened_chunk_claims_to_end, 0.9)] \
+    + [(stray_opcode(opcode, name), at) for opcode, name in ((0x0F, "data_end"), (0x07, "message_index"))
+       for at in (0.1, 0.5)] \
     + [(bit_flip_in_the_summary, at) for at in (0.3, 0.6, 0.9)] \
     + [(garbage_footer, 0.0), (garbage_footer, 0.5), (footer_pointing_into_the_data, 0.5),
        (garbage_after_the_footer, 0.0), (bit_flip_in_records, 0.0), (truncated, 0.999)]
@@ -291,3 +370,4 @@ def test_messages_whose_channel_record_is_lost_are_counted_lost(original, tmp_pa
     assert sum(d.lost for d in lost) == intact > 0
     assert cdpr(["bag", "reindex", str(bag_path)]) == 1
     assert "cannot repair" in capsys.readouterr().err
+

@@ -111,8 +111,15 @@ def test_a_disk_full_while_closing_keeps_the_chunks_before(tmp_path):
 
 
 def test_a_disk_full_before_the_header_fails_at_open(tmp_path):
-    with pytest.raises(BagWriteError, match="No space left"):
-        BagWriter(tmp_path / "run", opener=lambda p, mode: io.BufferedWriter(FullDisk(p, 5)))
+    # and leaves nothing behind (issue 28: an empty bag directory stayed, and the same name was then
+    # refused as existing), also directories it made on the way and a single-file bag
+    for name in ("run", "new/dirs/run", "run.mcap"):
+        with pytest.raises(BagWriteError, match="No space left"):
+            BagWriter(tmp_path / name, opener=lambda p, mode: io.BufferedWriter(FullDisk(p, 5)))
+        assert list(tmp_path.iterdir()) == []
+    with BagWriter(tmp_path / "run") as bag:                           # the name is free again
+        bag.write("/winch/state", None, JointState(position=[1.0]), 1)
+    assert BagReader(tmp_path / "run").message_count == 1
 
 
 # -- `cdpr bag record` and `cdpr launch --record` on a full disk ----------------------------------

@@ -275,3 +275,24 @@ def test_play_remaps_topics(tmp_path, spinners, capfd):
     assert "/nope" in capfd.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["bag", "play", str(tmp_path / "play"), "--remap", "p1=/x"])
+
+
+def test_player_at_any_rate_stops_when_asked_and_refuses_what_it_cannot_time(tmp_path, spinners):
+    """At rate 1e-300 the second message is 1e298 s away: the player waits in slices, so a stop
+    (Ctrl-C) ends it (issue 28: a single wait that long overflowed). A /clock rate whose period
+    vanishes beside the monotonic clock (1e300 Hz never advanced: play spun for ever, deaf to
+    SIGTERM) and an offset beyond the bag's nanosecond times are refused."""
+    write_playback_bag(tmp_path / "play")
+    node = spinners().add(Collector, topics={})
+    player = BagPlayer(node, BagReader(tmp_path / "play"), rate=1e-300)
+    stop, played = threading.Event(), []
+    thread = threading.Thread(target=lambda: played.append(player.play(stop)), daemon=True)
+    thread.start()
+    wait_for(lambda: player.published >= 1, what="the messages at the bag's start")
+    stop.set()
+    thread.join(60.0)
+    assert not thread.is_alive() and played == [player.published] and 1 <= player.published < 31
+    for kwargs, what in (({"clock_hz": 1e300}, "clock rate"), ({"clock_hz": -1.0}, "clock rate"),
+                         ({"start_offset": 1e300}, "start offset"), ({"rate": float("nan")}, "rate")):
+        with pytest.raises(ValueError, match=what):
+            BagPlayer(node, BagReader(tmp_path / "play"), **kwargs)

@@ -23,6 +23,9 @@ from cdpr_tools.message_convert import message_class
 PROGRESS_PERIOD = 1.0  # s of wall time between progress reports
 
 DEFAULT_CLOCK_HZ = 40.0  # rosbag2's default for `ros2 bag play --clock`
+MAX_CLOCK_HZ = 10_000.0  # /clock rates above it add nothing a node could use (and 1e300 Hz would never tick on)
+MAX_SECONDS = 1e9        # s: longest offset or wait taken (a bag's nanosecond times overflow at 9.2e9 s)
+WAIT_SLICE = 1.0         # s: the longest single wait, so that any rate > 0 waits without overflowing
 
 
 class BagPlayer:
@@ -39,8 +42,10 @@ class BagPlayer:
                  remap: dict[str, str] | None = None, progress: Callable[[float, float], None] | None = None):
         if not (rate > 0 and math.isfinite(rate)):
             raise ValueError(f"rate must be a finite number > 0, got {rate}")
-        if not (start_offset >= 0 and math.isfinite(start_offset)):
-            raise ValueError(f"start offset must be a finite number >= 0, got {start_offset}")
+        if not 0 <= start_offset <= MAX_SECONDS:
+            raise ValueError(f"start offset must be a number in [0, {MAX_SECONDS:g}] s, got {start_offset}")
+        if not (clock_hz == 0 or 0 < clock_hz <= MAX_CLOCK_HZ):
+            raise ValueError(f"clock rate must be 0 (no /clock) or in (0, {MAX_CLOCK_HZ:g}] Hz, got {clock_hz}")
         self.node, self.bag, self.rate, self.loop = node, bag, rate, loop
         self.topics = sorted(topics) if topics else list(bag.topics)
         unknown = sorted(set(self.topics) - set(bag.topics))
@@ -111,7 +116,7 @@ class BagPlayer:
             if now >= target:
                 return not stop.is_set()
             wake = min(target, self._next_clock) if self.clock_publisher is not None else target
-            if stop.wait(max(0.0, wake - now)):
+            if stop.wait(min(WAIT_SLICE, max(0.0, wake - now))):
                 return False
 
     def _publish_clock(self, t_ns: int) -> None:

@@ -23,8 +23,9 @@ import numpy as np
 import yaml
 from rclpy.serialization import deserialize_message
 
+from cdpr_control.model.yaml_file import YamlFileError, load_yaml
 from cdpr_tools.bag.qos import parse_profiles
-from cdpr_tools.bag.recovery import ChunkError, Damage, McapLayout, NotMcapError, layout
+from cdpr_tools.bag.recovery import ChunkError, Damage, McapLayout, NotMcapError, layout, split_order
 from cdpr_tools.message_convert import field_value, message_class
 from cdpr_tools.progress import track
 
@@ -70,11 +71,14 @@ class BagReader:
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
-        self.files = _mcap_files(self.path)
-        self._layouts: list[McapLayout] = []
-        self._channels: list[dict[int, tuple[str, str]]] = []  # per file: channel id -> (topic, type)
         self.damage: list[Damage] = []                           # parts skipped, every file
         self.problems: list[str] = []                            # data lost or damage found, for the user
+        directory_metadata, problem = _directory_metadata(self.path)
+        if problem:
+            self.problems.append(problem)
+        self.files = _mcap_files(self.path, directory_metadata)
+        self._layouts: list[McapLayout] = []
+        self._channels: list[dict[int, tuple[str, str]]] = []  # per file: channel id -> (topic, type)
         topics: dict[str, dict] = {}
         embedded: dict | None = None
         for file in self.files:
@@ -107,7 +111,7 @@ class BagReader:
         self.end_time_ns: int | None = max((f.end_time for f in self._layouts if f.message_count), default=None)
         self.topics = {name: TopicInfo(name, e["type"], e["count"], e["format"], e["qos"], e["hash"])
                        for name, e in sorted(topics.items())}
-        self.metadata = _directory_metadata(self.path) or embedded or {}
+        self.metadata = directory_metadata or embedded or {}
 
     @property
     def lost_messages(self) -> tuple[int, int]:
@@ -168,40 +172,59 @@ class BagReader:
         return (np.asarray(times, dtype=float), *(_stack(c, topic, p) for c, p in zip(columns, fields)))
 
 
-def _mcap_files(path: Path) -> list[Path]:
+def _mcap_files(path: Path, metadata: dict | None) -> list[Path]:
     if path.is_file() and path.suffix == ".mcap":
         return [path]
     if path.is_dir():
-        metadata = _directory_metadata(path)
         if metadata and metadata.get("relative_file_paths"):
             files = [path / Path(p).name for p in metadata["relative_file_paths"]]
         else:
-            files = sorted(path.glob("*.mcap"), key=_split_order)
+            files = sorted(path.glob("*.mcap"), key=split_order)
         missing = [f for f in files if not f.is_file()]
         if missing:
-            raise FileNotFoundError(f"bag {path}: missing {', '.join(map(str, missing))}")
+            raise FileNotFoundError(f"bag {path}: missing {', '.join(map(str, missing))} (listed in its "
+                                    "metadata.yaml; `cdpr bag reindex` rebuilds it from the files present)")
         if files:
             return files
     raise FileNotFoundError(f"no bag at {path}: expected a bag directory with .mcap files or an .mcap file")
 
 
-def _split_order(file: Path) -> tuple:
-    """``bag_2.mcap`` before ``bag_10.mcap`` (a split bag's files in order, without metadata.yaml)."""
-    stem, _, number = file.stem.rpartition("_")
-    return (stem, int(number)) if number.isdigit() else (file.stem, -1)
-
-
-def _directory_metadata(path: Path) -> dict | None:
+def _directory_metadata(path: Path) -> tuple[dict | None, str | None]:
+    """A bag directory's metadata.yaml (rosbag2_bagfile_information) and, when it exists but cannot
+    be used, why: it is then ignored (the .mcap files hold everything, and are read by their names),
+    as a damaged index would be."""
     meta = path / "metadata.yaml" if path.is_dir() else None
     if meta is None or not meta.is_file():
-        return None
-    return (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information")
+        return None, None
+    ignored = "; ignored: the bag's .mcap files are read by their names; `cdpr bag reindex` writes it again"
+    try:
+        data = load_yaml(meta, "bag metadata file")
+    except YamlFileError as exc:            # names the file and the problem (encoding, YAML, nesting)
+        return None, f"{exc}{ignored}"
+    if data is None:
+        return None, None                   # emptied: the files tell (issue 28)
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    files = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(info, dict):
+        why = "no rosbag2_bagfile_information mapping in it"
+    elif files is not None and not (isinstance(files, list) and all(isinstance(f, str) for f in files)):
+        why = "relative_file_paths is not a list of file names"
+    else:
+        return info, None
+    return None, f"{meta}: cannot be used ({why}){ignored}"
 
 
 def _embedded_metadata_records(records) -> dict | None:
+    """The rosbag2 metadata a file carries in its metadata record; None when it has none or the
+    record is damaged (it lies outside the chunks, under no CRC, and only repeats what the
+    chunks tell)."""
     for record in records:
         if record.name == "rosbag2" and "serialized_metadata" in record.metadata:
-            return yaml.safe_load(record.metadata["serialized_metadata"])
+            try:
+                metadata = yaml.safe_load(record.metadata["serialized_metadata"])
+            except (yaml.YAMLError, RecursionError):
+                return None
+            return metadata if isinstance(metadata, dict) else None
     return None
 
 

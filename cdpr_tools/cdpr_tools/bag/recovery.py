@@ -33,7 +33,7 @@ import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, MessageIndex, Metadata, Schema, Statistics
+from mcap.records import Attachment, Channel, Message, MessageIndex, Metadata, Schema, Statistics
 from mcap.writer import CompressionType, IndexType, Writer
 
 from cdpr_tools.bag.qos import parse_profiles
@@ -63,7 +63,11 @@ class ChunkError(ValueError):
 
 
 class RepairError(RuntimeError):
-    """``reindex`` could not make a readable bag of the file."""
+    """``reindex`` could not make a readable bag of a file; ``report``: what it did nevertheless."""
+
+    def __init__(self, message: str, report: list[str] | None = None):
+        super().__init__(message)
+        self.report = list(report or [])
 
 
 @dataclass(frozen=True)
@@ -224,7 +228,7 @@ def _chunk_records(data: bytes) -> list:
 def _parse(opcode: int, content: bytes):
     """A schema, channel, metadata, message index or statistics record from its content bytes."""
     kind = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.METADATA: Metadata,
-            Opcode.MESSAGE_INDEX: MessageIndex, Opcode.STATISTICS: Statistics}[opcode]
+            Opcode.MESSAGE_INDEX: MessageIndex, Opcode.STATISTICS: Statistics, Opcode.ATTACHMENT: Attachment}[opcode]
     stream = ReadDataStream(io.BytesIO(content))
     try:
         record = kind.read(stream)
@@ -351,6 +355,12 @@ class _Walk:
         self.seen: dict[tuple, int] = {}      # (times, size, CRC) of intact chunks -> their offset
         self.unknown: dict[int, list] = {}    # channel id -> [messages, first and last chunk offset]
         self.after_data_end = False
+        # where to look for the next chunk when a record cannot be read: from just after the end of
+        # the last chunk whose CRC held (its end is sure), or after the start of a damaged chunk whose length
+        # fields agreed (a byte inserted or deleted in it keeps them agreeing but moves its true end,
+        # and the records read after it were read out of step: the next chunk may start before the
+        # record found unreadable, and searching from there would lose it)
+        self.resync = len(MAGIC) + 1
 
     def run(self) -> McapLayout:
         pos = len(MAGIC)
@@ -377,8 +387,8 @@ class _Walk:
             self.found.complete = True
             return self.size
         allowed = _SUMMARY_RECORDS if self.after_data_end else _DATA_RECORDS
-        if opcode not in allowed or end > self.size:
-            return self._skip(pos, self._next_chunk(pos + 1), "an unreadable part")
+        if opcode not in allowed or end > self.size or not _plausible(self.buf, pos, opcode, length):
+            return self._unreadable(pos, "an unreadable part")
         if opcode == Opcode.MESSAGE_INDEX and self.pending is not None:
             self._count_index(pos, end)
             return end
@@ -389,8 +399,20 @@ class _Walk:
             try:
                 self._add(_parse(opcode, bytes(self.buf[pos + _HEAD.size:end])))
             except ChunkError:
-                return self._skip(pos, self._next_chunk(pos + 1), "an unreadable record")
+                return self._unreadable(pos, "an unreadable record")
         return end
+
+    def _unreadable(self, pos: int, what: str) -> int:
+        """Skip to the next chunk, searched from :attr:`resync`, after an unreadable record at ``pos``."""
+        resume = self._next_chunk(min(self.resync, pos + 1))
+        if resume > pos:
+            return self._skip(pos, resume, what)
+        # a chunk begins before the record: the record was read out of step (after a damaged chunk,
+        # reported on its own, or a damaged index record); nothing is skipped, the walk steps back
+        self._close_pending()
+        self.found.damage.append(Damage(self.found.path.name, pos, pos, 0,
+                                        f"{what}, read out of step: the walk went on with the chunk at byte {resume}"))
+        return resume
 
     def _chunk(self, pos: int) -> int:
         self._close_pending()
@@ -399,15 +421,18 @@ class _Walk:
         except ChunkError as exc:
             end = _consistent_end(self.buf, pos)
             if end is None:                   # its length cannot be trusted: look for the next chunk
-                return self._skip(pos, self._next_chunk(pos + 1), f"a damaged chunk ({exc})")
+                return self._unreadable(pos, f"a damaged chunk ({exc})")
             self.pending = {"start": pos, "end": end, "lost": 0, "indexed": False, "why": str(exc)}
+            self.resync = pos + 1
             return end
         key = _CHUNK.unpack_from(self.buf, pos + _HEAD.size)[:4]
         if key in self.seen:
             self.found.damage.append(Damage(self.found.path.name, pos, pos + ref.length, 0,
                                             f"a repeated copy of the chunk at byte {self.seen[key]}"))
+            self.resync = pos + ref.length + 1
             return pos + ref.length
         self.seen[key] = pos
+        self.resync = pos + ref.length + 1
         self.found.chunks.append(ref)
         for record in records:
             self._add(record, pos)
@@ -478,6 +503,33 @@ class _Walk:
                                            f"{last}: its channel record was in a damaged part"))
 
 
+def _plausible(buf, pos: int, opcode: int, length: int) -> bool:
+    """Whether a record outside the chunks (under no CRC) can be what its opcode says: after damage
+    the walk may read out of step, and a stray byte taken for the data end (which ends the search
+    for chunks) or for a message index with a large length (which jumps over chunks) loses the
+    intact chunks after it. The header comes first only; the data end holds a 4-byte CRC; a message
+    index holds a channel id and a length-prefixed list of 16-byte entries; an attachment parses
+    to its length and matches its CRC (when it has one)."""
+    if opcode == Opcode.HEADER:
+        return pos == len(MAGIC)
+    if opcode == Opcode.DATA_END:
+        return length == 4
+    if opcode == Opcode.MESSAGE_INDEX:
+        if length < _MESSAGE_INDEX.size:
+            return False
+        entries = _MESSAGE_INDEX.unpack_from(buf, pos + _HEAD.size)[1]
+        return entries % 16 == 0 and length == _MESSAGE_INDEX.size + entries
+    if opcode == Opcode.ATTACHMENT:
+        content = bytes(buf[pos + _HEAD.size:pos + _HEAD.size + length])
+        try:
+            _parse(opcode, content)
+        except ChunkError:
+            return False
+        (crc,) = struct.unpack_from("<I", content, len(content) - 4)   # it covers all before it
+        return crc in (0, zlib.crc32(content[:-4]))
+    return True
+
+
 def _consistent_end(buf, pos: int) -> int | None:
     """End of the chunk record at ``pos`` if its length fields agree with each other, else None."""
     if len(buf) - pos < _HEAD.size + _CHUNK.size + 8 or buf[pos] != Opcode.CHUNK:
@@ -500,62 +552,116 @@ def _walk(path: Path) -> McapLayout:
 
 
 # -- rebuilding ------------------------------------------------------------------------------
+def split_order(file: Path) -> tuple:
+    """``bag_2.mcap`` before ``bag_10.mcap`` (a split bag's files in order, without metadata.yaml)."""
+    stem, _, number = file.stem.rpartition("_")
+    return (stem, int(number)) if number.isdigit() else (file.stem, -1)
+
+
 def reindex(bag: str | os.PathLike) -> list[str]:
     """Make a cut-off or damaged bag whole again, as ``ros2 bag reindex`` does; returns a report.
 
-    A single-file bag (``.mcap``) or a bag directory with one .mcap file. A file without a summary
-    that matches it, or with damaged parts, is rewritten with every message of its intact chunks,
-    summary and indexes (the original is kept beside it as ``<name>.orig``); the new file is read
-    back and its count is what the report says. A bag directory gets a new metadata.yaml from the
-    file's contents. Raises :class:`RepairError` when nothing could be read (the file is left as is).
+    A single ``.mcap`` file, or a bag directory with its .mcap files (one, or the numbered files of
+    a split bag, found by their names: a damaged metadata.yaml is not trusted). Each file without a
+    summary that matches it, or with damaged parts, is rewritten with every message of its intact
+    chunks, summary and indexes (the original is kept beside it as ``<name>.orig``); the new file is
+    read back and its count is what the report says. A bag directory then gets a new metadata.yaml
+    listing the files that could be read. Raises :class:`RepairError` (its ``report``: what was
+    done nevertheless) when a file could not be repaired (not MCAP, no intact chunk with messages,
+    or the rebuilt file could not be written: it is then left as it was) or metadata.yaml could not
+    be written.
     """
     bag = Path(bag)
-    files = [bag] if bag.is_file() else sorted(bag.glob("*.mcap"))
-    if len(files) != 1:
-        raise ValueError(f"{bag}: reindex needs one .mcap file (a bag directory of one file), found {len(files)}")
-    file = files[0]
+    files = [bag] if bag.is_file() else sorted(bag.glob("*.mcap"), key=split_order)
+    if not files:
+        raise ValueError(f"{bag}: no .mcap file to reindex (a bag directory or an .mcap file)")
+    report: list[str] = []
+    failed: list[str] = []
+    repaired: list[tuple[Path, McapLayout]] = []
+    for file in files:
+        try:
+            repaired.append((file, _reindex_file(file, report)))
+        except RepairError as exc:
+            failed.append(str(exc))
+    if bag.is_dir() and repaired:
+        metadata = _directory_metadata_of(repaired)
+        try:
+            write_metadata_yaml(bag, metadata)
+        except OSError as exc:
+            (bag / ".metadata.yaml.tmp").unlink(missing_ok=True)
+            failed.append(f"cannot write {bag / 'metadata.yaml'}: {exc.strerror or exc}")
+        else:
+            report.append(f"{bag / 'metadata.yaml'}: rebuilt ({metadata['message_count']} messages"
+                          + (f" in {len(repaired)} files)" if len(files) > 1 else ")"))
+    if failed:
+        raise RepairError("; ".join(failed), report)
+    return report
+
+
+def _reindex_file(file: Path, report: list[str]) -> McapLayout:
+    """Rewrite ``file`` when it needs it (adding to ``report``); what it holds afterwards."""
     try:
         found = layout(file)
     except NotMcapError as exc:
         raise RepairError(f"cannot repair {file}: {exc}") from None
-    report = [str(d) for d in found.damage]
+    report.extend(str(d) for d in found.damage)
     if found.damage and not found.message_count:
         raise RepairError(f"cannot repair {file}: no intact chunk with messages in it; the file is left as it was")
-    if found.damage or not found.indexed:
-        original = file.with_name(file.name + ".orig")
-        if original.exists():
-            raise FileExistsError(f"{original} exists: move it away before reindexing again")
-        tmp = file.with_name(file.name + ".reindexing")
+    if not (found.damage or not found.indexed):
+        return found
+    original = file.with_name(file.name + ".orig")
+    if original.exists():
+        raise RepairError(f"cannot repair {file}: {original} exists: move it away before reindexing again")
+    tmp = file.with_name(file.name + ".reindexing")
+    try:
         counts = rewrite(found, tmp, _metadata_of(file.name, found))
         written = layout(tmp)
-        if written.damage or not written.indexed or _nonzero(written.counts) != _nonzero(counts):
-            tmp.unlink()
-            raise RepairError(f"cannot repair {file}: the rebuilt file did not read back as written; "
-                              "the file is left as it was")
-        os.replace(file, original)
-        os.replace(tmp, file)
-        found = written
-        report.append(f"{file.name}: rewritten with {written.message_count} messages and its index "
-                      f"(read back; the original is kept as {original.name})")
-    if bag.is_dir():
-        metadata = _metadata_of(file.name, found)
-        write_metadata_yaml(bag, metadata)
-        report.append(f"{bag / 'metadata.yaml'}: rebuilt ({metadata['message_count']} messages)")
-    return report
+    except OSError as exc:                  # a full disk, a file size limit, a read-only directory
+        tmp.unlink(missing_ok=True)
+        raise RepairError(f"cannot repair {file}: writing {tmp.name} failed ({exc.strerror or exc}); "
+                          "the file is left as it was") from None
+    if written.damage or not written.indexed or _nonzero(written.counts) != _nonzero(counts):
+        tmp.unlink()
+        raise RepairError(f"cannot repair {file}: the rebuilt file did not read back as written; "
+                          "the file is left as it was")
+    os.replace(file, original)
+    os.replace(tmp, file)
+    report.append(f"{file.name}: rewritten with {written.message_count} messages and its index "
+                  f"(read back; the original is kept as {original.name})")
+    return written
+
+
+def _directory_metadata_of(files: list[tuple[Path, McapLayout]]) -> dict:
+    """metadata.yaml of a bag directory from what its files hold (topics merged by name)."""
+    topics: dict[str, TopicRecord] = {}
+    entries = []
+    for file, found in files:
+        for topic in _metadata_topics(found):
+            known = topics.get(topic.name)
+            topics[topic.name] = topic if known is None else replace(known, count=known.count + topic.count)
+        entries.append({"path": file.name, "start": found.start_time, "end": found.end_time,
+                        "count": found.message_count})
+    starts = [f.start_time for _, f in files if f.message_count]
+    ends = [f.end_time for _, f in files if f.message_count]
+    return bag_metadata(entries, list(topics.values()), min(starts, default=None), max(ends, default=None))
 
 
 def _nonzero(counts: dict[int, int]) -> dict[int, int]:
     return {c: n for c, n in counts.items() if n}
 
 
-def _metadata_of(file_name: str, found: McapLayout) -> dict:
+def _metadata_topics(found: McapLayout) -> list[TopicRecord]:
     topics = []
     for cid, ch in found.channels.items():
         schema = found.schemas.get(ch.schema_id)
         topics.append(TopicRecord(ch.topic, schema.name if schema else "",
                                   parse_profiles(ch.metadata.get("offered_qos_profiles")),
                                   ch.metadata.get("topic_type_hash", ""), found.counts.get(cid, 0)))
-    return bag_metadata(file_name, topics, found.start_time, found.end_time)
+    return topics
+
+
+def _metadata_of(file_name: str, found: McapLayout) -> dict:
+    return bag_metadata(file_name, _metadata_topics(found), found.start_time, found.end_time)
 
 
 def rewrite(found: McapLayout, target: str | os.PathLike, metadata: dict | None = None,

@@ -105,9 +105,12 @@ class BagWriter:
                 raise FileExistsError(f"{existing} exists already; choose another bag name")
         if compression not in _COMPRESSION:
             raise ValueError(f"compression must be one of {', '.join(_COMPRESSION)}, got {compression!r}")
-        self.mcap_path.parent.mkdir(parents=True, exist_ok=True)
         if chunk_size <= 0 or flush_interval <= 0:
             raise ValueError(f"chunk_size and flush_interval must be > 0, got {chunk_size}, {flush_interval}")
+        created, parent = [], self.mcap_path.parent       # the directories this bag creates, deepest first
+        while not parent.exists() and parent != parent.parent:
+            created.append(parent)
+            parent = parent.parent
         self.compression = compression
         self.chunk_size = chunk_size
         self.flush_interval = flush_interval
@@ -124,8 +127,30 @@ class BagWriter:
         self._pending_bytes = 0
         self._last_flush = time.monotonic()
         self._flushed = {"count": 0, "times": _Times(), "counts": {}}   # what is on disk
-        self._open_file()
-        self._on_disk(self._write_metadata_file)
+        try:
+            self.mcap_path.parent.mkdir(parents=True, exist_ok=True)
+            self._open_file()
+            self._on_disk(self._write_metadata_file)
+        except OSError:                  # (BagWriteError too) a full disk at the start: leave nothing
+            self._remove(created)        # behind, so that the same name can be used again
+            raise
+
+    def _remove(self, created: list[Path]) -> None:
+        """Remove what a bag that failed as it opened wrote (no message yet), and the directories it made."""
+        stream = getattr(self, "_stream", None)
+        if stream is not None and not stream.closed:
+            try:
+                stream.close()
+            except OSError:
+                pass
+        extra = [] if self.directory is None else [self.directory / "metadata.yaml", self.directory / ".metadata.yaml.tmp"]
+        for file in (self.mcap_path, *extra):
+            file.unlink(missing_ok=True)
+        for directory in created:
+            try:
+                directory.rmdir()
+            except OSError:
+                pass
 
     def _open_file(self) -> None:
         """Start the bag's (next) .mcap file: header, and every schema and channel declared so far."""
