@@ -185,3 +185,11 @@ def test_non_text_and_bad_utf8_are_diagnosed():
     (d,) = errors(None)
     assert (d.line, d.column) == (1, 1)
     assert motions(parse_gcode(b"G0 X1"))[0].segment.q1[0] == pytest.approx(0.001)
+
+
+def test_a_utf8_byte_order_mark_is_not_part_of_the_program():
+    """Windows editors save UTF-8 with a byte order mark; it was read as an unexpected character at 1:1."""
+    with_bom = parse_gcode("G1 X1 F100".encode("utf-8-sig"))
+    assert motions(with_bom)[0].segment.q1[0] == pytest.approx(motions(parse_gcode(b"G1 X1 F100"))[0].segment.q1[0])
+    (d,) = errors(b"\xef\xbb\xbfG1 X1 F100\nG1 Y\xff")                 # line:col still count from the text
+    assert (d.line, d.column) == (2, 5)

@@ -379,13 +379,15 @@ def _feed_si(feed: float | None, scale: float, metric: int, motion: int) -> floa
 
 
 def program_text(source: object) -> str:
-    """The program as text: a str as is, bytes decoded as UTF-8; GCodeError with the line:col of the
-    first byte that is not UTF-8 (a Latin-1 or UTF-16 file) or when ``source`` is neither."""
+    """The program as text: a str as is, bytes decoded as UTF-8 (a leading byte order mark, as Windows
+    editors save UTF-8, dropped); GCodeError with the line:col of the first byte that is not UTF-8
+    (a Latin-1 or UTF-16 file) or when ``source`` is neither."""
     if isinstance(source, str):
         return source
     if isinstance(source, (bytes, bytearray)):
+        source = bytes(source).removeprefix(b"\xef\xbb\xbf")
         try:
-            return bytes(source).decode("utf-8")
+            return source.decode("utf-8")
         except UnicodeDecodeError as exc:
             before = bytes(source[:exc.start])
             line = before.count(b"\n") + 1
