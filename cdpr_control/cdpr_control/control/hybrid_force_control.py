@@ -536,29 +536,25 @@ def contact_response(AT, k_l, z_t) -> np.ndarray:
     return k_l * (AT.T @ np.linalg.solve(AT @ (k_l[:, None] * AT.T), g))
 
 
-def pre_contact_forces(AT, e, z_t, F_d: float, f_d, f_from, f_min, f_max) -> np.ndarray | None:
-    """The cable forces to hold before the impact (state A) so that pressing F_d [N] adds e F_d
-    (:func:`contact_response`) and keeps every cable within [f_min, f_max]: the issue's "force
+def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | None:
+    """The cable forces to hold before the impact (state A) so that pressing F_d [N], which adds
+    e F_d (:func:`contact_response`), keeps every cable within [f_min, f_max]: the issue's "force
     planned for contact before impact". With the CFC paused in B as in the thesis (section 5.1.2), x_t
     presses the contact with e F_d on top of what the CFC held at the pause; held at the free-space
     set, the IPAnema 3's upper cables went below f_min in B near the floor (issue 25).
 
-    f_d (m,) is the distribution's set-point of the period (it carries the expected contact force
-    F_c = a . (f_d - f_from) through its wrench filter, f_from the set-point when A began), so
-    f_d - e F_c carries the free-space wrench, and with all of F_d pressed it becomes the planned
-    contact set again (z_t the task z axis (5.2)). Returned: the forces nearest to it with that wrench in
-    [max(f_min, f_min - e F_d), min(f_max, f_max - e F_d)] (the QP (3.27)-(3.28) with those limits
-    and f_ref = f_d - e F_c); None where no such forces exist (the pose cannot hold the contact both
-    ways: the CFC then holds the free-space set, as the thesis)."""
-    AT = np.asarray(AT, dtype=float)
-    e, f_d = np.asarray(e, dtype=float), np.asarray(f_d, dtype=float)
-    a = task_force_direction(AT, z_t)
-    f_ref = f_d - e * float(a @ (f_d - np.asarray(f_from, dtype=float)))
-    df = e * F_d
+    f_from (m,) is the set-point when A began (the free-space forces). Returned: the forces nearest
+    to it with its wrench within [max(f_min, f_min - e F_d), min(f_max, f_max - e F_d)] (the QP
+    (3.27)-(3.28) with those limits and f_ref = f_from), so f_from itself where it already keeps
+    the cables within their limits under the contact, and only the internal tension (the nullspace
+    of A^T) changed otherwise; None where no such forces exist (the pose cannot hold the contact both
+    ways: the CFC then holds f_from, as the thesis)."""
+    AT, f_from = np.asarray(AT, dtype=float), np.asarray(f_from, dtype=float)
+    df = np.asarray(e, dtype=float) * F_d
     lo, hi = np.maximum(f_min, f_min - df), np.minimum(f_max, f_max - df)
-    if not (np.all(np.isfinite(f_ref)) and np.all(lo <= hi)):
+    if not (np.all(np.isfinite(f_from)) and np.all(lo <= hi)):
         return None
-    result = distribute(AT, -(AT @ f_ref), lo, hi, f_ref, method="qp")
+    result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
     return result.f if result.status == Status.FEASIBLE else None
 
 
@@ -648,13 +644,13 @@ class CFCCoupling:
         """In A, the set-point's ramp to the pre-contact forces not done (:meth:`pre_tension` wanted)."""
         return self.pre_from is None or self.pre_share < 1.0
 
-    def pre_tension(self, AT, e, z_t, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
+    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
         """A period of A while :attr:`pre_tensioning`: :func:`pre_contact_forces` (f_from: f_d in A's
         first period; the stage sets :attr:`pre_from` to None outside A)."""
         f_d = np.asarray(f_d, dtype=float)
         if self.pre_from is None:
             self.pre_from, self.pre_share = f_d.copy(), 0.0
-        return pre_contact_forces(AT, e, z_t, F_d, f_d, self.pre_from, f_min, f_max)
+        return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
 
     def contact_update(self, state: str, f_d, a, bias: float = 0.0,
                        f_pre=None) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -715,19 +711,15 @@ class CFCCoupling:
             # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
             self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
             y = self.average.update(f_d).copy()
-            target = self.hold + self.share * (f_d - self.hold)
-            f_err = target
+            f_err = y
             if aa > 0.0:
+                target = self.hold + self.share * (f_d - self.hold)
                 y += a * (a @ (target - y)) / aa
-                f_err = target + a * (a @ (f_d - target) - bias) / aa      # live along a, less the bias
+                f_err = y + a * (a @ (f_d - y) - bias) / aa      # live along a, less the bias
             return f_err, y, False
         f_ff, _ = self.update(state, f_d)
-        # the error's set-point stays the live one it was in D and R (the ramp from the one held
-        # finished); through the average as the feed-forward, it stepped the drive command by 1.12 mm
-        # when R ended before the average had followed f_d
-        self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
-        f_err = f_d if self.share == 1.0 else self.hold + self.share * (f_d - self.hold)
-        return live_along_a(f_err), live_along_a(f_ff), False
+        f_ff = live_along_a(f_ff)
+        return f_ff, f_ff.copy(), False
 
 
     def run(self, state: str, f_d, a, controller, f, e_F: float | None = None,
@@ -912,7 +904,7 @@ class ContactCableForceControl:
             a = task_force_direction(AT, self.z_t)
             if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning:   # planned before contact
                 e = contact_response(AT, self.cfc.stiffness(f_d, theta), self.z_t)
-                f_pre = self.coupling.pre_tension(AT, e, self.z_t, float(self.z_t @ F_d0), f_d, f_min, f_max)
+                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
         if state != APPROACH:
             self.coupling.pre_from = None                # the next A starts from its own f_d
         e_F = None
