@@ -652,8 +652,8 @@ class CFCCoupling:
             self.pre_from, self.pre_share = f_d.copy(), 0.0
         return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
 
-    def contact_update(self, state: str, f_d, a, bias: float = 0.0,
-                       f_pre=None) -> tuple[np.ndarray, np.ndarray, bool]:
+    def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
+                       d=None) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
         :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
@@ -684,9 +684,11 @@ class CFCCoupling:
             return f_d, f_d, False
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
+        if aa > 0.0:
+            d = a / aa if d is None else np.asarray(d, dtype=float)
 
         def live_along_a(f):
-            return f + a * (a @ (f_d - f) - bias) / aa if aa > 0.0 else f
+            return f + d * (a @ (f_d - f) - bias) if aa > 0.0 else f
 
         if state == APPROACH and f_pre is not None and self.pre_from is not None:
             self.pre_share = min(1.0, self.pre_share + self.dt / PRE_TENSION_TIME)
@@ -714,16 +716,16 @@ class CFCCoupling:
             f_err = y
             if aa > 0.0:
                 target = self.hold + self.share * (f_d - self.hold)
-                y += a * (a @ (target - y)) / aa
-                f_err = y + a * (a @ (f_d - y) - bias) / aa      # live along a, less the bias
+                y += d * (a @ (target - y))
+                f_err = y + d * (a @ (f_d - y) - bias)          # live along a, less the bias
             return f_err, y, False
         f_ff, _ = self.update(state, f_d)
         f_ff = live_along_a(f_ff)
         return f_ff, f_ff.copy(), False
 
 
-    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None,
-            f_pre=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None, f_pre=None,
+            d=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
         before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
@@ -763,7 +765,7 @@ class CFCCoupling:
             # paused: the CFC resumes bumpless from the pause; else ramped out
             bias = 0.0 if state in CFC_PAUSED else math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
             self.bias.reset(bias)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             c.feedback_filter.reset(f)
@@ -777,9 +779,9 @@ class CFCCoupling:
                                else min(1.0, self.hand_over_gain + step))
         aa = float(a @ a) if not paused and state in (CONTACT, RELEASE) else 0.0
         if aa > 0.0 and self.hand_over_gain > 0.0:
-            share = self.hand_over_gain * min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
-            c.pi.integrator = c.pi.integrator - share * a
-            F_a = share * aa                            # the cables press with a . f along z_t
+            F_a = self.hand_over_gain * min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator)
+            c.pi.integrator = c.pi.integrator - F_a * (a / aa if d is None else np.asarray(d, dtype=float))
+            # (the cables press with a . f along z_t: a . d = 1)
         return f_set, f_ff, paused, F_a
 
 
@@ -898,12 +900,14 @@ class ContactCableForceControl:
             key = F_d0.tobytes()
             if key != self._F_d0:                   # the same F_d,0 has the same axis
                 self.z_t, self._F_d0 = task_axis(F_d0, self.z_t), key
-        a, f_pre = self.a_zero, None
+        a, e, f_pre = self.a_zero, None, None
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
-            if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning:   # planned before contact
-                e = contact_response(AT, self.cfc.stiffness(f_d, theta), self.z_t)
+            e = contact_response(AT, self.cfc.stiffness(f_d, theta), self.z_t)
+            if not np.all(np.isfinite(e)):
+                e = None
+            if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning and e is not None:
                 f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
         if state != APPROACH:
             self.coupling.pre_from = None                # the next A starts from its own f_d
@@ -912,7 +916,7 @@ class ContactCableForceControl:
             F_vec = np.asarray(F_vec, dtype=float)
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)
