@@ -691,7 +691,8 @@ class CFCCoupling:
             return f + d * (a @ (f_d - f) - bias) if aa > 0.0 else f
 
         if state == APPROACH and f_pre is not None and self.pre_from is not None:
-            self.pre_share = min(1.0, self.pre_share + self.dt / PRE_TENSION_TIME)
+            share = self.pre_share + self.dt / PRE_TENSION_TIME
+            self.pre_share = 1.0 if share > 1.0 - 1e-9 else share       # (n periods of 1/n: done)
             f_set = self.pre_from + self.pre_share * (np.asarray(f_pre, dtype=float) - self.pre_from)
             self.average.reset(f_set)                   # held from B on (the pause's set-point)
             self.hold = f_set.copy()
