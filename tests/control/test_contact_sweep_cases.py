@@ -63,8 +63,9 @@ def test_cfc_error_along_a_loses_its_bias_against_the_hybrid_force_controllers_e
     np.testing.assert_allclose(errors[HAND_OVER_PERIODS], a @ (f_d - f), atol=0.1 * abs(a @ (f_d - f) - e_F))
     np.testing.assert_allclose(errors[-1], e_F, atol=0.01 * abs(a @ (f_d - f) - e_F))
     # the correction lies along the contact response e (a . e = 1): the projection I - e a^T removes it
-    e = contact_response(AT, stage.cfc.stiffness(f_d, theta), stage.z_t)
-    P = np.eye(MINI.m) - np.outer(e, a)
+    z_t = stage.z_t                            # along F_d,0 (5.2); a . e = 1 on the same axis
+    e = contact_response(AT, stage.cfc.stiffness(f_d, theta), z_t)
+    P = np.eye(MINI.m) - np.outer(e, task_force_direction(AT, z_t))
     np.testing.assert_allclose(P @ stage.f_set, P @ f_d, atol=1e-9)
 
 

@@ -745,7 +745,7 @@ class CFCCoupling:
           (docs/hybrid_force_control.md, "Validation sweep").
 
         - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
-          integral part takes the proportional part's step.
+          integral part takes the output held at the pause less the proportional part's step.
         - In D and R the integral part along a (the cable forces that change the contact force) is
           handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
           integrator this period (the hybrid force controller takes F_a / k_t on x_t,
@@ -769,8 +769,11 @@ class CFCCoupling:
         f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
+            # the PI's output held at the pause (its P part too: after the pre-tension's ramp in A the
+            # error is not 0, and resumed on the integral part alone the drive command stepped by
+            # 0.27 mm on the floor program) is what the integral part takes over
             c.feedback_filter.reset(f)
-            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
+            c.pi.integrator = c.pi.output - c.params.K_p * (f_set - f)
         self.paused = paused
         F_a = 0.0
         # no hand-over while an output is saturated (its integral part is clamped, not drained: what
