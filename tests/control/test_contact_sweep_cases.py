@@ -151,11 +151,13 @@ def test_no_hand_over_while_a_cfc_output_is_saturated_switched_over_the_hand_ove
     np.testing.assert_allclose(gains[n:], 1.0, atol=1e-9)
 
 
-def test_the_error_keeps_the_live_set_point_when_R_ends_before_the_moving_average_followed():
-    """After D and a short R, the CFC's error acts on the live set-point in I as it did in R, while the
-    feed-forward returns through the moving average (T_MA): through the average as well, the error's
-    set-point stepped by the average's lag behind f_d (up to 70 N on the IPAnema 3's floor program
-    with the hand-over off while saturated: the drive command stepped by 1.1 mm when R ended)."""
+def test_the_error_does_not_step_when_R_ends_before_the_moving_average_followed():
+    """After D and a short R, the CFC's error set-point goes on in I as it was in R: since session 11
+    the error and the feed-forward both follow f_d through the moving average (T_MA) across a, in
+    D, R and I alike (session 10: the error on the live set-point in D, R and I). A switch of the
+    error's set-point between the live f_d and the average when R ends steps it by the average's
+    lag behind f_d (up to 70 N on the IPAnema 3's floor program: the drive command stepped by
+    1.1 mm)."""
     stage = _contact_stage(MINI)
     x_d, f_d0, theta, f_min, f_max = _mini_contact_inputs()
     F_d0 = np.array([0.0, 0.0, -6.0])
