@@ -253,20 +253,23 @@ def test_pre_contact_forces_keep_every_cable_within_its_limits_once_the_contact_
 
 def test_the_cfc_tensions_for_the_contact_in_A_then_holds():
     """In A the CFC's set-point (error and feed-forward) goes from f_d at A's start to the pre-contact
-    forces within PRE_TENSION_TIME, not paused; then it is paused (Δq_CFC held: running on, it held
+    forces within PRE_TENSION_TIME and stays there for PRE_TENSION_SETTLE, not paused; then it is paused (Δq_CFC held: running on, it held
     the press of x_t at the impact to 13 N of 150 N for 2 s at IPAnema 3 #2) and the set-point is
     held through B, so D resumes from it."""
-    from cdpr_control.control.hybrid_force_control import APPROACH, BRAKE, PRE_TENSION_TIME, CFCCoupling
+    from cdpr_control.control.hybrid_force_control import (APPROACH, BRAKE, PRE_TENSION_SETTLE, PRE_TENSION_TIME,
+                                                             CFCCoupling)
 
     dt = 1e-3
     c = CFCCoupling(0.01, dt)
     a = np.r_[-np.ones(4), np.ones(4)] / np.sqrt(8.0)
     f0, f_pre = np.full(8, 100.0), np.full(8, 100.0) + np.r_[np.full(4, 80.0), np.zeros(4)]
-    c.pre_from, c.pre_share = f0.copy(), 0.0
-    n = int(round(PRE_TENSION_TIME / dt))
-    outs = [c.contact_update(APPROACH, f0, a, f_pre=f_pre) for _ in range(n)]
+    c.pre_from, c.pre_periods = f0.copy(), 0
+    n, n_settle = int(round(PRE_TENSION_TIME / dt)), int(round(PRE_TENSION_SETTLE / dt))
+    assert c.pre_tensioning
+    outs = [c.contact_update(APPROACH, f0, a, f_pre=f_pre) for _ in range(n + n_settle)]
     assert not any(paused for _, _, paused in outs)
     np.testing.assert_allclose(outs[0][0], f0 + (f_pre - f0) / n)
+    np.testing.assert_allclose(outs[n - 1][0], f_pre)
     np.testing.assert_allclose(outs[-1][0], f_pre)
     np.testing.assert_allclose(outs[-1][1], f_pre)
     assert not c.pre_tensioning

@@ -68,6 +68,11 @@ CFC_PAUSED = (APPROACH, BRAKE, LOST)
 # (pre_contact_forces; ASSUMPTION: within the joint command's 0.5 s switch-on ramp, T_on, that x_t
 # waits in A, and slow against the CFC's T_i 0.1 s and T_1,r 0.08 s)
 PRE_TENSION_TIME = 0.3
+# s the CFC then runs on the pre-contact forces before it pauses: its PI settles on them (T_i 0.1 s,
+# T_1,r 0.08 s). Paused at the ramp's end, the error and the PI's output near its saturation at the
+# pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
+# (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
+PRE_TENSION_SETTLE = 0.15
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -613,7 +618,7 @@ class CFCCoupling:
         self.bias_step = 0.0                    # N per period of its ramp-out after D
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
         self.pre_from: np.ndarray | None = None  # the set-point when A began (pre_tension), None outside A
-        self.pre_share = 0.0                    # 0..1, the ramp from it to the pre-contact forces
+        self.pre_periods = 0                    # periods of A with the pre-contact forces (ramp, then settling)
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -642,14 +647,14 @@ class CFCCoupling:
     @property
     def pre_tensioning(self) -> bool:
         """In A, the set-point's ramp to the pre-contact forces not done (:meth:`pre_tension` wanted)."""
-        return self.pre_from is None or self.pre_share < 1.0
+        return self.pre_from is None or self.pre_periods * self.dt < PRE_TENSION_TIME + PRE_TENSION_SETTLE - 1e-9
 
     def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
         """A period of A while :attr:`pre_tensioning`: :func:`pre_contact_forces` (f_from: f_d in A's
         first period; the stage sets :attr:`pre_from` to None outside A)."""
         f_d = np.asarray(f_d, dtype=float)
         if self.pre_from is None:
-            self.pre_from, self.pre_share = f_d.copy(), 0.0
+            self.pre_from, self.pre_periods = f_d.copy(), 0
         return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
 
     def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
@@ -662,7 +667,8 @@ class CFCCoupling:
         (3.22), paused).
 
         - A, given the pre-contact forces f_pre (:meth:`pre_tension`): not paused yet, the set-point
-          (error and feed-forward) goes from f_d at A's start to f_pre within PRE_TENSION_TIME; then
+          (error and feed-forward) goes from f_d at A's start to f_pre within PRE_TENSION_TIME and
+          stays there for PRE_TENSION_SETTLE; then
           paused and held (running on, the CFC held the contact force x_t pressed at the impact to
           13 N of 150 N for 2 s: IPAnema 3 sweep pose #2), so the contact x_t presses in B adds to
           forces planned for it.
@@ -691,9 +697,9 @@ class CFCCoupling:
             return f + d * (a @ (f_d - f) - bias) if aa > 0.0 else f
 
         if state == APPROACH and f_pre is not None and self.pre_from is not None:
-            share = self.pre_share + self.dt / PRE_TENSION_TIME
-            self.pre_share = 1.0 if share > 1.0 - 1e-9 else share       # (n periods of 1/n: done)
-            f_set = self.pre_from + self.pre_share * (np.asarray(f_pre, dtype=float) - self.pre_from)
+            self.pre_periods += 1
+            share = min(1.0, self.pre_periods * self.dt / PRE_TENSION_TIME)
+            f_set = self.pre_from + share * (np.asarray(f_pre, dtype=float) - self.pre_from)
             self.average.reset(f_set)                   # held from B on (the pause's set-point)
             self.hold = f_set.copy()
             self.weight, self.share = 1.0, 0.0
