@@ -233,6 +233,13 @@ class CableForceControl:
             return self.robot.cable.k_spec_nominal / l_t                       # (2.15)
         return lambda f_out: kernels.cable_stiffness(self.robot, np.maximum(f_out, 0.0), l_t)   # (2.17)
 
+    def stiffness(self, f, theta) -> np.ndarray:
+        """K_l (m,) [N/m] of (3.23) at the cable forces f [N] and encoder lengths θ [m]: the model the
+        controller commands elongations with ((2.15), or the secant of (2.17) at f)."""
+        l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
+        k_l = self._stiffness(l_t)
+        return np.asarray(k_l(np.asarray(f, dtype=float)) if callable(k_l) else k_l, dtype=float) * np.ones(self.robot.m)
+
     def _elongation(self, f, l_t) -> np.ndarray:
         k_l = self._stiffness(l_t)
         return f / (k_l(f) if callable(k_l) else k_l)

@@ -46,6 +46,8 @@ import numpy as np
 from cdpr_control import kernels
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.safety import all_finite
+from cdpr_control.force_distribution.methods import distribute
+from cdpr_control.force_distribution.result import Status
 from cdpr_control.model.memo import Memo
 
 IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
@@ -58,8 +60,19 @@ STATE_NAMES = {IDLE: "idle (position control)", APPROACH: "approach", BRAKE: "br
 FORCE_CONTROLLED = (APPROACH, BRAKE, LOST, CONTACT, RELEASE)
 HAND_OVER_TIME = 0.2    # s, ramp of the contact force from x_t to the CFC's feed-forward (ASSUMPTION)
 # The CFC pauses during contact establishment (A-C, section 5.1.2); it runs in D and R
-# (ContactCableForceControl, in ControlLoop and in the node cable_force_controller).
+# (ContactCableForceControl, in ControlLoop and in the node cable_force_controller). In A, before
+# the impact, it first tensions the cables for the contact to come (pre_contact_forces) and holds
+# that from B on: its output x_comp hands nothing over in A-C (no contact force pressed by it).
 CFC_PAUSED = (APPROACH, BRAKE, LOST)
+# s, the ramp of the CFC's set-point in A from the free-space forces to the pre-contact ones
+# (pre_contact_forces; ASSUMPTION: within the joint command's 0.5 s switch-on ramp, T_on, that x_t
+# waits in A, and slow against the CFC's T_i 0.1 s and T_1,r 0.08 s)
+PRE_TENSION_TIME = 0.3
+# s the CFC then runs on the pre-contact forces before it pauses: its PI settles on them (T_i 0.1 s,
+# T_1,r 0.08 s). Paused at the ramp's end, the error and the PI's output near its saturation at the
+# pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
+# (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
+PRE_TENSION_SETTLE = 0.15
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -511,6 +524,45 @@ def task_force_direction(AT, z_t) -> np.ndarray:
     return np.asarray(AT, dtype=float)[:3].T @ np.asarray(z_t, dtype=float)
 
 
+def contact_response(AT, k_l, z_t) -> np.ndarray:
+    """e (m,): the cable forces' change [N per N] when the platform presses 1 N along z_t against a
+    surface that blocks it there, the rest of the pose free: the elastic response of the cables,
+    e = K_l A (A^T K_l A)^-1 g with g = [z_t; 0 0 0], K_l = diag(k_l) the cable stiffness (2.15)-(2.17)
+    and A^T K_l A the cable stiffness matrix K_c (2.22) (the geometric part left out). A^T e = g,
+    so a . e = 1 (a of :func:`task_force_direction`). It is how x_t along z_t changes the forces of
+    a platform in contact (commanded pose into the surface, the cables unchanged otherwise): on the
+    IPAnema 3 near the floor the upper cables carry nearly all of it (their a_i is large, the lower
+    cables' small), which the force distribution's set with the contact (:func:`expected_contact_wrench`)
+    does not."""
+    AT = np.asarray(AT, dtype=float)
+    k_l = np.asarray(k_l, dtype=float)
+    g = np.zeros(AT.shape[0])
+    g[:3] = z_t
+    return k_l * (AT.T @ np.linalg.solve(AT @ (k_l[:, None] * AT.T), g))
+
+
+def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | None:
+    """The cable forces to hold before the impact (state A) so that pressing F_d [N], which adds
+    e F_d (:func:`contact_response`), keeps every cable within [f_min, f_max]: the issue's "force
+    planned for contact before impact". With the CFC paused in B as in the thesis (section 5.1.2), x_t
+    presses the contact with e F_d on top of what the CFC held at the pause; held at the free-space
+    set, the IPAnema 3's upper cables went below f_min in B near the floor (issue 25).
+
+    f_from (m,) is the set-point when A began (the free-space forces). Returned: the forces nearest
+    to it with its wrench within [max(f_min, f_min - e F_d), min(f_max, f_max - e F_d)] (the QP
+    (3.27)-(3.28) with those limits and f_ref = f_from), so f_from itself where it already keeps
+    the cables within their limits under the contact, and only the internal tension (the nullspace
+    of A^T) changed otherwise; None where no such forces exist (the pose cannot hold the contact both
+    ways: the CFC then holds f_from, as the thesis)."""
+    AT, f_from = np.asarray(AT, dtype=float), np.asarray(f_from, dtype=float)
+    df = np.asarray(e, dtype=float) * F_d
+    lo, hi = np.maximum(f_min, f_min - df), np.minimum(f_max, f_max - df)
+    if not (np.all(np.isfinite(f_from)) and np.all(lo <= hi)):
+        return None
+    result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
+    return result.f if result.status == Status.FEASIBLE else None
+
+
 def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
     """The correction (6,) that puts the expected contact reaction into the wrench of the force
     distribution (3.26)-(3.28) in place of the measured one: w - (F_d - F) z_t (force part).
@@ -565,6 +617,8 @@ class CFCCoupling:
         self.bias.reset(0.0)
         self.bias_step = 0.0                    # N per period of its ramp-out after D
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
+        self.pre_from: np.ndarray | None = None  # the set-point when A began (pre_tension), None outside A
+        self.pre_periods = 0                    # periods of A with the pre-contact forces (ramp, then settling)
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -590,7 +644,21 @@ class CFCCoupling:
         return self.weight * filtered + (1.0 - self.weight) * f_d, False
 
 
-    def contact_update(self, state: str, f_d, a, bias: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
+    @property
+    def pre_tensioning(self) -> bool:
+        """In A, the set-point's ramp to the pre-contact forces not done (:meth:`pre_tension` wanted)."""
+        return self.pre_from is None or self.pre_periods * self.dt < PRE_TENSION_TIME + PRE_TENSION_SETTLE - 1e-9
+
+    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
+        """A period of A while :attr:`pre_tensioning`: :func:`pre_contact_forces` (f_from: f_d in A's
+        first period; the stage sets :attr:`pre_from` to None outside A)."""
+        f_d = np.asarray(f_d, dtype=float)
+        if self.pre_from is None:
+            self.pre_from, self.pre_periods = f_d.copy(), 0
+        return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
+
+    def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
+                       d=None) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
         :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
@@ -598,7 +666,13 @@ class CFCCoupling:
         against the hybrid force controller's error) -> (set-point of the error (3.2), feed-forward
         (3.22), paused).
 
-        - A-C: paused, the set-point of the pause held (thesis).
+        - A, given the pre-contact forces f_pre (:meth:`pre_tension`): not paused yet, the set-point
+          (error and feed-forward) goes from f_d at A's start to f_pre within PRE_TENSION_TIME and
+          stays there for PRE_TENSION_SETTLE; then
+          paused and held (running on, the CFC held the contact force x_t pressed at the impact to
+          13 N of 150 N for 2 s: IPAnema 3 sweep pose #2), so the contact x_t presses in B adds to
+          forces planned for it.
+        - A without f_pre, B, C: paused, the set-point of the pause held (thesis).
         - D and R: the error acts on the live f_d (off a it goes there from the one held within
           HAND_OVER_TIME, so the resumed CFC does not step). The feed-forward starts from the one held and
           follows f_d through the moving average of T_MA,HPFC (the thesis's filter "to slow down the
@@ -616,10 +690,20 @@ class CFCCoupling:
             return f_d, f_d, False
         a = np.asarray(a, dtype=float)
         aa = float(a @ a)
+        if aa > 0.0:
+            d = a / aa if d is None else np.asarray(d, dtype=float)
 
         def live_along_a(f):
-            return f + a * (a @ (f_d - f) - bias) / aa if aa > 0.0 else f
+            return f + d * (a @ (f_d - f) - bias) if aa > 0.0 else f
 
+        if state == APPROACH and f_pre is not None and self.pre_from is not None:
+            self.pre_periods += 1
+            share = min(1.0, self.pre_periods * self.dt / PRE_TENSION_TIME)
+            f_set = self.pre_from + share * (np.asarray(f_pre, dtype=float) - self.pre_from)
+            self.average.reset(f_set)                   # held from B on (the pause's set-point)
+            self.hold = f_set.copy()
+            self.weight, self.share = 1.0, 0.0
+            return f_set, f_set.copy(), False
         if state in CFC_PAUSED:
             if self.average.y is None or self.weight == 0.0:
                 self.average.reset(f_d)
@@ -636,27 +720,24 @@ class CFCCoupling:
             # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
             self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
             y = self.average.update(f_d).copy()
-            target = self.hold + self.share * (f_d - self.hold)
-            f_err = target
+            f_err = y
             if aa > 0.0:
-                y += a * (a @ (target - y)) / aa
-                f_err = target + a * (a @ (f_d - target) - bias) / aa      # live along a, less the bias
+                target = self.hold + self.share * (f_d - self.hold)
+                y += d * (a @ (target - y))
+                f_err = y + d * (a @ (f_d - y) - bias)          # live along a, less the bias
             return f_err, y, False
         f_ff, _ = self.update(state, f_d)
-        # the error's set-point stays the live one it was in D and R (the ramp from the one held
-        # finished); through the average as the feed-forward, it stepped the drive command by 1.12 mm
-        # when R ended before the average had followed f_d
-        self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
-        f_err = f_d if self.share == 1.0 else self.hold + self.share * (f_d - self.hold)
-        return live_along_a(f_err), live_along_a(f_ff), False
+        f_ff = live_along_a(f_ff)
+        return f_ff, f_ff.copy(), False
 
 
-    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    def run(self, state: str, f_d, a, controller, f, e_F: float | None = None, f_pre=None,
+            d=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
         before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
-        the hybrid force controller's force error F_d - F (None: not known)
-        -> (set-point, feed-forward, paused, F_a).
+        the hybrid force controller's force error F_d - F (None: not known), f_pre the pre-contact
+        forces in A (:meth:`pre_tension`) -> (set-point, feed-forward, paused, F_a).
 
         - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
           T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
@@ -670,7 +751,7 @@ class CFCCoupling:
           (docs/hybrid_force_control.md, "Validation sweep").
 
         - Resuming after the pause it is bumpless: the feedback filter restarts at f and the
-          integral part takes the proportional part's step.
+          integral part takes the output held at the pause less the proportional part's step.
         - In D and R the integral part along a (the cable forces that change the contact force) is
           handed over to x_t with the CFC's T_i: F_a [N] is the contact force it took out of the
           integrator this period (the hybrid force controller takes F_a / k_t on x_t,
@@ -691,11 +772,14 @@ class CFCCoupling:
             # paused: the CFC resumes bumpless from the pause; else ramped out
             bias = 0.0 if state in CFC_PAUSED else math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
             self.bias.reset(bias)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
+            # the PI's output held at the pause (its P part too: after the pre-tension's ramp in A the
+            # error is not 0, and resumed on the integral part alone the drive command stepped by
+            # 0.27 mm on the floor program) is what the integral part takes over
             c.feedback_filter.reset(f)
-            c.pi.integrator = c.pi.integrator - c.params.K_p * (f_set - f)
+            c.pi.integrator = c.pi.output - c.params.K_p * (f_set - f)
         self.paused = paused
         F_a = 0.0
         # no hand-over while an output is saturated (its integral part is clamped, not drained: what
@@ -705,9 +789,9 @@ class CFCCoupling:
                                else min(1.0, self.hand_over_gain + step))
         aa = float(a @ a) if not paused and state in (CONTACT, RELEASE) else 0.0
         if aa > 0.0 and self.hand_over_gain > 0.0:
-            share = self.hand_over_gain * min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator) / aa
-            c.pi.integrator = c.pi.integrator - share * a
-            F_a = share * aa                            # the cables press with a . f along z_t
+            F_a = self.hand_over_gain * min(1.0, self.dt / c.params.T_i) * float(a @ c.pi.integrator)
+            c.pi.integrator = c.pi.integrator - F_a * (a / aa if d is None else np.asarray(d, dtype=float))
+            # (the cables press with a . f along z_t: a . d = 1)
         return f_set, f_ff, paused, F_a
 
 
@@ -826,16 +910,23 @@ class ContactCableForceControl:
             key = F_d0.tobytes()
             if key != self._F_d0:                   # the same F_d,0 has the same axis
                 self.z_t, self._F_d0 = task_axis(F_d0, self.z_t), key
-        a = self.a_zero
+        a, e, f_pre = self.a_zero, None, None
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
+            e = contact_response(AT, self.cfc.stiffness(f_d, theta), self.z_t)
+            if not np.all(np.isfinite(e)):
+                e = None
+            if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning and e is not None:
+                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
+        if state != APPROACH:
+            self.coupling.pre_from = None                # the next A starts from its own f_d
         e_F = None
         if state == CONTACT and F_d0 is not None and F_vec is not None:     # (run reads it in D only)
             F_vec = np.asarray(F_vec, dtype=float)
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)

@@ -255,6 +255,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     metrics = dict.fromkeys(("overshoot_percent", "settling_s", "steady_error_percent", "steady_error_true_percent",
                              "slack_s"), float("nan"))
     metrics["time_in_B_s"] = float(np.count_nonzero(states == "B") * DT)
+    metrics["contact_capacity_N"] = capacity = contact_capacity(robot, x)
     metrics["impact_s"] = float(t[touched[0]]) if len(touched) else float("nan")
     if len(touched) and ok:
         i, n = touched[0], int(STEADY_WINDOW / DT)
@@ -267,8 +268,45 @@ def contact_case(spec: CaseSpec) -> CaseResult:
                        steady_error_true_percent=criteria.steady_error_percent(F[i:], F_d, n),
                        slack_s=criteria.slack_time(f[i:], robot.cable.f_min, DT))
     note = "" if len(touched) else "never touched the floor"
+    if capacity < F_d:
+        note = "; ".join(n for n in (note, f"F_d beyond the pose's contact capacity ({capacity:.4g} N within the "
+                                           f"planned force limits)") if n)
     held_text = rec.held or (f"held by the force watch: {held['reason']}" if "reason" in held else None)
     return judge(spec, metrics, not ok, note or (f"diverged at {rec.diverged_at:.3f} s" if not ok else ""), held_text)
+
+
+def contact_capacity(robot, x, rtol: float = 1e-3) -> float:
+    """The largest force [N] the platform can press down at x at rest with cable forces within the
+    shipped distribution's limits (the parameter file's f_min, the robot's f_max): the wrench of the
+    weight plus that contact's reaction, F e_z, wrench-feasible (2.40), by bisection to rtol of the
+    robot's nominal contact force. Reported, not judged: a contact beyond it asks forces the
+    distribution cannot plan (it overloads or leaves a cable below its planned f_min) whatever the
+    controller does (docs/validation.md, "Contact after session 11")."""
+    from cdpr_control import kernels
+    from cdpr_control.force_distribution.methods import distribute
+    from cdpr_control.force_distribution.result import Status
+    from cdpr_control.model.dynamics import gravity_wrench
+    from cdpr_tools.validate.grid import planned_f_min
+
+    x = np.asarray(x, dtype=float)
+    AT, = kernels.inverse_kinematics_fields(robot, x, "AT")
+    f_min = planned_f_min(robot)
+    f_max = np.asarray(robot.cable.f_max, dtype=float) * np.ones(robot.m)
+    w_g = gravity_wrench(robot, x)
+
+    def holds(F: float) -> bool:
+        return distribute(AT, w_g + np.r_[0.0, 0.0, F, 0.0, 0.0, 0.0], f_min, f_max, f_min).status == Status.FEASIBLE
+
+    nominal = NOMINAL_CONTACT_FORCE[robot.file.stem]
+    lo, hi = 0.0, nominal
+    while holds(hi) and hi < 1e3 * nominal:
+        lo, hi = hi, 2.0 * hi
+    if not holds(lo):
+        return 0.0
+    while hi - lo > rtol * nominal:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+    return lo
 
 
 def _settled_watch(rec: Recorder, F_d: float):
