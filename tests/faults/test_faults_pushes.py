@@ -108,13 +108,7 @@ def test_a_program_pushed_beyond_the_cables_fails_and_does_not_end_done(push_run
     assert run["watch"] is not None
 
 
-SLACK_LEFT = pytest.mark.xfail(strict=True, reason=(
-    "open (issue 28): at cuboid_mini's corner (-150, -100, -100) mm, 900 N then 500 N leave the plant's cables "
-    "settled and the platform tilted (1.6 deg); the hold's tension correction (control/joint_command.py, "
-    "internal forces only) leaves cables at 0-5.5 N 1.0-1.5 s after the end (composed graph, mismatched plant)"))
-
-
-@pytest.mark.parametrize("case", [c if "corner" not in c else pytest.param(c, marks=SLACK_LEFT) for c in PUSHES])
+@pytest.mark.parametrize("case", list(PUSHES))
 def test_after_a_push_the_loop_runs_and_the_cables_are_back_within_their_limits(push_runs, case):
     """Issue 28: after a 350 N push forces stayed at 1.5-7.9 N (below f_min 5 N) 20 s later, after
     900 N then 500 N four cables at 0-0.07 N for 10 s. Now the loop runs on through the pushes (no
@@ -131,10 +125,6 @@ def test_after_a_push_the_loop_runs_and_the_cables_are_back_within_their_limits(
     assert len(late) and np.all(late >= c.f_min) and np.all(late <= c.f_max), (late.min(), late.max())
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 28, Done when): after a push's end the hold restores the tension over T_HOLD 0.25 s "
-    "(control/joint_command.py): cables stay below 0.5 f_min for 300-355 ms after 350 N, 630-755 ms after "
-    "900 N then 500 N at home and past the 1.5 s watched at the corner (composed graph, mismatched plant)"))
 @pytest.mark.parametrize("case", list(PUSHES))
 def test_after_a_push_no_cable_force_leaves_the_band_for_more_than_100_ms(push_runs, case):
     """Issue 28, "Done when": no simulated cable force out of [0.5 f_min, 1.5 f_max] for more than
