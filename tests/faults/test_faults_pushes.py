@@ -15,7 +15,8 @@ from required import import_or_skip  # noqa: E402  (a missing rclpy fails in CI)
 rclpy = import_or_skip("rclpy")
 from cdpr_msgs.msg import ProgramStatus  # noqa: E402
 
-from cdpr_test_nodes.fault_graph import HANG_S, MS, FaultGraph, check_not_done, program_ended  # noqa: E402
+from cdpr_test_nodes.fault_graph import (HANG_S, MS, FaultGraph, check_not_done, longest_excursion,  # noqa: E402
+    program_ended)
 
 
 AFTER_S = 1.5           # simulated time watched after a push's end
@@ -69,7 +70,8 @@ def pushed(position, pushes: list, program: str | None = None) -> dict:
     late = f[stamps >= end + int(SETTLED_S * 1e9)]
     print(f"\npushes {pushes} at {position} mm (mismatched plant): after the end {f.min():.1f}..{f.max():.1f} N, "
           f"{SETTLED_S}-{AFTER_S} s after it {late.min():.2f}..{late.max():.2f} N; excursions (ms after the "
-          f"end) {[((a - end) // MS, (b - end) // MS) for a, b in recording.excursions(end, until)]}; "
+          f"end) {[((a - end) // MS, (b - end) // MS) for a, b in recording.excursions(end, until)]}, the longest "
+          f"outside [0.5 f_min, 1.5 f_max] {longest_excursion(stamps, f, recording.robot.cable) // MS} ms; "
           f"held by {None if watch is None else watch.message}")
     return {"recording": recording, "start": start, "began": began, "end": end, "until": until, "result": result,
             "watch": watch}
