@@ -163,8 +163,8 @@ class JointCommand:
             return self._return_to(self.target(x_safe, [offset_safe], dq_safe + self.dq_hold))
         if self._watch_hold:
             self._release()
-        if self.dq_kept is not None and dq_cfc is not None:
-            dq_cfc = dq_cfc + self.dq_kept
+        if self.dq_kept is not None:
+            dq_cfc = (self.no_dq if dq_cfc is None else dq_cfc) + self.dq_kept
         if self._start is not None and not hold:
             return self._starting_period(x_d, offsets, dq_cfc)
         if not hold and len(offsets) == 1 and dq_cfc is not None:
