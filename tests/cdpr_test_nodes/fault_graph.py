@@ -52,6 +52,22 @@ def excursions(stamps: np.ndarray, f: np.ndarray, cable) -> list[tuple[int, int]
     return found
 
 
+def longest_excursion(stamps: np.ndarray, f: np.ndarray, cable) -> int:
+    """The longest stretch [ns] (first to last stamp) in which some force of f (n, m) at ``stamps``
+    (n,) (sorted) is out of [0.5 f_min, 1.5 f_max], of any length (0: none); for the figures the
+    fault tests print, :func:`excursions` is the check."""
+    low, high = FORCE_BAND
+    out = np.any((f < low * cable.f_min) | (f > high * cable.f_max), axis=1)
+    longest, started = 0, None
+    for t, bad in zip(stamps, out):
+        if not bad:
+            started = None
+            continue
+        started = t if started is None else started
+        longest = max(longest, int(t - started))
+    return longest
+
+
 class Recording:
     """What a FaultGraph recorded (``collector.messages(topic)``) and the checks on it; a frozen copy
     (:meth:`FaultGraph.recording`) outlives its graph."""

@@ -10,7 +10,7 @@ from cdpr_msgs.msg import CableForces
 from std_msgs.msg import Header
 
 from cdpr_control.model.robot import load_robot
-from cdpr_test_nodes.fault_graph import PERIOD_NS, ROBOT, FaultGraph, Recording, excursions
+from cdpr_test_nodes.fault_graph import PERIOD_NS, ROBOT, FaultGraph, Recording, excursions, longest_excursion
 
 
 def recorded(forces: np.ndarray, command_stamps) -> SimpleNamespace:
@@ -62,3 +62,17 @@ def test_excursions_are_the_stretches_longer_than_100_ms_one_running_at_the_end_
     rec = Recording(robot, {"/ground_truth/cable_forces": recorded(f, []).collector.messages("")})
     assert rec.excursions(350 * PERIOD_NS, 500 * PERIOD_NS) == []          # 70 ms of it in the window
     assert rec.excursions(0, 950 * PERIOD_NS) == [(300 * PERIOD_NS, 419 * PERIOD_NS)]
+
+
+def test_the_longest_excursion_of_any_length_is_measured_first_to_last_stamp():
+    """The figure the push tests print: the longest out-of-band stretch, short ones included."""
+    c = load_robot(ROBOT).cable
+    f = np.tile(c.f_min * 2.0, (1000, 1))
+    stamps = np.arange(1000) * PERIOD_NS
+    assert longest_excursion(stamps, f, c) == 0
+    f[100:150, 0] = 0.0                                      # 50 periods slack: 49 ms first to last
+    f[300:320, 1] = 2.0 * c.f_max[1]
+    assert longest_excursion(stamps, f, c) == 49 * PERIOD_NS
+    f[990:, 2] = 0.4 * c.f_min[2]                            # running at the end: to the last stamp
+    f[150:170, 3] = 0.0                                      # right after the first: one stretch of 70
+    assert longest_excursion(stamps, f, c) == 69 * PERIOD_NS

@@ -18,30 +18,59 @@ while moving is no velocity step either; the cables keep the tension of the last
 A tripped force watch (:class:`cdpr_control.control.safety.ForceWatch`) holds differently: the last command
 is what drove the forces away, so θ_d goes, at most v_max per second per cable, to the watch's safe
 command θ_d = IK(x_safe + offset_safe) - Δq_CFC,safe - Δq_hold (the set-point where it tripped, the
-controller outputs of the last moment the forces followed within their limits) and stays there.
-Δq_hold restores that moment's internal tension when the plant has changed since (cables that
-settled under an overload, a push): a pure integral on the force error f_d,safe - f, low-pass
-filtered over ``T_HOLD_FILTER`` so that a ringing platform does not feed it and projected onto the
-null space of A^T (the internal forces, which move no pose: its wrench part, sensor errors and the
-model's, would only move the platform), with reset time ``T_HOLD`` through the linear stiffness
-k_spec / l_t (2.15), bounded to the elongation of the force range, and paused while a filtered force
-is above f_max (an overload is a push or the oscillation itself, not a tension to restore).
-Its crossover, 1 / T_HOLD = 4 rad/s, is far below the drives' bandwidth, so it is stable whatever
-made the controllers diverge.
+controller outputs of the last moment the forces followed within their limits) and stays there:
+the last safe pose at the force set-point's tension f_d,safe. Δq_hold = Δq_T + Δq_D, two terms of the
+measured forces f through the linear stiffness k = k_spec / l_t (2.15):
+
+* Δq_T restores the internal tension of f_d,safe when the plant has changed since (cables that
+  settled under an overload, a push): an integral of the internal force error, f_d,safe - f
+  low-pass filtered over ``T_HOLD_FILTER`` and projected onto the null space of A^T(x_safe) (the
+  internal forces, which move no pose: its wrench part, sensor errors and the model's, would only
+  move the platform), with reset time ``T_HOLD``. It integrates only while the platform stands
+  (the wrench part of that error, |A^T (f_d,safe - f)| over the forces, within ``f_min``: a ringing
+  platform's forces are no tension to restore; with slack cables their internal part points
+  anywhere) and no filtered force is above f_max (an overload is a push, not a tension to restore),
+  bounded to the elongation of ``HOLD_RANGES`` force ranges (a settled cable needs more than one:
+  the Mini's at cuboid_mini's corner 6 mm after 900 N then 500 N).
+* Δq_D damps the platform: Δq_D = K_D (f_slow - f) / k, f_slow the forces low-pass filtered over
+  ``T_HOLD_WASHOUT``, a proportional force feedback through a washout (zero at rest, so it moves
+  no set-point; a sustained push washes out instead of paying the cables out). A held command
+  alone leaves the platform ringing on slack cables after a push for ~100 ms (the Mini, nominal
+  plant); drives paying out a cable whose force rises absorb that energy. K_D
+  (:func:`hold_damping`) is ``HOLD_DAMPING`` or less, so that the loop K_D G_a(s) washout(s) keeps a
+  12 dB gain margin with the robot's drive (3.10)/(5.11) and its dead time (the Mini: 1.5, the
+  IPAnema 3: 0.26).
+
+With the force error's integral at 1 / T_HOLD = 20 rad/s and the damping's crossover below the
+drives' phase crossover, the hold is stable whatever made the controllers diverge
+(tests/control/test_joint_command_hold.py checks the margins of both robots by the stability
+analysis of section 3.4). Released, the hold keeps Δq_T (the plant's cables stay as they settled)
+as an offset of every later command, and θ_d goes from the held command to the controllers' along
+the start ramp's cosine over ``START_RAMP`` (no step: dropping Δq_T at once slackened the settled
+cables again and tripped the watch anew).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from cdpr_control import kernels
-from cdpr_control.control.bumpless import StartRamp
+from cdpr_control.control.bumpless import START_RAMP, StartRamp
 from cdpr_control.control.safety import all_finite
 from cdpr_control.model.cable import total_free_length
 from cdpr_control.control.filters import LowPass
 
 A_BRAKE = 5.0   # m/s^2: default deceleration of θ_d in a hold (braking on the path)
-T_HOLD = 0.25         # s, reset time of the force-watch hold's tension integral
-T_HOLD_FILTER = 0.05  # s, PT1 of the forces it integrates
+# the force-watch hold (module docstring); measured on the Mini's pushes (docs/faults.md, tests/faults/test_faults_pushes.py)
+T_HOLD = 0.05           # s, reset time of the hold's tension integral Δq_T
+T_HOLD_FILTER = 0.005   # s, PT1 of the forces it integrates
+T_HOLD_WASHOUT = 0.05   # s, washout of the hold's force damping Δq_D
+HOLD_DAMPING = 1.5      # -, largest gain K_D of the force damping
+# -, K_D |G_a washout| at the phase crossover at most: a 12 dB gain margin of the single-cable model.
+# 6 dB (K_D 0.52 on the IPAnema 3) held the IPAnema 3 in a growing oscillation after OSPC x100
+# (tests/control/test_force_watch.py): the eight cables' feedback on one platform has more gain
+# than one cable's; 0.4 held, 0.26 (12 dB) leaves it a factor 1.5 of it
+HOLD_GAIN_MARGIN = 0.25
+HOLD_RANGES = 10.0      # -, bound of Δq_T: the elongation of this many force ranges (f_max - f_min)
 
 
 class JointCommand:
@@ -54,8 +83,13 @@ class JointCommand:
         self.velocity = np.zeros(robot.m)      # θ̇_d of the last period [m/s]
         self.no_dq = np.zeros(robot.m)         # Δq_CFC when none is given (q - 0 = q)
         self.held = False
-        self.dq_hold = np.zeros(robot.m)       # the force-watch hold's tension correction [m]
+        self.dq_hold = np.zeros(robot.m)       # the force-watch hold's correction Δq_T + Δq_D [m]
+        self.dq_tension = np.zeros(robot.m)    # its tension integral Δq_T [m]
+        self.dq_kept: np.ndarray | None = None  # Δq_T kept after a released hold [m] (None: none)
+        self.K_D = hold_damping(robot, dt)
         self._hold_filter = LowPass(T_HOLD_FILTER, dt)
+        self._hold_slow = LowPass(T_HOLD_WASHOUT, dt)
+        self._watch_hold = False               # the last period held for the force watch
         self._start: np.ndarray | None = None  # θ at power-on while the start ramp runs
         self._gap: np.ndarray | None = None    # θ_0 minus the first target, ramped out
         self._ramp = StartRamp(0.0, dt)
@@ -121,11 +155,16 @@ class JointCommand:
             raise RuntimeError("JointCommand.update before reset(theta)")
         if safe is not None:
             x_safe, offset_safe, dq_safe, f_safe = safe
+            if not self._watch_hold and self.dq_kept is not None:   # a hold again: Δq_T goes on from the kept one
+                self.dq_tension, self.dq_kept = self.dq_kept, None
+                self.dq_hold = self.dq_tension.copy()
+            self._watch_hold = True
             self._restore_tension(x_safe, f_safe, f)
             return self._return_to(self.target(x_safe, [offset_safe], dq_safe + self.dq_hold))
-        if self._hold_filter.y is not None:    # (released: the next hold starts afresh)
-            self.dq_hold = np.zeros(self.robot.m)
-            self._hold_filter.reset()
+        if self._watch_hold:
+            self._release()
+        if self.dq_kept is not None:
+            dq_cfc = (self.no_dq if dq_cfc is None else dq_cfc) + self.dq_kept
         if self._start is not None and not hold:
             return self._starting_period(x_d, offsets, dq_cfc)
         if not hold and len(offsets) == 1 and dq_cfc is not None:
@@ -152,19 +191,39 @@ class JointCommand:
         return self._move_towards(self._ramped(target), held=False)
 
     def _restore_tension(self, x_safe, f_safe, f) -> None:
-        """One period of Δq_hold: dt / T_HOLD of the filtered internal force error as elongation (2.15)."""
-        if f_safe is None or f is None or not all_finite(np.asarray(f, dtype=float).tolist()):
+        """One period of Δq_hold = Δq_T + Δq_D (module docstring) from the measured forces f (m,)
+        [N] and the set-point's f_d,safe (m,) at x_safe; f not finite or f_d,safe unknown: unchanged."""
+        if f_safe is None or f is None:
+            return
+        f = np.asarray(f, dtype=float)
+        if not all_finite(f.tolist()):
             return
         c = self.robot.cable
-        f_lp = self._hold_filter.update(np.asarray(f, dtype=float))
-        if np.any(f_lp > c.f_max):
-            return
+        k = c.k_spec_nominal / total_free_length(self.robot, self.theta_d)      # (2.15)
+        f_lp = self._hold_filter.update(f)
         error = f_safe - f_lp
         AT = kernels.inverse_kinematics(self.robot, x_safe).AT
-        internal = error - AT.T @ np.linalg.solve(AT @ AT.T, AT @ error)       # the null space of A^T
-        k = c.k_spec_nominal / total_free_length(self.robot, self.theta_d)      # (2.15)
-        bound = (c.f_max - c.f_min) / k
-        self.dq_hold = np.clip(self.dq_hold + self.dt / T_HOLD * internal / k, -bound, bound)
+        wrench = AT @ error
+        standing = float(np.linalg.norm(wrench[:3])) <= float(np.max(c.f_min))
+        if standing and not np.any(f_lp > c.f_max):
+            internal = error - AT.T @ np.linalg.solve(AT @ AT.T, wrench)          # the null space of A^T
+            bound = HOLD_RANGES * (c.f_max - c.f_min) / k
+            self.dq_tension = np.clip(self.dq_tension + self.dt / T_HOLD * internal / k, -bound, bound)
+        damping = self.K_D * (self._hold_slow.update(f) - f) / k                  # Δq_D: the washout
+        self.dq_hold = self.dq_tension + damping
+
+    def _release(self) -> None:
+        """The force watch released its hold: Δq_T kept as an offset of every later command, the
+        damping dropped, θ_d ramped from the held command to the controllers' over START_RAMP."""
+        self.dq_kept = self.dq_tension.copy() if self.dq_tension.any() else None
+        self.dq_tension = np.zeros(self.robot.m)
+        self.dq_hold = np.zeros(self.robot.m)
+        self._hold_filter.reset()
+        self._hold_slow.reset()
+        self._watch_hold = False
+        self._ramp = StartRamp(START_RAMP, self.dt)
+        self._start = self.theta_d.copy() if self._ramp.running else None
+        self._gap = None
 
     def _return_to(self, theta_safe: np.ndarray) -> np.ndarray:
         """θ_d towards theta_safe at most v_max dt per cable (a held period); braking as :meth:`brake`
@@ -193,6 +252,32 @@ class JointCommand:
         if speed == 0.0:
             return self.velocity
         return self.velocity * (max(speed - self.a_brake * self.dt, 0.0) / speed)
+
+
+def hold_damping(robot, dt: float) -> float:
+    """K_D of the hold's force damping (module docstring): HOLD_DAMPING, or less so that
+    K_D |G_a(jω) W(jω)| <= HOLD_GAIN_MARGIN where the phase of G_a W first reaches -180 deg, G_a the
+    drive (3.10) or (5.11) with its dead time and half a period of zero-order hold (as the
+    stability analysis of section 3.4 models it), W(s) = T s / (1 + T s) the washout of T_HOLD_WASHOUT.
+    The phase crossover by bisection on the phase, which falls monotonically."""
+    d = robot.drive
+    delay = d.T_d + 0.5 * dt
+
+    def response(w: float) -> complex:
+        s = 1j * w
+        G = 1.0 / (1.0 + d.T_1 * s) if d.model == "pt1_deadtime" else 1.0 / (1.0 + 2.0 * d.zeta * d.T_w * s + (d.T_w * s) ** 2)
+        return G * T_HOLD_WASHOUT * s / (1.0 + T_HOLD_WASHOUT * s)
+
+    def phase(w: float) -> float:        # unwrapped: the rational part's angle (in (-pi, pi/2)) minus the delay's
+        return float(np.angle(response(w))) - w * delay
+
+    lo, hi = 1.0, 1e6                    # rad/s: phase(lo) > -pi; beyond hi the drive's gain is negligible
+    if phase(hi) > -np.pi:
+        return HOLD_DAMPING
+    for _ in range(200):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if phase(mid) > -np.pi else (lo, mid)
+    return min(HOLD_DAMPING, HOLD_GAIN_MARGIN / abs(response(hi)))
 
 
 def _joint_command_step(robot, x, dq_cfc, theta_d, step: float) -> np.ndarray | None:

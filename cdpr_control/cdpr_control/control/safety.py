@@ -292,6 +292,10 @@ class ForceWatch:
     def _remember(self, offset: np.ndarray, dq_cfc: np.ndarray, f_d) -> None:
         if self._outputs is None:
             self._outputs = (offset, dq_cfc, f_d)    # the first period: the robot stood there
+        elif self._outputs[2] is None and f_d is not None:
+            # the first force set-point (in the graph it may come a period after the first command):
+            # without it a trip before the first clean stretch restored no tension
+            self._outputs = (*self._outputs[:2], f_d)
         self._history.append((offset, dq_cfc, f_d))
 
     def _band(self, f: np.ndarray, bounds: tuple, longest: float, i: int) -> Fault | None:

@@ -156,8 +156,9 @@ class JointCommandNode(CdprNode):
         self.create_service(Trigger, "~/release_hold", self._on_release_hold)
 
     def _on_release_hold(self, request, response):
-        """End the force watch's hold (an operator who has removed its cause); no step: θ_d moves
-        from where it is towards the next command at v_max."""
+        """End the force watch's hold (an operator who has removed its cause); no step: θ_d goes from
+        the held command to the controllers' along a cosine over START_RAMP, keeping the hold's
+        tension correction (:meth:`cdpr_control.control.joint_command.JointCommand.update`)."""
         response.success = self.watch.fault is not None
         response.message = f"released: {self.watch.fault.message}" if response.success else "not holding"
         self.watch.release()
