@@ -7,6 +7,8 @@ steps at standstill on the IPAnema 3 at r = [-1, -1, 0.5] m (one step of 32 kg o
 16 x 8 kg experiment is ``cdpr identify load-steps``) and on the Mini; a live disable and a guarded
 estimate without a jump in θ_d.
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -376,8 +378,22 @@ def test_disabling_live_does_not_jump_the_command():
         if k == 1500:
             stage.compensation.set_params(LoadCompensationParams(enabled=False))
 
-    r = run(MINI, hold(MINI.home), 2.2, loop_params("ik_lc", MINI), before_step=schedule,
+    # the force watch off: under IK-only the payload takes the Mini's lower cables about 3 N below
+    # f_min, the watch held from 0.2 s on and froze θ_d, and this test passed without a ramp to check
+    # (the hold's tension correction since session 11 moves θ_d, which showed it); the ramp is its subject
+    params = loop_params("ik_lc", MINI)
+    params = replace(params, safety=replace(params.safety, force_watch=False))
+    held = []
+
+    def schedule_and_watch(k, loop, sim):
+        schedule(k, loop, sim)
+        state = getattr(loop, "state", None)
+        if state is not None and any(fault.holds for fault in state.faults):
+            held.append(k)
+
+    r = run(MINI, hold(MINI.home), 2.2, params, before_step=schedule_and_watch,
             offset_stages={"load_compensation": stage})
+    assert not held
     assert np.all(np.isfinite(r.theta_d))
     assert r.offsets["load_compensation"][1490, 2] > 1e-4
     ramp = np.abs(np.diff(r.theta_d[1400:], axis=0)).max()

@@ -85,10 +85,12 @@ def test_state_every_period_approach_and_the_coupled_controllers(graph):
     assert parse_state(s.controller) == "A" and s.enabled
     assert list(s.output) == list(s.feedforward)                   # A: all of x_t is position-controlled
     assert s.output[2] < 0.0 and abs(s.output[2]) <= 0.002 * 5e-3  # along F_d,0 (down) at most v_max
-    # the OSPC stops integrating along the force axis, the CFC is held
+    # the OSPC stops integrating along the force axis; the CFC runs on in A's first PRE_TENSION_TIME
+    # + PRE_TENSION_SETTLE (0.45 s), tensioning the cables for the contact to come
+    # (pre_contact_forces, since session 11), and is held only after that
     z_integrator = [st.integrator[2] for st in ospc_states[-4:]]
     assert max(z_integrator) - min(z_integrator) == 0.0
-    np.testing.assert_array_equal(cfc_states[-1].output, dq_free)
+    assert not np.array_equal(cfc_states[-1].output, dq_free)
     # the coupled CFC publishes its hand-over every period: applied, nothing handed over while paused
     assert spin_until(executor, lambda: len(hand_overs) >= 7)
     assert [h.header.stamp.nanosec for h in hand_overs[-7:]] == [k * 1_000_000 for k in range(1, 8)]
