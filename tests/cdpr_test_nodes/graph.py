@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -73,6 +76,21 @@ def wait_for(condition, timeout: float = DISCOVERY, what: str = "condition") -> 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(0.02)
+
+
+def cdpr(env: dict, *argv: str, timeout: float) -> subprocess.CompletedProcess:
+    """`cdpr ARGV` in a process of its own with ``env``; it must end within ``timeout`` s (else it hangs)."""
+    return subprocess.run([sys.executable, "-m", "cdpr_tools.cli", *argv], capture_output=True, text=True,
+                          env=env, timeout=timeout)
+
+
+def kill_daemon(pid: int) -> None:
+    """SIGKILL the graph daemon of ``pid`` if that process is one (a pid file may outlive its process)."""
+    try:
+        if b"cdpr_tools.daemon.server" in Path(f"/proc/{pid}/cmdline").read_bytes():
+            os.kill(pid, signal.SIGKILL)
+    except OSError:
+        pass
 
 
 def subprocess_env() -> dict:

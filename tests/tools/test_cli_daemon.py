@@ -24,7 +24,7 @@ from rosgraph_msgs.msg import Clock
 from geometry_msgs.msg import PointStamped
 from std_msgs.msg import Header, String
 
-from cdpr_test_nodes.graph import Spinner, subprocess_env
+from cdpr_test_nodes.graph import kill_daemon, cdpr as run_cdpr, Spinner, subprocess_env
 from cdpr_test_nodes.talker import Talker
 from cdpr_tools import cli
 from cdpr_tools.daemon import client
@@ -102,22 +102,14 @@ def env(graph):
     yield env
     cdpr(env, "daemon", "stop")
     for pid_file in Path(runtime).rglob("*.pid"):  # whatever the stop could not reach
-        _kill(int(pid_file.read_text()))
+        kill_daemon(int(pid_file.read_text()))
     shutil.rmtree(runtime, ignore_errors=True)
 
-
-def _kill(pid: int) -> None:
-    try:
-        if b"cdpr_tools.daemon.server" in Path(f"/proc/{pid}/cmdline").read_bytes():
-            os.kill(pid, signal.SIGKILL)
-    except OSError:
-        pass
 
 
 def cdpr(env: dict, *argv: str) -> subprocess.CompletedProcess:
     """`cdpr ARGV` in a process of its own; it must end within NO_HANG seconds."""
-    return subprocess.run([sys.executable, "-m", "cdpr_tools.cli", *argv], capture_output=True, text=True,
-                          env=env, timeout=NO_HANG)
+    return run_cdpr(env, *argv, timeout=NO_HANG)
 
 
 def timed(env: dict, *argv: str) -> tuple[subprocess.CompletedProcess, float]:
@@ -333,7 +325,7 @@ def test_idle_daemon_exits_by_itself(env):
         assert not list(Path(own["XDG_RUNTIME_DIR"]).rglob("*.sock"))  # it removed its socket
     finally:
         if pid is not None:
-            _kill(pid)
+            kill_daemon(pid)
         shutil.rmtree(own["XDG_RUNTIME_DIR"], ignore_errors=True)
 
 

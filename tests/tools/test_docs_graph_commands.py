@@ -12,7 +12,6 @@ fail with that error (up to a "..." that stands for the rest). Commands that nee
 """
 from __future__ import annotations
 
-import os
 import shlex
 import shutil
 import signal
@@ -24,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from cdpr_test_nodes.graph import subprocess_env
+from cdpr_test_nodes.graph import kill_daemon, cdpr as run_cdpr, subprocess_env
 from cdpr_tools.share import package_share
 from test_documented_commands import DOCS, PLACEHOLDER, _is_reference, documented_commands
 
@@ -83,24 +82,17 @@ def graph():
     finally:
         cdpr(env, "daemon", "stop")
         for pid_file in Path(runtime).rglob("*.pid"):   # whatever the stop could not reach
-            _kill_daemon(int(pid_file.read_text()))
+            kill_daemon(int(pid_file.read_text()))
         shutil.rmtree(runtime, ignore_errors=True)
         launch.send_signal(signal.SIGINT)
         _, err = launch.communicate(timeout=NO_HANG)
     assert launch.returncode == 0, err[-2000:]
 
 
-def _kill_daemon(pid: int) -> None:
-    try:
-        if b"cdpr_tools.daemon.server" in Path(f"/proc/{pid}/cmdline").read_bytes():
-            os.kill(pid, signal.SIGKILL)
-    except OSError:
-        pass
-
 
 def cdpr(env: dict, *argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cdpr_tools.cli", *argv], capture_output=True, text=True,
-                          env=env, timeout=NO_HANG)
+    """`cdpr ARGV` in a process of its own; it must end within NO_HANG seconds."""
+    return run_cdpr(env, *argv, timeout=NO_HANG)
 
 
 def _runnable(argv: list[str], error: str | None) -> list[str]:
