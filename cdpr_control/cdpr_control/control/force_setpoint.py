@@ -49,13 +49,11 @@ RESERVE_FLOOR = 1e-3
 RESERVE_SHARE = 0.7    # -, of the largest margin a pose leaves (:func:`largest_margin`): the rest is the QP's freedom
 # -, the hand's reserve per N of its share max |Δf_i|. A hand that lets go at once is a step of -Δf on
 # the lightly damped cable mode, whose response swings up to twice the step; measured on the Mini
-# (session 11, grid pose #28, 13 N released): 1.35 x the share below the set-point. 2 kept the Mini's
-# #12 and #28 above f_min after the release, but made the IPAnema 3's eigenfrequency runs at #12 and
-# #29 (interior poses, mismatched seeds 1 and 2) oscillate at about 13 Hz until the force watch held
-# on the force rate (with 1 both pass, -0.47 %); the cause is not found (not the margin LP's cap:
-# filtering it changed nothing), so the reserve stays at the share (docs/validation.md, "Hand guiding
-# after session 11")
-RESERVE_RING = 1.0
+# (session 11, grid pose #28, 13 N released): 1.35 x the share below the set-point, so 2 keeps the
+# Mini's #12 and #28 above f_min after the release. (At the merge of session 11 it went back to 1:
+# the IPAnema 3's eigenfrequency runs at #12 and #29 oscillated at 13 Hz until the force watch held.
+# The cause was the rate of the forces the reserve adds, not the factor: _with_reserve, session 12.)
+RESERVE_RING = 2.0
 _INF = 1e30            # DAQP's "no bound"
 EIGEN_PERIODS = 50     # periods between two evaluations of ω_n while a payload is known
 
@@ -204,6 +202,8 @@ class ForceSetpoint:
         self.w_d: np.ndarray | None = None
         self.w_user: np.ndarray | None = None    # hand guiding: the user's wrench w_Adm (set_user_wrench)
         self.reserve = 0.0                       # N, the hand's reserve from f_min and f_max (_hand_reserve)
+        self.reserve_applied = 0.0               # N, the reserve the last set-point kept (_with_reserve)
+        self.reserve_forces = np.zeros(robot.m)  # N, what it added to the plain distribution's forces then
         self.margin_lp = MarginLP(6, robot.m)    # largest_margin, warm from period to period (_with_reserve)
         self._model_memo = Memo()                # (w_dyn, A^T) of the set-point's bytes and kernels.ENABLED (_model)
         self._payload_memo = Memo()              # R c, g - a_c of the set-point's and cog's bytes (payload_wrench)
@@ -323,8 +323,8 @@ class ForceSetpoint:
         user's wrench at the tension level's rate (``tension_rate``, the internal forces move
         smoothly) and decays with RESERVE_RELEASE_TIME after the hand has let go, so the reserve is
         there while the cables ring out. Without a user (``set_user_wrench(None)``) r decays to 0.
-        The target is RESERVE_RING times the largest |Δf_i| (1: the static change; the release's swing
-        lets #28 of the Mini's grid ring to 4.49 N for f_min 5 N, see RESERVE_RING)."""
+        The target is RESERVE_RING times the largest |Δf_i| (2: the release's swing, not only the
+        static change, which let #28 of the Mini's grid ring to 4.49 N for f_min 5 N, see RESERVE_RING)."""
         target = 0.0 if self.w_user is None else RESERVE_RING * float(np.abs(user_forces(AT, self.w_user)).max())
         if target >= self.reserve:
             d = self.distributor
@@ -339,17 +339,49 @@ class ForceSetpoint:
         """The distribution again with every cable within [f_min + r, f_max - r]: the hand's reserve r
         kept from both limits (a release swings the cables it unloads down and those it loads up),
         at most the largest margin this pose and wrench leave (:func:`largest_margin`), so that the
-        set-point stays continuous near the border; ``result`` where no margin is left."""
+        set-point stays continuous near the border; ``result`` where no margin is left.
+
+        The cable forces the reserve adds move at most at the tension level's rate (``tension_rate``
+        times the force range, per cable and period), not only r: raising the bounds of the cables
+        at a limit moves the others along the null space of A^T, by up to 18 N per N of r at the
+        IPAnema 3's grid pose #12 (two low cables whose null-space rows are nearly parallel). With
+        r alone rate-limited, f_d rose at up to 58 kN/s there, faster than the CFC follows; the
+        cables' unequal lag read as a wrench, which (5.9) took for the user's and which raised r
+        again: with RESERVE_RING 2 the loop ran away into a 13 Hz oscillation until the force watch
+        held (docs/validation.md, "Hand guiding after session 12"). The set-point is therefore
+        f = f_plain + s (f_raised - f_plain), s in [0, 1] the largest for which no cable's addition
+        moves by more than the rate's step from the last period's (``reserve_forces``): both
+        solutions balance A^T f = -w_d, so their combination does, within [f_min + s r, f_max - s r]
+        (``reserve_applied`` = s r, the reserve kept); s = 1 (the raised QP's optimum) once the
+        additions have caught up."""
         d = self.distributor
         if self.reserve == 0.0 or d.method != "qp" or result.status != Status.FEASIBLE:
-            return result
+            return self._reserve_kept(result, 0.0, None)
         r = min(self.reserve, RESERVE_SHARE * self.margin_lp.solve(AT, self.w_d, d.f_min, d.f_max))
-        if not r > 0.0:
-            return result
-        raised = d.qp.solve(AT, self.w_d, f_min=d.f_min + r, f_max=d.f_max - r)
-        if raised.status != Status.FEASIBLE:
-            return result
-        return replace(raised, f_min=result.f_min, f_max=result.f_max, violation=result.violation)
+        raised = d.qp.solve(AT, self.w_d, f_min=d.f_min + r, f_max=d.f_max - r) if r > 0.0 else None
+        if raised is None or raised.status != Status.FEASIBLE:
+            return self._reserve_kept(result, 0.0, None)
+        added = raised.f - result.f
+        rate = self.params.tension_rate * float(np.max(d.f_max - d.f_min))
+        if rate > 0.0:
+            step, last = rate * self.dt, self.reserve_forces
+            with np.errstate(divide="ignore", invalid="ignore"):
+                bound = np.where(added > 0.0, (last + step) / added, np.where(added < 0.0, (last - step) / added, np.inf))
+            s = float(np.clip(bound.min(), 0.0, 1.0))
+            if s < 1.0:
+                r, added = s * r, s * added
+                raised = replace(raised, f=result.f + added)
+        raised = replace(raised, f_min=result.f_min, f_max=result.f_max, violation=result.violation)
+        return self._reserve_kept(raised, r, added)
+
+    def _reserve_kept(self, result: DistributionResult, r: float, added) -> DistributionResult:
+        """Remember the reserve r [N] a set-point keeps and the forces it added (None: none)."""
+        self.reserve_applied = r
+        if added is None:
+            self.reserve_forces[:] = 0.0
+        else:
+            self.reserve_forces[:] = added
+        return result
 
     @staticmethod
     def _within_limits(result: DistributionResult) -> DistributionResult:
