@@ -179,3 +179,44 @@ def test_a_guided_setpoint_the_limits_cannot_hold_is_clipped_to_them():
     guided = _pushed_beyond(True)
     assert all(r.f.max() <= r.f_max.max() + 1e-12 and r.f.min() >= r.f_min.min() - 1e-12 for r in guided)
     assert guided[-1].status != Status.FEASIBLE
+
+
+def _held(fs, robot, x, periods, w_user=None):
+    """``periods`` periods holding the pose x, the measured wrench the model's, the user's wrench given."""
+    zero = np.zeros(6)
+    w = platform_wrench(robot, x, zero, zero)
+    fs.set_user_wrench(w_user)
+    return [fs.update(x, zero, zero, w) for _ in range(periods)]
+
+
+def test_the_forces_the_reserve_adds_rise_at_the_tension_rate_where_its_null_space_gain_is_large():
+    """The IPAnema 3's grid pose #12 [3.487, 3.233, -0.345] (interior): raising the two lowest cables'
+    bound by r moves the others along the null space of A^T by many times r. With only r rate-limited,
+    f_d rose at up to 58 kN/s there (RESERVE_RING 2), the CFC lagged, the lag read as a user wrench
+    that raised r again, and the loop ran into a 13 Hz oscillation until the force watch held. Now
+    every cable's set-point moves by at most the tension rate's step per period while r rises, still
+    balances the wrench set-point, and ends at the raised QP's optimum."""
+    robot = load_robot("ipanema3")
+    x = np.r_[3.4869, 3.2332, -0.3452, 0.0, 0.0, 0.0]
+    params = control_loop_params(robot).force
+    fs = ForceSetpoint(robot, DT, params)
+    plain = _held(fs, robot, x, 400)[-1]
+    d = fs.distributor
+    rate = params.tension_rate * float(np.max(d.f_max - d.f_min))
+    hand = np.r_[60.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    AT = inverse_kinematics(robot, x).AT
+    r = RESERVE_RING * float(np.abs(user_forces(AT, hand)).max())
+    optimum = d.qp.solve(AT, fs.w_d, f_min=d.f_min + r, f_max=d.f_max - r).f
+    assert np.abs(optimum - plain.f).max() > 10.0 * r            # the null-space gain this pose has
+    results, kept = [], []
+    for _ in range(1500):
+        results += _held(fs, robot, x, 1, hand)
+        kept.append(fs.reserve_applied)
+    f = np.array([plain.f] + [res.f for res in results])
+    assert np.abs(np.diff(f, axis=0)).max() <= rate * DT * (1.0 + 1e-9)
+    for res, r_k in zip(results, kept):
+        np.testing.assert_allclose(AT @ res.f, -fs.w_d, atol=1e-6)
+        assert res.f.min() >= d.f_min.min() + r_k - 1e-6 and res.f.max() <= d.f_max.max() - r_k + 1e-6
+    assert 0.0 < kept[0] < rate * DT / 2.0                       # (the gain slows the reserve, not only f_d)
+    assert fs.reserve_applied == pytest.approx(r)
+    np.testing.assert_allclose(results[-1].f, optimum, atol=1e-6)
