@@ -7,7 +7,7 @@ from cdpr_control.control.admittance import (AdmittanceController, AdmittancePar
     UserWrenchParams, VirtualSystem, damped_eigenfrequency, default_parameters, exact_step_matrices,
     settings_from)
 from cdpr_control.control.admittance_zones import (Zone, ZoneSet, box_from_workspace, check_in_workspace,
-    hard_box, max_penetration, thesis_zones)
+    force_limits, hard_box, max_penetration, thesis_zones)
 from cdpr_control.model.dynamics import dynamic_wrench, gravity_wrench
 from cdpr_control.model.kinematics import twist_from_pose_rates
 from cdpr_control.model.robot import load_robot
@@ -271,9 +271,10 @@ def test_zones_leaving_the_wfw_near_the_border_are_shrunk_to_the_largest_that_fi
     np.testing.assert_array_equal(zones.x_0, IPANEMA3_BORDER)
     for a, b in zip(zones.zones, configured.zones):                # the dynamics are kept
         np.testing.assert_array_equal(a.c, b.c) and np.testing.assert_array_equal(a.m, b.m)
-    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    limits = force_limits(IPANEMA3, values["zones.force_margin"])    # (the file's margin: fitted within them)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max, *limits)
     with pytest.raises(ValueError):                                 # the largest: 2 % more leaves it
-        check_in_workspace(loaded, scaled(configured, 1.02 * clipping.scale), params.user.w_max, params.v_max)
+        check_in_workspace(loaded, scaled(configured, 1.02 * clipping.scale), params.user.w_max, params.v_max, *limits)
     assert f"scaled by {clipping.scale:.3g}" in clipping.text() and "clipped" in clipping.text()
 
 
@@ -284,23 +285,25 @@ def test_where_not_even_the_walls_reach_fits_the_limits_shrink_with_the_zones():
     from cdpr_control.control.admittance import fitted_settings
     from cdpr_control.control.admittance_zones import W_MAX_OVER_DEAD_BAND, per_axis, scaled
 
-    x = np.array(IPANEMA3_BORDER)
-    x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.05     # 5 % further out
-    values = _shipped_values(IPANEMA3, x)
+    # the grid's border pose: in the WFW of the shipped margin's limits (145-2955 N) not even the
+    # wall's reach fits there (without the margin, 5 % further out)
+    values = _shipped_values(IPANEMA3, IPANEMA3_BORDER)
+    limits = force_limits(IPANEMA3, values["zones.force_margin"])
     configured_params, configured, _ = settings_from(values, IPANEMA3, check_workspace=False)
     w_max, v_max = (per_axis(v, "") for v in (configured_params.user.w_max, configured_params.v_max))
     floor = W_MAX_OVER_DEAD_BAND * per_axis(configured_params.user.dead_band, "")
     with pytest.raises(ValueError, match="wrench-feasible"):                      # box alone: none fits
-        check_in_workspace(IPANEMA3, scaled(configured, 1e-3), w_max, v_max)
+        check_in_workspace(IPANEMA3, scaled(configured, 1e-3), w_max, v_max, *limits)
     params, zones, loaded, clipping = fitted_settings(values, IPANEMA3)
     k = clipping.reach_scale
     assert 0.0 < k < 1.0 and clipping.scale == k and "v_max and w_max scaled by" in clipping.text()
     np.testing.assert_allclose(params.v_max, k * v_max)
     np.testing.assert_allclose(params.user.w_max, np.maximum(k * w_max, floor))
     np.testing.assert_allclose(zones.box, k * configured.box)
-    check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max, *limits)
     with pytest.raises(ValueError):                                  # the largest
-        check_in_workspace(loaded, scaled(configured, 1.02 * k), np.maximum(1.02 * k * w_max, floor), 1.02 * k * v_max)
+        check_in_workspace(loaded, scaled(configured, 1.02 * k), np.maximum(1.02 * k * w_max, floor), 1.02 * k * v_max,
+                           *limits)
 
 
 def test_where_nothing_fits_hand_guiding_is_refused_with_the_reason():
@@ -310,3 +313,36 @@ def test_where_nothing_fits_hand_guiding_is_refused_with_the_reason():
     x[:3] = IPANEMA3.home[:3] + (x[:3] - IPANEMA3.home[:3]) * 1.08     # 8 % further out, still in the WFW
     with pytest.raises(ValueError, match="no virtual workspace fits"):
         fitted_settings({**_shipped_values(IPANEMA3, x), "dead_band": [90.0, 90.0, 90.0, 9.0, 9.0, 9.0]}, IPANEMA3)
+
+
+# ---- the force margin of the fit (zones.force_margin) ----------------------------------------------
+
+# the validation grid's Mini pose #1 (border): released after a push against the wall, the platform
+# rested at the free box's border with a cable planned at 39.74 N and truly at 40.31 N (f_max 40 N)
+MINI_BORDER = [-0.0628, -0.2046, -0.0118, 0.0, 0.0, 0.0]
+
+
+def test_force_limits_narrow_the_cable_limits_by_the_margin():
+    f_min, f_max = force_limits(MINI, 1.0)
+    np.testing.assert_array_equal(f_min, MINI.cable.f_min + 1.0)
+    np.testing.assert_array_equal(f_max, MINI.cable.f_max - 1.0)
+    for bad in (-0.1, 17.5):                                     # negative; nothing left of 5-40 N
+        with pytest.raises(ValueError, match="force_margin"):
+            force_limits(MINI, bad)
+
+
+def test_the_zones_are_fitted_within_the_force_margin():
+    """With the Mini's margin (1 N) the hard box lies in the WFW of [6, 39] N, a smaller box than
+    without it, which leaves those limits."""
+    from cdpr_control.control.admittance import fitted_settings
+
+    values = _shipped_values(MINI, MINI_BORDER)
+    assert values["zones.force_margin"] == 1.0                  # the shipped file's
+    limits = force_limits(MINI, 1.0)
+    params, zones, loaded, clipping = fitted_settings(values, MINI)
+    plain_params, without, _, plain = fitted_settings({**values, "zones.force_margin": 0.0}, MINI)
+    assert clipping.scale < plain.scale
+    check_in_workspace(loaded, zones, params.user.w_max, params.v_max, *limits)
+    with pytest.raises(ValueError, match="wrench-feasible"):
+        check_in_workspace(loaded, without, plain_params.user.w_max, plain_params.v_max, *limits)
+    check_in_workspace(loaded, without, plain_params.user.w_max, plain_params.v_max)   # (the cable limits')

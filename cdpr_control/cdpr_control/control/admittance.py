@@ -30,7 +30,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import expm
 
-from cdpr_control.control.admittance_zones import ZoneSet, fit_in_workspace, hard_box, per_axis, thesis_zones
+from cdpr_control.control.admittance_zones import (ZoneSet, fit_in_workspace, force_limits, hard_box, per_axis,
+    thesis_zones)
 from cdpr_control.model.dynamics import dynamic_wrench, gravity_wrench
 from cdpr_control.control.filters import LowPass
 from cdpr_control.model.kinematics import twist_from_pose_rates
@@ -333,6 +334,7 @@ def default_parameters() -> dict:
         "zones.free.box": six(free.size),
         "zones.free.c": six(free.c), "zones.free.d": six(free.d), "zones.free.m": six(free.m),
         "zones.wall.c": six(wall.c), "zones.wall.d": six(wall.d), "zones.wall.m": six(wall.m),
+        "zones.force_margin": 0.0,        # N: the thesis' WFW, of the cable limits themselves
     }
 
 
@@ -340,8 +342,9 @@ def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[Ad
     """(params, zones, robot with the known payload) from flat parameters (missing: defaults).
 
     The zone origin is the robot's home plus ``zones.origin``. Raises ValueError with the reason
-    for an invalid combination, including a virtual workspace that leaves the WFW (unless
-    ``check_workspace`` is false: an analysis of the dynamics only)."""
+    for an invalid combination, including a virtual workspace that leaves the WFW of the cable
+    limits narrowed by ``zones.force_margin`` (:func:`~cdpr_control.control.admittance_zones.force_limits`;
+    unless ``check_workspace`` is false: an analysis of the dynamics only)."""
     from cdpr_control.control.admittance_zones import Zone, check_in_workspace
 
     v = {**default_parameters(), **values}
@@ -362,19 +365,22 @@ def settings_from(values: dict, robot, check_workspace: bool = True) -> tuple[Ad
         Zone("wall", "outside", None, v["zones.wall.c"], v["zones.wall.d"], v["zones.wall.m"], spring="border")), x_0)
     if v["zones.rest.radius"] >= float(np.min(zones.box[:3])):
         raise ValueError("the rest sphere must lie inside the free box")
+    f_min, f_max = force_limits(robot, float(v["zones.force_margin"]))
     if check_workspace:
-        check_in_workspace(loaded, zones, params.user.w_max, params.v_max)
+        check_in_workspace(loaded, zones, params.user.w_max, params.v_max, f_min, f_max)
     return params, zones, loaded
 
 
 def fitted_settings(values: dict, robot):
     """:func:`settings_from`, but a virtual workspace that leaves the WFW is shrunk to fit
     (:func:`~cdpr_control.control.admittance_zones.fit_in_workspace`: the zones, and where that is
-    not enough w_max and v_max too) instead of refused -> (params, zones, robot with the known
+    not enough w_max and v_max too) instead of refused, in the WFW of the cable limits narrowed by
+    ``zones.force_margin`` on both sides -> (params, zones, robot with the known
     payload, Clipping or None). ValueError for an invalid set, or where nothing fits."""
     params, zones, loaded = settings_from(values, robot, check_workspace=False)
+    f_min, f_max = force_limits(robot, float({**default_parameters(), **values}["zones.force_margin"]))
     zones, w_max, v_max, clipping = fit_in_workspace(loaded, zones, params.user.w_max, params.v_max,
-                                                     params.user.dead_band)
+                                                     params.user.dead_band, f_min=f_min, f_max=f_max)
     if clipping is not None and clipping.reach_scale < 1.0:
         params = replace(params, v_max=v_max, user=replace(params.user, w_max=w_max))
         params.validate()

@@ -274,6 +274,26 @@ def _largest(fits, lo: float, tol: float) -> float:
     return lo
 
 
+def force_limits(robot, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(f_min + margin, f_max - margin) (m,) [N] of the robot's cable limits: the limits the hard box
+    is fitted in (``zones.force_margin``, :func:`cdpr_control.control.admittance.fitted_settings`).
+
+    The margin is what the cable forces may differ from a planned distribution within the limits:
+    the force control's tracking error and the force sensors' error (slope and offset of (3.29)).
+    Without it a platform the wall pushed back to the border of the free box rests where the
+    distribution plans a cable within a fraction of a newton of f_max, and its true force lies
+    beyond (the Mini's grid pose #1: set-point 39.74 N, true 40.31 N for f_max 40 N;
+    docs/admittance.md). ValueError where nothing is left between them."""
+    if not margin >= 0.0:
+        raise ValueError(f"zones.force_margin must be >= 0 N, got {margin}")
+    c = robot.cable
+    f_min = np.asarray(c.f_min, dtype=float) * np.ones(robot.m) + margin
+    f_max = np.asarray(c.f_max, dtype=float) * np.ones(robot.m) - margin
+    if np.any(f_min >= f_max):
+        raise ValueError(f"zones.force_margin {margin} N leaves no force between the cable limits")
+    return f_min, f_max
+
+
 W_MAX_OVER_DEAD_BAND = 1.25   # a shrunk w_max stays this far above the dead band (a user wrench of 20 % of it)
 
 

@@ -64,6 +64,9 @@ _DESCRIPTIONS = {
     "zones.wall.c": ("zone 3 wall stiffness normal to the box faces per axis [N/m, N m/rad]", None),
     "zones.wall.d": ("zone 3 damping per axis [N s/m, N m s/rad]", None),
     "zones.wall.m": ("zone 3 virtual mass per axis [kg, kg m^2]", None),
+    "zones.force_margin": ("the zones are fitted to the wrench-feasible workspace of the cable limits narrowed by "
+                           "this on both sides: the force control's tracking and the force sensors' error [N]",
+                           (0.0, 1e4)),
 }
 PARAMS = [ParamSpec("hand_guiding", False, "hand guiding on: this node is the set-point source")] + [
     ParamSpec(name, _D[name], *_DESCRIPTIONS[name][:1], range=_DESCRIPTIONS[name][1]) for name in _D]
