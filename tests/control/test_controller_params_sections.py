@@ -3,7 +3,7 @@ the stages, the hybrid position/force control, load compensation and hand guidin
 import numpy as np
 import pytest
 
-from cdpr_control.control.admittance_zones import per_axis
+from cdpr_control.control.admittance_zones import check_in_workspace, force_limits, per_axis
 from cdpr_control.control.params import control_loop_params, load_params_file, shipped_configuration
 from cdpr_control.control.load_compensation import LoadCompensationStage
 from cdpr_control.model.robot import load_robot
@@ -34,7 +34,10 @@ def test_every_section_of_the_shipped_file_is_read(name):
     controller = shipped.admittance_controller(robot)
     zones = {z.name: z for z in controller.zones.zones}
     for key, value in adm.items():
-        if key.startswith("zones.") and key != "zones.origin":
+        if key == "zones.force_margin":          # the fit's margin: the hard box in the narrowed limits' WFW
+            check_in_workspace(robot, controller.zones, controller.user.w_max, controller.system.v_max,
+                               *force_limits(robot, value))
+        elif key.startswith("zones.") and key != "zones.origin":
             _, zone, field = key.split(".")
             actual = zones[zone].size if field in ("box", "radius") else getattr(zones[zone], field)
             np.testing.assert_array_equal(actual, value if field == "radius" else per_axis(value, key), err_msg=key)
