@@ -322,9 +322,10 @@ class ForceSetpoint:
         f_min 5 N on the Mini after a 13 N push). r is the largest |Δf_i|: it rises with the
         user's wrench at the tension level's rate (``tension_rate``; the forces it adds move at that
         rate too, :meth:`_with_reserve`) and decays with RESERVE_RELEASE_TIME after the hand has let
-        go, so the reserve is there while the cables ring out. Without a user (``set_user_wrench(None)``) r decays to 0.
-        The target is RESERVE_RING times the largest |Δf_i| (2: the release's swing, not only the
-        static change, which let #28 of the Mini's grid ring to 4.49 N for f_min 5 N, see RESERVE_RING)."""
+        go, so the reserve is there while the cables ring out. Without a user
+        (``set_user_wrench(None)``) r decays to 0. The target is RESERVE_RING times the largest
+        |Δf_i| (2: the release's swing, not only the static change, which let #28 of the Mini's
+        grid ring to 4.49 N for f_min 5 N, see RESERVE_RING)."""
         target = 0.0 if self.w_user is None else RESERVE_RING * float(np.abs(user_forces(AT, self.w_user)).max())
         if target >= self.reserve:
             d = self.distributor
