@@ -421,13 +421,15 @@ class HybridForceControl:
             # negative one is no contact whatever its size (the environment only pushes back along
             # z_t): IPAnema 3 #5 (seed 2) read -20 N and was not tared (abs until session 12)
             self.F_tare = F_vec.copy() if p.tare and raw < 0.5 * p.F_th else NO_TARE
-        elif self.state == APPROACH and self.x_t == 0.0 and self.F_tare is not NO_TARE:
-            # tared in free space and x_t still waiting at 0 (T_on): the tare follows the reading.
-            # The cable force control's pre-tension (CFCCoupling.pre_tension) changes the cable forces
-            # by up to hundreds of N after the approach began, the platform standing; the sensors'
-            # slope errors of those changes (1 % on the default plant) read as a contact force, -55 N
-            # at IPAnema 3 #5 (seed 2) and -0.8 N at Mini #28 (seed 1) before the impact: B then
-            # stopped on a force that lagged the true one by that much (docs/hybrid_force_control.md)
+        elif (self.state == APPROACH and self.x_t == 0.0 and self.F_tare is not NO_TARE
+              and float(self.z_t @ (F_vec - self.F_tare)) < 0.5 * p.F_th):
+            # tared in free space and x_t still waiting at 0 (T_on): the tare follows the reading
+            # (as at the start, what reads F_th / 2 more is contact and not followed). The cable force
+            # control's pre-tension (CFCCoupling.pre_tension) changes the cable forces by up to
+            # hundreds of N after the approach began, the platform standing; the sensors' slope
+            # errors of those changes (1 % on the default plant) read as a contact force, -0.8 N at
+            # Mini #28 (seed 1) before the impact: B then stopped on a force that lagged the true one
+            # by that much (docs/hybrid_force_control.md, "Session 12")
             self.F_tare = F_vec.copy()
         F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
