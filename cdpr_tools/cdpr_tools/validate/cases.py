@@ -306,9 +306,11 @@ def contact_capacity(robot, x, rtol: float = 1e-3) -> float:
     """The largest force [N] the platform can press down at x at rest with cable forces within the
     shipped distribution's limits (the parameter file's f_min, the robot's f_max): the wrench of the
     weight plus that contact's reaction, F e_z, wrench-feasible (2.40), by bisection to rtol of the
-    robot's nominal contact force. Reported, not judged: a contact beyond it asks forces the
-    distribution cannot plan (it overloads or leaves a cable below its planned f_min) whatever the
-    controller does (docs/validation.md, "Contact after session 11")."""
+    robot's nominal contact force (the controller's own, :func:`cdpr_control.control.hybrid_force_control.contact_capacity`,
+    is an LP of the same). Reported: a contact beyond it asks forces the distribution cannot plan
+    (it overloads or leaves a cable below its planned f_min) whatever the controller does, which
+    since session 12 limits the force it regulates (``F_d_regulated_N``, docs/validation.md,
+    "Beyond the pose's contact capacity")."""
     from cdpr_control import kernels
     from cdpr_control.force_distribution.methods import distribute
     from cdpr_control.force_distribution.result import Status
