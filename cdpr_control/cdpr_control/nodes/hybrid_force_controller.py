@@ -27,6 +27,12 @@ handed over in a period is taken on x_t (F_a / k_t, :meth:`HybridForceControl.ab
 start of the next period, as the in-process loop does; its ``enabled`` (Δq_CFC applied) switches
 x_comp. Without that topic x_comp is 0 and nothing is handed over.
 
+It subscribes ``force_distribution`` (not synchronised: the last one) for the distribution's f_min
+and f_max: while enabled or active, F_d is limited to the contact capacity of the pose x_d over 1.2
+(:meth:`cdpr_control.control.hybrid_force_control.HybridForceControl.update`), the state's
+``reference`` is then the limited F_d,0, and ``/diagnostics`` carries a WARN naming the F_d asked
+for, the capacity and the pose.
+
 The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceStage` (as ControlLoop runs it).
 """
 from __future__ import annotations
@@ -137,8 +143,10 @@ class HybridForceControllerNode(CdprNode):
                 later.append(msg)
         self.hand_overs = later
         setpoint = msgs["setpoint"]
+        c = stage.control           # x_d only where the capacity may limit F_d (not idle and disabled)
+        x_d = pose_from_msg(setpoint.pose) if c.enabled or c.state != IDLE else None
         s, output = stage.update(from_vector3(setpoint.force), wrench_from_msg(msgs["wrench"].wrench),
-                                 self.cfc_on, pose_from_msg(setpoint.pose), self.limits)
+                                 self.cfc_on, x_d, self.limits)
         # the fields' arithmetic in floats: element by element what numpy's would give, without
         # its call overhead on six numbers
         x = s.x.tolist()
@@ -158,7 +166,7 @@ class HybridForceControllerNode(CdprNode):
         if limited:
             level = DiagnosticStatus.WARN
             message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
-                        f"[{' '.join(f'{v:.4g}' for v in pose_from_msg(setpoint.pose))}]: regulating {s.F_d:.4g} N")
+                        f"[{' '.join(f'{v:.4g}' for v in x_d)}]: regulating {s.F_d:.4g} N")
         if (level, message) != self._last_diagnostic:
             values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
             if limited:
