@@ -222,6 +222,33 @@ def test_tare_at_the_approach_removes_a_sensor_offset():
     assert in_contact.update([0, 0, -10.0], offset + [0, 0, 0.5, 0, 0, 0]).F == pytest.approx(0.8)
 
 
+def test_the_tare_follows_the_reading_while_x_t_waits_but_not_a_contact():
+    """While x_t waits at 0 in A (T_on) the platform stands and only the cable force control's
+    pre-tension changes the cable forces: what the reading drifts by then (the sensors' slope errors
+    of those changes) is tared, in both directions below F_th / 2; a rise of F_th / 2 or more is
+    contact and is not. A negative reading at the start is tared whatever its size. Once x_t
+    moves, the tare stays."""
+    g, m = MINI.gravity, MINI.platform.mass
+    params = replace(MINI_HPFC, T_F=0.0, T_on=0.1)                # F_th 1 N
+    weight = np.r_[m * g, 0, 0, 0]
+    hpfc = HybridForceControl(MINI, 1e-3, params, enabled=True)
+    s = hpfc.update([0, 0, -10.0], weight + [0, 0, -3.0, 0, 0, 0])    # reads -3 N: an offset, tared
+    assert s.state == "A" and s.F == pytest.approx(0.0, abs=1e-12)
+    for drift in np.linspace(-3.0, -3.8, 20):                         # the pre-tension: -0.8 N more
+        s = hpfc.update([0, 0, -10.0], weight + [0, 0, drift, 0, 0, 0])
+        assert s.F == pytest.approx(0.0, abs=1e-12) and s.x_t == 0.0
+    s = hpfc.update([0, 0, -10.0], weight + [0, 0, -3.8 + 0.4, 0, 0, 0])   # below F_th / 2: followed
+    assert s.F == pytest.approx(0.0, abs=1e-12)
+    s = hpfc.update([0, 0, -10.0], weight + [0, 0, -3.4 + 2.0, 0, 0, 0])   # 2 N: contact, B
+    assert s.F == pytest.approx(2.0) and s.state == "B"
+    moving = HybridForceControl(MINI, 1e-3, params, enabled=True)
+    for _ in range(150):                                             # past T_on: x_t moves
+        s = moving.update([0, 0, -10.0], weight)
+    assert s.x_t > 0.0
+    s = moving.update([0, 0, -10.0], weight + [0, 0, -0.3, 0, 0, 0])    # no tare once x_t moves
+    assert s.F == pytest.approx(-0.3)
+
+
 def test_cfc_runs_in_contact_with_the_average_feed_forward_and_the_live_contact_share():
     """Section 5.1.2: paused in A-C (without pre-contact forces); in D the error and the feed-forward
     follow the set-point through the moving average, but along a (the contact force's direction in

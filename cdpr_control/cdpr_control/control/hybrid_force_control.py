@@ -41,6 +41,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+import daqp
 import numpy as np
 
 from cdpr_control import kernels
@@ -48,6 +49,7 @@ from cdpr_control.control.filters import LowPass
 from cdpr_control.control.safety import all_finite
 from cdpr_control.force_distribution.methods import distribute
 from cdpr_control.force_distribution.result import Status
+from cdpr_control.model.dynamics import gravity_wrench
 from cdpr_control.model.memo import Memo
 
 IDLE, APPROACH, BRAKE, LOST, CONTACT, RELEASE = "I", "A", "B", "C", "D", "R"
@@ -83,6 +85,11 @@ LAG_SHARE = 0.1
 # the stiffness B measures is taken as at least this share of K_p (a force that hardly rises yet
 # would plan a stroke of metres; ASSUMPTION)
 K_MIN = 0.25
+# The force the controller regulates is limited to the pose's contact capacity (contact_capacity) over
+# 1 + CAPACITY_OVERSHOOT: the largest transient the validation's bands accept, an overshoot of 20 %
+# of F_d (table 5.2: 11.3 % max), then still asks forces the distribution can plan within its
+# limits (the lead's decision in session 12; docs/hybrid_force_control.md, "Beyond the pose's capacity")
+CAPACITY_OVERSHOOT = 0.2
 
 
 @dataclass
@@ -238,6 +245,9 @@ class HPFCState:
     integrator: float            # integral part of x_t [m]
     saturated: bool              # |x_t| at x_max
     x: np.ndarray                # (6,) x_d,HPFC = [R_t [0 0 x_t]; 0 0 0] [m, rad]
+    F_d_requested: float = math.nan   # N, the F_d asked for (F_d,0 of the set-point along z_t) where it was
+                                 # limited to the pose's capacity (F_d, F_d0 then the limited ones); NaN: not limited
+    capacity: float = math.inf   # N, the pose's contact capacity (contact_capacity) where known, else inf
 
 
 class HybridForceControl:
@@ -268,6 +278,9 @@ class HybridForceControl:
         self.braking = False                   # B has begun to slow down (it does not speed up again)
         self.brake_speed = 0.0                 # m/s, B's top speed (_brake_speed)
         self.force_filter = LowPass(0.0, dt)
+        self.capacity = math.inf               # N, the pose's contact capacity (_limited), inf: not known
+        self._capacity = Memo()                # contact_capacity of (x_d, z_t, limits)
+        self.capacity_lp = CapacityLP(6, robot.m)
         self._idle = Memo(read_only=True)      # (z_t, F_d,0, x) of the idle state (_idle_state)
         self.set_params(params or HPFCParams())
 
@@ -373,8 +386,11 @@ class HybridForceControl:
         if self.x_t == 0.0:
             self.state = IDLE
 
-    def update(self, F_d0, w) -> HPFCState:
-        """One period: desired force F_d,0 (3,) [N] and measured wrench w (6,) -> HPFCState."""
+    def update(self, F_d0, w, x_d=None, limits=None) -> HPFCState:
+        """One period: desired force F_d,0 (3,) [N], measured wrench w (6,), the pose set-point x_d
+        (6,) and the force distribution's limits (f_min, f_max) (m,) [N] (either None: not known,
+        F_d not limited) -> HPFCState. While wanted or active, F_d is limited to the pose's
+        capacity (:meth:`_limited`); the state's F_d,0 and F_d are then the limited ones."""
         p, dt = self.params, self.dt
         F_d0 = np.asarray(F_d0, dtype=float)
         w = np.asarray(w, dtype=float)
@@ -385,6 +401,13 @@ class HybridForceControl:
             self.z_t, self._z_t_of = task_axis(F_d0, self.z_t), key
             self._F_d = float(self.z_t @ F_d0)                   # (5.2): the z entry of R_t^T F_d,0
         F_d = self._F_d
+        F_d_requested = math.nan
+        if (x_d is not None and limits is not None and F_d > 0.0
+                and (self.state != IDLE or (self.enabled and F_d >= p.F_th))):
+            F_cap = self._limited(x_d, limits)
+            if F_d > F_cap:
+                F_d_requested, F_d = F_d, F_cap
+                F_d0 = F_d * self.z_t
         w_floats = w.tolist() if w.shape == (6,) else None
         if w_floats is not None and all_finite(w_floats):
             F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
@@ -394,8 +417,20 @@ class HybridForceControl:
             return self._idle_state(F_d0, key, F_d, F_vec)       # I, not wanted: most periods
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
-            # a reading below F_th / 2 is taken for the sensors' offset, above it for contact
-            self.F_tare = F_vec.copy() if p.tare and abs(raw) < 0.5 * p.F_th else NO_TARE
+            # a reading below F_th / 2 is taken for the sensors' offset, above it for contact; a
+            # negative one is no contact whatever its size (the environment only pushes back along
+            # z_t): IPAnema 3 #5 (seed 2) read -20 N and was not tared (abs until session 12)
+            self.F_tare = F_vec.copy() if p.tare and raw < 0.5 * p.F_th else NO_TARE
+        elif (self.state == APPROACH and self.x_t == 0.0 and self.F_tare is not NO_TARE
+              and float(self.z_t @ (F_vec - self.F_tare)) < 0.5 * p.F_th):
+            # tared in free space and x_t still waiting at 0 (T_on): the tare follows the reading
+            # (as at the start, what reads F_th / 2 more is contact and not followed). The cable force
+            # control's pre-tension (CFCCoupling.pre_tension) changes the cable forces by up to
+            # hundreds of N after the approach began, the platform standing; the sensors' slope
+            # errors of those changes (1 % on the default plant) read as a contact force, -0.8 N at
+            # Mini #28 (seed 1) before the impact: B then stopped on a force that lagged the true one
+            # by that much (docs/hybrid_force_control.md, "Session 12")
+            self.F_tare = F_vec.copy()
         F_vec = np.array([a - b for a, b in zip(F_vec.tolist(), self.F_tare.tolist())])
         F = float(self.z_t @ F_vec)
         # the unfiltered contact force of this period: the PT1 (T_F, for the PID) lags a rising
@@ -464,7 +499,27 @@ class HybridForceControl:
         x = np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0])    # R_t [0 0 x_t]
         # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, active, self.z_t.copy(), F_d0.copy(),
-                         F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x)
+                         F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x,
+                         F_d_requested, self.capacity)
+
+    def _limited(self, x_d, limits) -> float:
+        """The largest F_d [N] the controller regulates at x_d: the pose's contact capacity along z_t
+        (:func:`contact_capacity` with the platform's and the known payload's weight at x_d and the
+        distribution's limits, kept while x_d, z_t and the limits repeat) over 1 + CAPACITY_OVERSHOOT;
+        :attr:`capacity` keeps the capacity. Not in the thesis (docs/hybrid_force_control.md)."""
+        x_d = np.asarray(x_d, dtype=float)
+        f_min, f_max = (np.asarray(v, dtype=float) for v in limits)
+        self.capacity = self._capacity((x_d.tobytes(), self.z_t.tobytes(), f_min.tobytes(), f_max.tobytes()),
+                                       self._capacity_at, x_d, f_min, f_max)
+        return self.capacity / (1.0 + CAPACITY_OVERSHOOT)
+
+    def _capacity_at(self, x_d, f_min, f_max) -> float:
+        if not (x_d.shape == (6,) and np.all(np.isfinite(x_d)) and f_min.shape == f_max.shape == (self.robot.m,)):
+            return math.inf                       # (nothing to plan with: not limited)
+        AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
+        # the platform's weight and the known payload's (taken at the platform's centre of gravity)
+        w_g = gravity_wrench(self.robot, x_d) * (self.mass / self.robot.platform.mass)
+        return self.capacity_lp.solve(AT, w_g, self.z_t, f_min, f_max)
 
     def _idle_state(self, F_d0: np.ndarray, key: bytes, F_d: float, F_vec: np.ndarray) -> HPFCState:
         """The rest of :meth:`update` in state I while not wanted (disabled, or F_d < F_th), after the
@@ -561,6 +616,46 @@ def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | 
         return None
     result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
     return result.f if result.status == Status.FEASIBLE else None
+
+
+def contact_capacity(AT, w, z_t, f_min, f_max) -> float:
+    """The largest force F [N] the platform can press along z_t (3,) at rest with cable forces within
+    [f_min, f_max] (m,): the largest F for which A^T f = -w + F [z_t; 0 0 0] (the environment
+    pushing back with -F z_t, w the rest of the external wrench, (2.10)) has a solution within the
+    limits, wrench feasibility (2.40) along a ray (an LP); 0 where not even F = 0 has one. A
+    contact force beyond it cannot be planned within the limits whatever the controller does. One
+    cold solve of :class:`CapacityLP`."""
+    n, m = np.shape(AT)
+    return CapacityLP(n, m).solve(AT, w, z_t, f_min, f_max)
+
+
+class CapacityLP:
+    """:func:`contact_capacity` as one DAQP model (as ``force_setpoint.MarginLP``): variables [f (m), F],
+    rows A^T f - F [z_t; 0] = -w (n); bounds f_min <= f <= f_max, 0 <= F <= sum(f_max)."""
+
+    def __init__(self, n: int, m: int):
+        self.n, self.m = n, m
+        self.A = np.zeros((n, m + 1))
+        self.bu = np.zeros(m + 1 + n)
+        self.bl = np.zeros(m + 1 + n)
+        self.sense = np.zeros(m + 1 + n, dtype=np.int32)
+        self.sense[m + 1:] = 5                               # the equality rows
+        self.cost = np.r_[np.zeros(m), -1.0]                 # max F
+        self.no_hessian = np.zeros((m + 1, m + 1))           # an LP
+
+    def solve(self, AT, w, z_t, f_min, f_max) -> float:
+        n, m = self.n, self.m
+        A, bu, bl = self.A, self.bu, self.bl
+        A[:, :m] = AT
+        A[:, m] = 0.0
+        A[:3, m] = -np.asarray(z_t, dtype=float)
+        bl[:m], bu[:m] = f_min, f_max
+        bl[m], bu[m] = 0.0, float(np.sum(f_max))
+        bu[m + 1:] = bl[m + 1:] = -np.asarray(w, dtype=float)
+        x, _, exitflag, _ = daqp.solve(self.no_hessian, self.cost, A, bu, bl, self.sense)
+        if exitflag != 1 or not np.isfinite(x[m]):
+            return 0.0
+        return float(x[m])
 
 
 def expected_contact_wrench(state: "HPFCState") -> np.ndarray:
@@ -863,10 +958,11 @@ class HybridForceStage:
         if self.control.state in (CONTACT, RELEASE):
             self.control.absorb(F_a / self.k_t)
 
-    def update(self, F_d0, w, cfc_on: bool) -> tuple[HPFCState, np.ndarray]:
-        """F_d,0 (3,) [N], the measured wrench w (6,), cfc_on: Δq_CFC applied (in the last period)
+    def update(self, F_d0, w, cfc_on: bool, x_d=None, limits=None) -> tuple[HPFCState, np.ndarray]:
+        """F_d,0 (3,) [N], the measured wrench w (6,), cfc_on: Δq_CFC applied (in the last period),
+        x_d and the distribution's (f_min, f_max) as :meth:`HybridForceControl.update`
         -> (the period's HPFCState, x_d,HPFC + x_comp (6,) [m, rad])."""
-        s = self.control.update(F_d0, w)
+        s = self.control.update(F_d0, w, x_d, limits)
         x_comp = self.hand_over.update(s, self.k_t, cfc_on)
         # x + 0.0 is x + np.zeros(6) (the same numbers, -0.0 becoming 0.0 alike) and a new array:
         # the idle state's x is read-only and shared by the periods

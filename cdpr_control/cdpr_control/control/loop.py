@@ -140,6 +140,7 @@ class ControlLoop:
                                                                  p.force.T_wrench_filter, enabled=p.hpfc_enabled)
         self.contact = None if p.hpfc is None else ContactCableForceControl(robot, self.cfc, p.hpfc.T_MA, dt)
         self._cfc_applied = False                # Δq_CFC applied in the last period (the node's hand-over)
+        self._limits = None                      # the distribution's (f_min, f_max) of the last period (hybrid force control)
         self.dq_cfc = np.zeros(robot.m)
         self.offset_stages = dict(offset_stages or {})
         # the offset inputs in the joint command node's order (params: offset_inputs)
@@ -192,11 +193,14 @@ class ControlLoop:
         if self.hpfc is not None:
             # section 5.1.2: x_t takes over what the CFC's integral part handed over in the last period
             self.hpfc.take_over(self.contact.F_a)
-            hpfc, x_hpfc = self.hpfc.update(NO_FORCE if F_d0 is None else F_d0, w, self._cfc_applied)
+            # F_d limited to the pose's capacity with the distribution's limits of the last period
+            hpfc, x_hpfc = self.hpfc.update(NO_FORCE if F_d0 is None else F_d0, w, self._cfc_applied, x_d,
+                                            self._limits)
             contact = (hpfc.state, hpfc.F_d0, hpfc.F_vec)     # its expected contact force in the wrench
         self.force.set_user_wrench(w_user)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, w_model=sum(w_models) if w_models else None,
                                  contact=contact)
+        self._limits = (dist.f_min, dist.f_max)
         p = self.params
         force_control = p.mode == "force_control"
         for blend in (self.blend_cfc, self.blend_ospc):

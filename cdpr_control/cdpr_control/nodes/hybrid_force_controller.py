@@ -27,12 +27,18 @@ handed over in a period is taken on x_t (F_a / k_t, :meth:`HybridForceControl.ab
 start of the next period, as the in-process loop does; its ``enabled`` (Δq_CFC applied) switches
 x_comp. Without that topic x_comp is 0 and nothing is handed over.
 
+It subscribes ``force_distribution`` (not synchronised: the last one) for the distribution's f_min
+and f_max: while enabled or active, F_d is limited to the contact capacity of the pose x_d over 1.2
+(:meth:`cdpr_control.control.hybrid_force_control.HybridForceControl.update`), the state's
+``reference`` is then the limited F_d,0, and ``/diagnostics`` carries a WARN naming the F_d asked
+for, the capacity and the pose.
+
 The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceStage` (as ControlLoop runs it).
 """
 from __future__ import annotations
 
 import numpy as np
-from cdpr_msgs.msg import ControllerState, OperationalSetpoint
+from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
@@ -43,7 +49,7 @@ from cdpr_control.control.ospc import AXES
 
 from cdpr_control.control.params import default, section
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import from_vector3, wrench_from_msg
+from cdpr_control.ros.conversions import from_vector3, pose_from_msg, wrench_from_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync, stamp_ns
@@ -88,6 +94,7 @@ class HybridForceControllerNode(CdprNode):
         self.stage: HybridForceStage | None = None
         self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
         self.hand_overs: list = []         # hand-overs not yet taken on x_t
+        self.limits = None                 # the force distribution's last (f_min, f_max) [N]
         self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
         self.sync = StampSync(self, {
@@ -98,6 +105,15 @@ class HybridForceControllerNode(CdprNode):
         # the previous period's hand-over (not synchronised: the CFC of period k runs after this node)
         self.create_subscription(ControllerState, "cable_force_controller/hand_over", self._on_hand_over, CONTROL,
                                  adapted=True)
+        # the distribution's limits for the pose's contact capacity (not synchronised either: the
+        # distribution of period k runs after this node; ControlLoop takes those of period k - 1 too)
+        self.create_subscription(ForceDistribution, "force_distribution", self._on_distribution, CONTROL,
+                                 adapted=True)
+
+    def _on_distribution(self, msg) -> None:
+        f_min, f_max = np.array(msg.f_min, dtype=float), np.array(msg.f_max, dtype=float)
+        if f_min.shape == f_max.shape == (self.robot.m,) and np.all(np.isfinite(f_min)) and np.all(np.isfinite(f_max)):
+            self.limits = (f_min, f_max)
 
     def _on_hand_over(self, msg) -> None:
         self.cfc_on = bool(msg.enabled)
@@ -126,8 +142,11 @@ class HybridForceControllerNode(CdprNode):
             else:
                 later.append(msg)
         self.hand_overs = later
-        s, output = stage.update(from_vector3(msgs["setpoint"].force), wrench_from_msg(msgs["wrench"].wrench),
-                                 self.cfc_on)
+        setpoint = msgs["setpoint"]
+        c = stage.control           # x_d only where the capacity may limit F_d (not idle and disabled)
+        x_d = pose_from_msg(setpoint.pose) if c.enabled or c.state != IDLE else None
+        s, output = stage.update(from_vector3(setpoint.force), wrench_from_msg(msgs["wrench"].wrench),
+                                 self.cfc_on, x_d, self.limits)
         # the fields' arithmetic in floats: element by element what numpy's would give, without
         # its call overhead on six numbers
         x = s.x.tolist()
@@ -143,9 +162,16 @@ class HybridForceControllerNode(CdprNode):
         # values are formatted only then)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
         message = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+        limited = s.F_d_requested == s.F_d_requested     # (not NaN) F_d limited to the pose's capacity
+        if limited:
+            level = DiagnosticStatus.WARN
+            message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
+                        f"[{' '.join(f'{v:.4g}' for v in x_d)}]: regulating {s.F_d:.4g} N")
         if (level, message) != self._last_diagnostic:
-            self.report(level, message, {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"},
-                        stamp_ns=t_ns)
+            values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
+            if limited:
+                values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}")
+            self.report(level, message, values, stamp_ns=t_ns)
 
 
 def main(args=None):

@@ -253,35 +253,64 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     F_c = np.array([s.hpfc.F for s in rec.rows["state"]])          # the controller's contact force
     touched = np.flatnonzero(F > 0.0)
     metrics = dict.fromkeys(("overshoot_percent", "settling_s", "steady_error_percent", "steady_error_true_percent",
-                             "slack_s"), float("nan"))
+                             "slack_s", "setpoint_above_f_max_N"), float("nan"))
     metrics["time_in_B_s"] = float(np.count_nonzero(states == "B") * DT)
     metrics["contact_capacity_N"] = capacity = contact_capacity(robot, x)
     metrics["impact_s"] = float(t[touched[0]]) if len(touched) else float("nan")
+    # beyond the pose's capacity the controller regulates a limited F_d (the state's; the lead's
+    # decision of session 12): the case is judged on it, with the same bands
+    F_d_run = regulated_force(rec, F_d)
+    metrics["F_d_regulated_N"] = F_d_run
     if len(touched) and ok:
         i, n = touched[0], int(STEADY_WINDOW / DT)
         # overshoot and slack on the simulator's true forces; settling and steady error on the
         # control error e_F = F_d - F of the force the robot measures (section 5.1.3, as table 5.2);
         # the true force's steady error beside it, reported: the sensors' calibration, not the control
-        metrics.update(overshoot_percent=criteria.overshoot_percent(F[i:], F_d),
-                       settling_s=criteria.settling_time(t[i:], F_c[i:], F_d),
-                       steady_error_percent=criteria.steady_error_percent(F_c[i:], F_d, n),
-                       steady_error_true_percent=criteria.steady_error_percent(F[i:], F_d, n),
-                       slack_s=criteria.slack_time(f[i:], robot.cable.f_min, DT))
+        acting = ~np.array([any(fault.holds for fault in s.faults) for s in rec.rows["state"]])
+        f_d = np.array([s.f_d for s in rec.rows["state"]])          # the force set-point
+        metrics.update(overshoot_percent=criteria.overshoot_percent(F[i:], F_d_run),
+                       settling_s=criteria.settling_time(t[i:], F_c[i:], F_d_run),
+                       steady_error_percent=criteria.steady_error_percent(F_c[i:], F_d_run, n),
+                       steady_error_true_percent=criteria.steady_error_percent(F[i:], F_d_run, n),
+                       slack_s=criteria.slack_time(f[i:], robot.cable.f_min, DT),
+                       setpoint_above_f_max_N=criteria.above_limit(f_d[i:][acting[i:]], robot.cable.f_max))
     note = "" if len(touched) else "never touched the floor"
     if capacity < F_d:
         note = "; ".join(n for n in (note, f"F_d beyond the pose's contact capacity ({capacity:.4g} N within the "
                                            f"planned force limits)") if n)
+    if F_d_run < F_d:
+        note = "; ".join(n for n in (note, f"the controller limited F_d to {F_d_run:.4g} N (its capacity "
+                                           f"{_controller_capacity(rec):.4g} N), judged on that") if n)
     held_text = rec.held or (f"held by the force watch: {held['reason']}" if "reason" in held else None)
     return judge(spec, metrics, not ok, note or (f"diverged at {rec.diverged_at:.3f} s" if not ok else ""), held_text)
+
+
+def regulated_force(rec: Recorder, F_d: float) -> float:
+    """The contact force [N] the controller regulated: its state's F_d in the last period of D (the
+    requested F_d, or less where the pose's capacity limited it), F_d where it never reached D."""
+    for s in reversed(rec.rows["state"]):
+        if s.hpfc is not None and s.hpfc.state == "D":
+            return float(s.hpfc.F_d)
+    return F_d
+
+
+def _controller_capacity(rec: Recorder) -> float:
+    """The pose's contact capacity [N] the controller computed (its state's), NaN where it did not."""
+    for s in reversed(rec.rows["state"]):
+        if s.hpfc is not None and np.isfinite(s.hpfc.capacity):
+            return float(s.hpfc.capacity)
+    return float("nan")
 
 
 def contact_capacity(robot, x, rtol: float = 1e-3) -> float:
     """The largest force [N] the platform can press down at x at rest with cable forces within the
     shipped distribution's limits (the parameter file's f_min, the robot's f_max): the wrench of the
     weight plus that contact's reaction, F e_z, wrench-feasible (2.40), by bisection to rtol of the
-    robot's nominal contact force. Reported, not judged: a contact beyond it asks forces the
-    distribution cannot plan (it overloads or leaves a cable below its planned f_min) whatever the
-    controller does (docs/validation.md, "Contact after session 11")."""
+    robot's nominal contact force (the controller's own, :func:`cdpr_control.control.hybrid_force_control.contact_capacity`,
+    is an LP of the same). Reported: a contact beyond it asks forces the distribution cannot plan
+    (it overloads or leaves a cable below its planned f_min) whatever the controller does, which
+    since session 12 limits the force it regulates (``F_d_regulated_N``, docs/validation.md,
+    "Beyond the pose's contact capacity")."""
     from cdpr_control import kernels
     from cdpr_control.force_distribution.methods import distribute
     from cdpr_control.force_distribution.result import Status
@@ -323,8 +352,9 @@ def _settled_watch(rec: Recorder, F_d: float):
         if state["impact"] is None and w[-1][2] > 0.0:
             state["impact"] = len(w) - 1
         if state["impact"] is not None:
-            F = rec.rows["state"][-1].hpfc.F
-            state["inside"] = state["inside"] + 1 if abs(F - F_d) <= 0.02 * F_d else 0
+            hpfc = rec.rows["state"][-1].hpfc
+            F, F_r = hpfc.F, (hpfc.F_d if hpfc.state == "D" else F_d)     # (the regulated F_d: regulated_force)
+            state["inside"] = state["inside"] + 1 if abs(F - F_r) <= 0.02 * F_r else 0
             if state["inside"] >= max(n_hold, n_steady):
                 raise Done
     return watch
