@@ -260,13 +260,19 @@ def measure_graph(mode: str, record: bool, intra_process: bool, program: str | N
     # composed, the simulator's steps are read in-process: a /clock subscriber in another context
     # would have the simulator publish /clock over DDS every period (about 100 us of its period)
     in_process_clock = mode == "composed" and not split
-    probe = ClockProbe(clock=not in_process_clock)
+    # one process per node: the probe (an rclpy context: DDS threads, a spinning thread) starts after
+    # the launcher has started its children, which fork with a preexec_fn (PR_SET_PDEATHSIG): a fork
+    # beside running threads may deadlock the child before its exec, and Popen then waits for it
+    # without bound (the transport floor's processes configuration hung so in session 11's make bench)
+    probe = None if mode == "processes" else ClockProbe(clock=not in_process_clock)
     try:
         with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
             bag = pathlib.Path(tmp) / "bag"
             description.record = RecordSpec(output=str(bag)) if record else None
             wall_launch = time.perf_counter()
             with Launcher(description, mode=mode, intra_process=intra_process) as launch:
+                if probe is None:
+                    probe = ClockProbe(clock=True)
                 if in_process_clock:
                     probe.sim = sim_node(launch)
                 probe.wait_running(START_TIMEOUT_S)
@@ -317,8 +323,9 @@ def measure_graph(mode: str, record: bool, intra_process: bool, program: str | N
                 errors = list(launch.errors)
             recorded = sum(1 for _ in BagReader(bag).messages(start_ns=sim0, end_ns=sim1)) if record else None
     finally:
-        missed = probe.missed_deadlines
-        probe.close()
+        missed = None if probe is None else probe.missed_deadlines
+        if probe is not None:
+            probe.close()
         if part is not None:
             stop_part(part)
     if errors:
@@ -390,8 +397,12 @@ def transport_floor(window_s: float = WINDOW_S, configs: tuple[str, ...] = tuple
                       deliveries_per_period=spec["window"]["deliveries_per_period"], topics_per_period=topics)
         for name in configs:
             print(f"[bench_graph] transport floor {name} ...", flush=True)
+            kwargs = FLOOR_CONFIGS[name]
             try:
-                r = measure(**FLOOR_CONFIGS[name], window_s=window_s, description=skeleton.description(path, spec))
+                if bounded(kwargs):
+                    r = bounded_measure(kwargs, window_s, skeleton_path=str(path))
+                else:
+                    r = measure(**kwargs, window_s=window_s, description=skeleton.description(path, spec))
             except (TimeoutError, RuntimeError) as exc:
                 result["failed"][name] = f"{type(exc).__name__}: {exc}"
                 print(f"[bench_graph] transport floor {name}: failed: {result['failed'][name]}", flush=True)
@@ -399,6 +410,80 @@ def transport_floor(window_s: float = WINDOW_S, configs: tuple[str, ...] = tuple
             result["configs"][name] = r
             print(f"[bench_graph] transport floor {name}: rtf {r['rtf']:.3f}", flush=True)
     return result
+
+
+# wall time a configuration run in a child process (bounded_measure) may take: start-up
+# (START_TIMEOUT_S), warm-up, the window and the second one, the launcher's stop (about 20 s), margin
+CHILD_MARGIN_S = 120.0
+
+
+def bounded(kwargs: dict) -> bool:
+    """Whether a configuration starts node processes (run by :func:`bounded_measure`)."""
+    return kwargs.get("mode") == "processes" or bool(kwargs.get("split"))
+
+
+def bounded_measure(kwargs: dict, window_s: float, skeleton_path: str | None = None) -> dict:
+    """:func:`measure` in a child process of its own, killed with every process it started when it
+    has not finished within its bound (START_TIMEOUT_S + WARMUP_S + 2 window_s + CHILD_MARGIN_S):
+    a configuration that cannot finish is reported (TimeoutError) and the benchmark goes on.
+    ``skeleton_path``: the transport floor's skeleton (skeleton.json) instead of the graph."""
+    bound = START_TIMEOUT_S + WARMUP_S + 2.0 * window_s + CHILD_MARGIN_S
+    with tempfile.TemporaryDirectory(prefix="bench_graph_child_") as tmp:
+        out = pathlib.Path(tmp) / "result.json"
+        job = {"kwargs": kwargs, "window_s": window_s, "skeleton": skeleton_path, "out": str(out)}
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+        child = subprocess.Popen([sys.executable, str(pathlib.Path(__file__).resolve()), "--child", json.dumps(job)],
+                                 env=env, stdin=subprocess.DEVNULL, start_new_session=True)
+        try:
+            child.wait(bound)
+        except subprocess.TimeoutExpired:
+            kill_tree(child.pid)
+            child.wait()
+            raise TimeoutError(f"did not finish within {bound:g} s (killed with the processes it started)") from None
+        if not out.exists():
+            raise RuntimeError(f"the measuring process ended with code {child.returncode} without a result")
+        answer = json.loads(out.read_text())
+    if "error" in answer:
+        raise RuntimeError(answer["error"])
+    return answer["result"]
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below pid (children in sessions of their own included), from /proc."""
+    parents: dict[int, list[int]] = {}
+    for stat in pathlib.Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rpartition(")")[2].split()
+        except OSError:                     # ended meanwhile
+            continue
+        parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = [], [pid]
+    while todo:
+        for child in parents.get(todo.pop(), ()):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def kill_tree(pid: int) -> None:
+    """SIGKILL pid and every process below it (collected first: killed, their children would be re-parented)."""
+    for p in [pid, *descendants(pid)]:
+        try:
+            os.kill(p, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def child_main(job: dict) -> None:
+    """The child of :func:`bounded_measure`: one configuration, its result (or error) as JSON."""
+    kwargs = dict(job["kwargs"])
+    if job["skeleton"] is not None:
+        kwargs["description"] = skeleton.description(job["skeleton"])
+    try:
+        answer = {"result": measure(**kwargs, window_s=job["window_s"])}
+    except (TimeoutError, RuntimeError) as exc:
+        answer = {"error": f"{type(exc).__name__}: {exc}"}
+    pathlib.Path(job["out"]).write_text(json.dumps(answer))
 
 
 def baseline(periods: int) -> dict:
@@ -479,9 +564,13 @@ TYPE_ADAPT_PAIRS = (("composed", "composed_messages"), ("composed_recording", "c
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter windows (free-running 15 s), for a check")
+    parser.add_argument("--child", help=argparse.SUPPRESS)     # bounded_measure's child: its job as JSON
     parser.add_argument("--only", nargs="+", choices=sorted(CONFIGS) + ["transport_floor"],
                         help="run only these configurations (transport_floor: the skeleton's, see transport_floor())")
     args = parser.parse_args()
+    if args.child is not None:
+        child_main(json.loads(args.child))
+        return
     window = 5.0 if args.quick else WINDOW_S
     free_window = 15.0 if args.quick else FREE_WINDOW_S
     configs, failed = {}, {}
@@ -491,7 +580,7 @@ def main() -> None:
         print(f"[bench_graph] {name} ...", flush=True)
         w = free_window if name == "free_running" else window
         try:
-            configs[name] = measure(**kwargs, window_s=w)
+            configs[name] = bounded_measure(kwargs, w) if bounded(kwargs) else measure(**kwargs, window_s=w)
         except (TimeoutError, RuntimeError) as exc:   # recorded, and the other configurations still run
             failed[name] = f"{type(exc).__name__}: {exc}"
             print(f"[bench_graph] {name}: failed: {failed[name]}", flush=True)
