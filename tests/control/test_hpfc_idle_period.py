@@ -23,9 +23,9 @@ def bits(value):
 class Counted(HybridForceControl):
     full = 0
 
-    def update(self, F_d0, w):
+    def update(self, F_d0, w, x_d=None, limits=None):
         self.full += 1
-        return super().update(F_d0, w)
+        return super().update(F_d0, w, x_d, limits)
 
 
 def test_held_idle_periods_skip_the_full_path_with_the_same_numbers():
