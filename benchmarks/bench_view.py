@@ -26,6 +26,14 @@ both are reported: the RTF is the issue's figure, the CPU per period says what t
 loop's own process. The view's and the client's processes run on the same two cores and take their
 share of them, which the RTF includes and the CPU per period does not.
 
+Two counts in the graph's process say where a watched topic's cost goes, whatever the load: per
+period, the DDS copies of in-process messages that its subscriptions' DDS readers hand to Python
+(``dds_copies_per_period``: ``LocalSubscription.from_dds`` calls, which drop them,
+cdpr_control/ros/intraprocess.py), and the thread CPU time spent inside rclpy's
+``Publisher.publish`` (``dds_publish_us_per_period``: converting the message, serializing it and
+writing it to the DDS readers, on the publishing thread unless the publication is asynchronous,
+cdpr_tools/launch.py ``observers_published_asynchronously``).
+
 Targets (issue 27): unwatched within 5 % of the baseline's RTF, one topic watched within 10 %.
 Writes bench/view.json. Run: .venv/bin/python benchmarks/bench_view.py [--rounds N]
 """
@@ -213,16 +221,47 @@ class View:
             self.process.wait()
 
 
-def window(probe, seconds: float) -> dict:
-    """RTF and this process's CPU per simulated period over ``seconds`` of wall time."""
+class Counts:
+    """In this process (the graph's): DDS copies handed to local subscriptions, and thread CPU time in
+    rclpy's Publisher.publish (every publication over DDS). Installed before the graph is built
+    (``from_dds`` is bound when a subscription is created)."""
+
+    def __init__(self):
+        from rclpy.publisher import Publisher
+
+        from cdpr_control.ros.intraprocess import LocalSubscription
+
+        self.copies = self.publish_ns = 0
+        from_dds, publish = LocalSubscription.from_dds, Publisher.publish
+
+        def counted_from_dds(local, msg):
+            self.copies += 1
+            return from_dds(local, msg)
+
+        def timed_publish(publisher, msg):
+            t0 = time.thread_time_ns()
+            try:
+                return publish(publisher, msg)
+            finally:
+                self.publish_ns += time.thread_time_ns() - t0
+        LocalSubscription.from_dds, Publisher.publish = counted_from_dds, timed_publish
+
+    def snapshot(self) -> tuple[int, int]:
+        return self.copies, self.publish_ns
+
+
+def window(probe, seconds: float, counts: Counts) -> dict:
+    """RTF, this process's CPU and the counts per simulated period over ``seconds`` of wall time."""
     from bench_graph import PERIOD_S
 
-    cpu0, (wall0, sim0) = time.process_time(), probe.latest
+    cpu0, (wall0, sim0), (copies0, ns0) = time.process_time(), probe.latest, counts.snapshot()
     time.sleep(seconds)
-    cpu1, (wall1, sim1) = time.process_time(), probe.latest
+    cpu1, (wall1, sim1), (copies1, ns1) = time.process_time(), probe.latest, counts.snapshot()
     periods = round((sim1 - sim0) * 1e-9 / PERIOD_S)
     return {"rtf": periods * PERIOD_S / (wall1 - wall0), "periods": periods,
             "graph_cpu_us_per_period": (cpu1 - cpu0) * 1e6 / periods if periods else None,
+            "dds_copies_per_period": (copies1 - copies0) / periods if periods else None,
+            "dds_publish_us_per_period": (ns1 - ns0) * 1e-3 / periods if periods else None,
             "loadavg_1min": os.getloadavg()[0]}
 
 
@@ -235,11 +274,12 @@ def run(rounds: int) -> list[dict]:
 
     description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml", {"robot": ROBOT})
     probe = ClockProbe(clock=False)
+    counts = Counts()
     windows = []
     view = subscriber = None
 
     def measure(config: str, k: int, **extra) -> None:
-        windows.append({"config": config, "round": k, **window(probe, WINDOW_S), **extra})
+        windows.append({"config": config, "round": k, **window(probe, WINDOW_S, counts), **extra})
         print(json.dumps(windows[-1]), flush=True)
 
     try:
@@ -310,10 +350,10 @@ def summarize(windows: list[dict], rounds: int) -> dict:
         "dds_subscriber_rtf_ratio": med["dds_cable_forces"]["rtf"],
         "dds_subscriber_cpu_per_period_ratio": med["dds_cable_forces"]["graph_cpu_us_per_period"],
         "rtf_median": {c: statistics.median(w["rtf"] for w in windows if w["config"] == c) for c in CONFIGS},
-        "graph_cpu_us_per_period_median": {
-            c: statistics.median(w["graph_cpu_us_per_period"] for w in windows
-                                 if w["config"] == c and w["graph_cpu_us_per_period"])
-            for c in CONFIGS},
+        **{f"{figure}_median": {
+            c: statistics.median(w[figure] for w in windows if w["config"] == c and w[figure] is not None)
+            for c in CONFIGS} for figure in ("graph_cpu_us_per_period", "dds_copies_per_period",
+                                              "dds_publish_us_per_period")},
     }
 
 
