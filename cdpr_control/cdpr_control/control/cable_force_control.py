@@ -115,7 +115,7 @@ def nullspace_projector(AT, held=None) -> np.ndarray:
     return np.eye(m) - np.linalg.pinv(M) @ M
 
 
-def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT):
+def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
     """One period of the PI (3.19) whose integral part integrates only internal forces -> new arrays
     (integrator, saturated, output), as :func:`cdpr_control.control.pi_control.pi_update`.
 
@@ -132,28 +132,34 @@ def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT):
 
     A part of I outside the nullspace (the integrator of the printed (3.19) when the projection
     starts, after a contact, or as x_d and with it A^T move) decays with T_i: a factor
-    min(1, dt/T_i) of it per period, so the drive command does not step."""
+    min(1, dt/T_i) of it per period, so the drive command does not step. ``P``: the
+    :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here)."""
     e = np.asarray(e, dtype=float)
-    AT = np.asarray(AT, dtype=float)
     lo, hi = -np.asarray(u_neg, dtype=float), np.asarray(u_pos, dtype=float)
-    P = nullspace_projector(AT)
+    P = nullspace_projector(AT) if P is None else P
     integrator = np.asarray(integrator, dtype=float)
-    integrator = integrator - np.minimum(1.0, dt / np.asarray(T_i, dtype=float)) * (integrator - P @ integrator)
+    integrator = integrator - np.minimum(1.0, dt / T_i) * (integrator - P @ integrator)
     p = K_p * e
     printed = K_p * dt / T_i * e
-    held = np.zeros(e.shape, dtype=bool)
-    for _ in range(e.size + 1):
-        step = P @ printed
+    step = P @ printed
+    held = None
+    for _ in range(e.size):
         u_free = p + integrator + step
-        pushed = held | ((u_free > hi) & (step > 0.0)) | ((u_free < lo) & (step < 0.0))
-        if np.array_equal(pushed, held):
+        pushed = ((u_free > hi) & (step > 0.0)) | ((u_free < lo) & (step < 0.0))
+        if held is not None:
+            pushed |= held
+            if np.array_equal(pushed, held):
+                break
+        elif not pushed.any():
             break
         held = pushed
-        P = nullspace_projector(AT, held)
+        step = nullspace_projector(AT, held) @ printed
     candidate = integrator + step
-    with np.errstate(divide="ignore", invalid="ignore"):
-        room = np.where(candidate > hi, hi / candidate, np.where(candidate < lo, lo / candidate, 1.0))
-    integrator = candidate * min(1.0, float(np.min(room)))
+    if np.any(candidate > hi) or np.any(candidate < lo):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(candidate > hi, hi / candidate, np.where(candidate < lo, lo / candidate, 1.0))
+        candidate = candidate * min(1.0, float(np.min(room)))
+    integrator = candidate
     u = p + integrator
     return integrator, (u > hi) | (u < lo), np.clip(u, lo, hi)
 
@@ -172,6 +178,7 @@ class CableForceController:
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
         self._f_ref: np.ndarray | None = None    # the start ramp's set-point, None once it has caught up
+        self._projector: tuple[bytes, np.ndarray] | None = None   # (A^T's bytes, its nullspace projector)
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -235,8 +242,12 @@ class CableForceController:
         if AT is None or pi.hold:
             u = pi.update(e_f, sat_n, sat_p)                        # (3.19) with saturation
         else:                                                       # (3.19), its integral internal
+            AT = np.asarray(AT, dtype=float)
+            key = AT.tobytes()
+            if self._projector is None or self._projector[0] != key:     # (x_d repeats while holding)
+                self._projector = (key, nullspace_projector(AT))
             pi.integrator, pi.saturated, pi.output = internal_pi_update(e_f, pi.K_p, pi.T_i, pi.dt, pi.integrator,
-                                                                        sat_n, sat_p, AT)
+                                                                        sat_n, sat_p, AT, self._projector[1])
             u = pi.output
         self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
