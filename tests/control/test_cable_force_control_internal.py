@@ -1,5 +1,5 @@
 """The cable force controller's integral part on the internal forces (CFCParams.internal_integral,
-docs/cable_force_control.md): the integral part of (3.19) integrates only the component of the force
+docs/load_compensation.md, "The CFC's integral part on the internal forces"): the integral part of (3.19) integrates only the component of the force
 error in the nullspace of A^T(x_d) (2.41), so it exerts no wrench and moves no pose; the pose is the
 OSPC's (3.16). Closed forms, an equilibrium on a clamped platform, the anti-windup inside the
 projection, the decay of a part outside the nullspace, and the printed (3.19) where no x_d is given."""

@@ -13,11 +13,13 @@ shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.control.j
 Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
 much softer than modelled) may pull harder, a cable close to f_max may release harder.
 
-With ``internal_integral`` (the default; a departure from the printed (3.19), docs/cable_force_control.md)
-the integral part integrates only the internal forces, the component of the force error in the
-nullspace of A^T(x_d) (2.41) (:func:`internal_pi_update`): a force change in that nullspace moves
-no pose, so the pose is the OSPC's (3.16) alone and the integral part leaves no pose offset after
-a payload step (docs/validation.md, "Payload after session 11", cause B).
+With ``internal_integral`` (the default; a departure from the printed (3.19): docs/load_compensation.md,
+"The CFC's integral part on the internal forces") the integral part integrates only the internal
+forces, the component of the force error in the nullspace of A^T(x_d) (2.41)
+(:func:`internal_pi_update`): a force change in that nullspace moves no pose, so the pose is the
+OSPC's (3.16) alone and the integral part leaves no pose offset after a payload step
+(docs/validation.md, "Payload after session 11", cause B). Not under hybrid force control in
+contact (section 5.1.2: its integral part along the contact is handed over to x_t).
 """
 from __future__ import annotations
 
