@@ -72,7 +72,7 @@ def test_equilibrium_on_a_clamped_platform(AT, internal):
     m, dt = AT.shape[1], 0.001
     G = np.array([1.1, 0.92, 1.05, 0.95, 1.08, 1.0, 0.9, 1.12])        # |u| = |f_d / G - f_d| < F_sat
     f_d = np.array([900.0, 1400.0, 700.0, 1100.0, 950.0, 1300.0, 800.0, 1200.0])
-    cfc = CableForceController(m, CFCParams(T_filter=0.0), dt)
+    cfc = CableForceController(m, CFCParams(T_filter=0.0, internal_integral=internal), dt)
     cfc.reset(np.zeros(m))
     plant = _clamped_platform(G)
     f = plant(f_d)
@@ -144,8 +144,8 @@ def test_the_stage_projects_only_where_it_is_given_x_d(ipanema3):
     theta = inverse_kinematics(ipanema3, X).q
     f_d = np.linspace(600.0, 1500.0, m)
     outs = {}
-    for name, params, x_d in (("plain", CFCParams(internal_integral=False), X), ("none", CFCParams(), None),
-                              ("internal", CFCParams(), X)):
+    on = CFCParams(internal_integral=True)
+    for name, params, x_d in (("plain", CFCParams(), X), ("none", on, None), ("internal", on, X)):
         stage = CableForceControl(ipanema3, dt, params)
         stage.calibration.set_home(ipanema3, f_d)
         f = f_d + 40.0

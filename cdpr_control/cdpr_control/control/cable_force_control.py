@@ -13,7 +13,7 @@ shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.control.j
 Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
 much softer than modelled) may pull harder, a cable close to f_max may release harder.
 
-With ``internal_integral`` (the default; a departure from the printed (3.19): docs/load_compensation.md,
+With ``internal_integral`` (off by default; a departure from the printed (3.19): docs/load_compensation.md,
 "The CFC's integral part on the internal forces") the integral part integrates only the internal
 forces, the component of the force error in the nullspace of A^T(x_d) (2.41)
 (:func:`internal_pi_update`): a force change in that nullspace moves no pose, so the pose is the
@@ -50,7 +50,7 @@ class CFCParams:
     stiffness_model: str = "nonlinear"   # K_l of (3.23): "linear" (thesis, (2.15)) or "nonlinear" (2.17)
     # the integral part of (3.19) integrates only the internal forces (the nullspace of A^T(x_d),
     # (2.41)), where the caller gives x_d: internal_pi_update; False: the printed (3.19)
-    internal_integral: bool = True
+    internal_integral: bool = False
 
     def validate(self) -> None:
         checks = {
