@@ -156,57 +156,12 @@ def test_a_swing_at_start_up_does_not_delay_the_tare():
     assert abs(lc.m_c) < 0.05
 
 
-def _excursion_past_the_set_point(t):
-    """The sag and return of a 21 kg step under force control with the CFC's integral on the internal
-    forces (ipanema3 #37, default plant seed 2, the forward kinematics' z): the start-up's wobble
-    (0.4 mm), 5.4 mm down over 0.3 s from 0.7 s, back up 7.7 mm (2.2 mm past the set-point) by
-    1.38 s, down 2.5 mm by 1.69 s and settling: two half swings of 2 SWING_AMPLITUDE or more from
-    rest, then a third, each of a different length."""
-    knots_t = [0.0, 0.7, 1.0, 1.38, 1.69, 1.81, 5.0]
-    knots_z = [0.0, 0.0, -5.4e-3, 2.26e-3, -0.21e-3, 1.0e-3, 0.0]
-    z = np.zeros_like(t)
-    for (t0, z0), (t1, z1) in zip(zip(knots_t, knots_z), zip(knots_t[1:], knots_z[1:])):
-        s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
-        z += np.where((t >= t0) & (t < t1), z0 + (z1 - z0) * 0.5 * (1.0 - np.cos(np.pi * s)), 0.0)
-    z += np.where(t < 0.6, 0.4e-3 * np.sin(2 * np.pi * 2.0 * t), 0.0)
-    return z
-
-
-def test_a_return_past_the_set_point_is_no_swing_across_the_step():
-    """The payload put down over 0.3 s from 0.7 s; the sag and the return past the set-point are two
-    half swings of 2 SWING_AMPLITUDE or more: a window of twice the time between their turning
-    points (0.76 s) reached back across the step (ipanema3 #37: 12.6 % low at 1.7 s). Their
-    acceleration amplitude is 0.18 m/s², below SWING_ACCELERATION: no swing, the window stays
-    T_filter, and the estimate is within 1 % from 1 s after the step."""
-    lc = LoadCompensation(IPANEMA3, DT, ESTIMATED)
-    mass = 21.1
-    f_empty, df_empty = _vertical_forces(IPANEMA3, POSE, 0.0)
-    f_full, df_full = _vertical_forces(IPANEMA3, POSE, mass)
-    t = np.arange(4000) * DT
-    z = _excursion_past_the_set_point(t)
-    a = np.gradient(np.gradient(z, DT), DT)
-    share = 0.5 * (1.0 - np.cos(np.pi * np.clip((t - 0.7) / 0.3, 0.0, 1.0)))     # the payload put down
-    m_c, starts = [], []
-    for k in range(len(t)):
-        x = POSE.copy()
-        x[2] += z[k]
-        f = (1.0 - share[k]) * (f_empty + a[k] * df_empty) + share[k] * (f_full + a[k] * df_full)
-        lc.update(POSE, np.zeros(6), np.zeros(6), f, x)
-        m_c.append(lc.m_c)
-        n = lc.window_n or lc.wrench_filter.n
-        if n > lc.wrench_filter.n:
-            starts.append(t[k] - n * DT)
-    m_c = np.array(m_c)
-    assert not starts or min(starts) >= 1.0            # no swing window over the step
-    assert np.abs(m_c[t >= 1.7] - mass).max() / mass < 0.01
-
-
-def test_a_slow_swing_is_matched_after_a_third_half_swing():
-    """60 kg swinging at 1.4 Hz by 6 mm (0.46 m/s², below SWING_ACCELERATION: ipanema3 #34 under
-    ik_lc slows to 0.42 m/s² while swinging), the forward kinematics seeing 20 % of it: from its
-    third half swing the window is the swing's period (0.71 s) and the estimate within 1 %; with
-    two half swings as the only test (the rule of acceleration alone) the 240 ms window read the
-    missed acceleration as several per cent of the mass."""
+def test_a_slow_swing_is_matched_too():
+    """60 kg swinging at 1.4 Hz by 6 mm (0.46 m/s²: ipanema3 #34 under ik_lc slows to 0.42 m/s² while
+    swinging), the forward kinematics seeing 20 % of it: the window is the swing's period (0.71 s)
+    and the estimate within 1 %. A rule that matched only swings of 0.5 m/s² or more (tried in
+    session 12 against the window over a load step, docs/load_compensation.md) kept the 240 ms
+    window here, which read the missed acceleration as 3.9 % of the mass."""
     lc = LoadCompensation(IPANEMA3, DT, ESTIMATED)
     slow = lambda t: (0.006 * np.sin(2 * np.pi * 1.4 * t), 0.2 * 0.006 * np.sin(2 * np.pi * 1.4 * t))  # noqa: E731
     t, m_c = _run(lc, IPANEMA3, 60.0, slow, 4.0)

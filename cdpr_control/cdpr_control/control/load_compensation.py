@@ -71,14 +71,6 @@ VELOCITY_BASE = 0.2
 SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
 SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
 SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
-# m/s², the least acceleration amplitude A (2 pi / T)^2 (amplitude A, period T) at which two half
-# swings are taken for a swing at once; a slower one needs a third half swing before them. A step's
-# sag from rest and the force controller's return past the set-point are two half swings of
-# 0.8-0.9 s (ipanema3 #8, #37 with the CFC's internal integral: 0.29 and 0.15 m/s²), and a window of
-# their "period" reached back across the step (1 s windows from before it: 24.9 % and 12.6 %); the
-# swings the window is for have 1.7-4 m/s² (#32, #34, #38 after the step), and where one slows
-# (ipanema3 #34 ik_lc, 0.42 m/s² from 2.6 s) it has swung long before
-SWING_ACCELERATION = 0.5
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -437,7 +429,7 @@ class LoadCompensation:
         self.c_history: list[float] = [0.0] * self._velocity_base   # its last h values
         self.d_history: list[float] = []                       # sums of the cumulative sum over h
         self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
-        self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last four turning points
+        self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
         self.window_n: int | None = None                       # samples of the last window of (4.4)
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
@@ -521,9 +513,7 @@ class LoadCompensation:
         forward kinematics' noise at rest turns nothing); its period is twice the time between the
         last two (the latest half swing: a swing that decays or changes its frequency after a step
         is matched as soon as it turns), and it counts as a swing where the last two half swings
-        each move z by 2 SWING_AMPLITUDE or more and either its acceleration amplitude, A (2 pi / T)^2
-        with A half the smaller half swing and T that period, is SWING_ACCELERATION or more, or the
-        half swing before them moved z by 2 SWING_AMPLITUDE or more as well."""
+        each move z by 2 SWING_AMPLITUDE or more."""
         zh, h = self.z_history, self._velocity_base
         if len(zh) > h:
             v = zh[-1] - zh[-1 - h]
@@ -535,24 +525,17 @@ class LoadCompensation:
                 recent = zh[-1 - h:]
                 k = max(range(len(recent)), key=recent.__getitem__) if previous > 0 else \
                     min(range(len(recent)), key=recent.__getitem__)
-                self.extremes = (self.extremes + [(self.samples_seen - len(recent) + k, recent[k])])[-4:]
+                self.extremes = (self.extremes + [(self.samples_seen - len(recent) + k, recent[k])])[-3:]
                 self.direction = direction
         n = self.wrench_filter.n
         # a swing: the last two half swings both large enough (a single excursion, such as the sag
         # and recovery of a load step under force control, turns once from rest and is not one: a
-        # window over it would reach back across the load change), fast enough or swung once more
-        # before them (the sag and a slow return past the set-point are not one either,
-        # SWING_ACCELERATION), and not stopped (a turning point within the longest window): at rest
-        # again, the next load step is read with T_filter's latency
-        e = self.extremes[-3:]
-        if len(e) == 3 and self.samples_seen - e[2][0] <= self._n_max:
-            half = min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1]))
-            period = 2 * (e[2][0] - e[1][0])
-            if half >= 2.0 * SWING_AMPLITUDE and period > 0 and (
-                    0.5 * half * (2.0 * math.pi / (period * self.dt)) ** 2 >= SWING_ACCELERATION
-                    or (len(self.extremes) == 4
-                        and abs(self.extremes[1][1] - self.extremes[0][1]) >= 2.0 * SWING_AMPLITUDE)):
-                n = max(n, min(period, self._n_max))
+        # window over it would reach back across the load change), and not stopped (a turning point
+        # within the longest window): at rest again, the next load step is read with T_filter's latency
+        e = self.extremes
+        if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
+                and self.samples_seen - e[2][0] <= self._n_max):
+            n = max(n, min(2 * (e[2][0] - e[1][0]), self._n_max))
         return n
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
