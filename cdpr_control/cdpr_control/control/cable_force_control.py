@@ -12,6 +12,14 @@ shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.control.j
 
 Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
 much softer than modelled) may pull harder, a cable close to f_max may release harder.
+
+With ``internal_integral`` (off by default; a departure from the printed (3.19): docs/load_compensation.md,
+"The CFC's integral part on the internal forces") the integral part integrates only the internal
+forces, the component of the force error in the nullspace of A^T(x_d) (2.41)
+(:func:`internal_pi_update`): a force change in that nullspace moves no pose, so the pose is the
+OSPC's (3.16) alone and the integral part leaves no pose offset after a payload step
+(docs/validation.md, "Payload after session 11", cause B). Not under hybrid force control in
+contact (section 5.1.2: its integral part along the contact is handed over to x_t).
 """
 from __future__ import annotations
 
@@ -40,6 +48,9 @@ class CFCParams:
     widen_band: float = 50.0     # N, distance to a force limit where widening starts
     widen_factor: float = 3.0    # -, saturation multiplier reached at the limit
     stiffness_model: str = "nonlinear"   # K_l of (3.23): "linear" (thesis, (2.15)) or "nonlinear" (2.17)
+    # the integral part of (3.19) integrates only the internal forces (the nullspace of A^T(x_d),
+    # (2.41)), where the caller gives x_d: internal_pi_update; False: the printed (3.19)
+    internal_integral: bool = False
 
     def validate(self) -> None:
         checks = {
@@ -51,6 +62,7 @@ class CFCParams:
             "widen_band": self.widen_band > 0.0,
             "widen_factor": self.widen_factor >= 1.0,
             "stiffness_model": self.stiffness_model in ("linear", "nonlinear"),
+            "internal_integral": isinstance(self.internal_integral, (bool, np.bool_)),
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -94,6 +106,66 @@ def _cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, 
 cfc_period = kernels.law("cfc_period", _cfc_period, kernels.compiled_cfc_period)
 
 
+def nullspace_projector(AT, held=None) -> np.ndarray:
+    """P (m, m): the orthogonal projector onto the nullspace of A^T (2.41), the cable forces that
+    exert no wrench on the platform (internal forces, which move no pose); ``held`` (m,) bool: the
+    cables whose component must in addition be zero (P projects onto the nullspace of [A^T; E_held^T])."""
+    M = np.asarray(AT, dtype=float)
+    m = M.shape[1]
+    if held is not None and np.any(held):
+        M = np.vstack([M, np.eye(m)[np.asarray(held, dtype=bool)]])
+    return np.eye(m) - np.linalg.pinv(M) @ M
+
+
+def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
+    """One period of the PI (3.19) whose integral part integrates only internal forces -> new arrays
+    (integrator, saturated, output), as :func:`cdpr_control.control.pi_control.pi_update`.
+
+    ``u = clip(K_p e + I, -u_neg, u_pos)``; the integrator's increment is the nullspace part
+    P (K_p dt / T_i e) of the printed one (P of :func:`nullspace_projector`, A^T = ``AT`` of the
+    set-point x_d), so A^T I stays 0: the integral part exerts no wrench and moves no pose. The
+    proportional part acts on the whole error. Anti-windup as the PI's, inside the projection:
+
+    - conditional integration: a cable whose output is saturated and whose increment would push it
+      further out is held (its increment 0), and the increment is projected again with that cable
+      held (onto the nullspace of [A^T; e_i^T]) until no held cable is pushed out;
+    - clamping: where the integral part alone leaves the output range, the integrator is scaled
+      towards 0 (all cables by one factor, which keeps it internal) into the range.
+
+    A part of I outside the nullspace (the integrator of the printed (3.19) when the projection
+    starts, after a contact, or as x_d and with it A^T move) decays with T_i: a factor
+    min(1, dt/T_i) of it per period, so the drive command does not step. ``P``: the
+    :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here)."""
+    e = np.asarray(e, dtype=float)
+    lo, hi = -np.asarray(u_neg, dtype=float), np.asarray(u_pos, dtype=float)
+    P = nullspace_projector(AT) if P is None else P
+    integrator = np.asarray(integrator, dtype=float)
+    integrator = integrator - np.minimum(1.0, dt / T_i) * (integrator - P @ integrator)
+    p = K_p * e
+    printed = K_p * dt / T_i * e
+    step = P @ printed
+    held = None
+    for _ in range(e.size):
+        u_free = p + integrator + step
+        pushed = ((u_free > hi) & (step > 0.0)) | ((u_free < lo) & (step < 0.0))
+        if held is not None:
+            pushed |= held
+            if np.array_equal(pushed, held):
+                break
+        elif not pushed.any():
+            break
+        held = pushed
+        step = nullspace_projector(AT, held) @ printed
+    candidate = integrator + step
+    if np.any(candidate > hi) or np.any(candidate < lo):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(candidate > hi, hi / candidate, np.where(candidate < lo, lo / candidate, 1.0))
+        candidate = candidate * min(1.0, float(np.min(room)))
+    integrator = candidate
+    u = p + integrator
+    return integrator, (u > hi) | (u < lo), np.clip(u, lo, hi)
+
+
 class CableForceController:
     """Per-cable PI with feed-forward, widened saturation, anti-windup and pre-tension (3.19)-(3.23)."""
 
@@ -108,6 +180,7 @@ class CableForceController:
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
         self._f_ref: np.ndarray | None = None    # the start ramp's set-point, None once it has caught up
+        self._projector: tuple[bytes, np.ndarray] | None = None   # (A^T's bytes, its nullspace projector)
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -152,12 +225,14 @@ class CableForceController:
         """PT1 feedback filter (3.20)."""
         return self.feedback_filter.update(f)
 
-    def update(self, f_d, f, k_l, f_min, f_max, f_ff=None) -> np.ndarray:
+    def update(self, f_d, f, k_l, f_min, f_max, f_ff=None, AT=None) -> np.ndarray:
         """One period: desired and measured forces [N], cable stiffness K_l [N/m] -> Δq_CFC [m].
 
         k_l is the secant stiffness per cable, an array (the thesis' linear model) or a function of
         the output force f_c,out (a non-linear model (2.17): then K_l^-1 f_c,out is the elongation).
         f_ff: a feed-forward (3.22) other than f_d (hybrid force control, section 5.1.2); None: f_d.
+        AT: A^T(x_d) (6, m) (2.10): the integral part integrates only internal forces
+        (:func:`internal_pi_update`; not while the PI is held); None: the printed (3.19).
         """
         if self.dq_0 is None:
             raise RuntimeError("CableForceController.update before reset(dq_0)")
@@ -165,7 +240,17 @@ class CableForceController:
         f_fb = self.filter(f)
         e_f = f_d - f_fb                                            # (3.2)
         sat_n, sat_p = widened_saturation(self.params, f_fb, f_min, f_max)
-        u = self.pi.update(e_f, sat_n, sat_p)                       # (3.19) with saturation
+        pi = self.pi
+        if AT is None or pi.hold:
+            u = pi.update(e_f, sat_n, sat_p)                        # (3.19) with saturation
+        else:                                                       # (3.19), its integral internal
+            AT = np.asarray(AT, dtype=float)
+            key = AT.tobytes()
+            if self._projector is None or self._projector[0] != key:     # (x_d repeats while holding)
+                self._projector = (key, nullspace_projector(AT))
+            pi.integrator, pi.saturated, pi.output = internal_pi_update(e_f, pi.K_p, pi.T_i, pi.dt, pi.integrator,
+                                                                        sat_n, sat_p, AT, self._projector[1])
+            u = pi.output
         self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
         self.dq_cfc = self.f_out / stiffness - self.dq_0            # (3.23)
@@ -248,9 +333,11 @@ class CableForceControl:
         c = self.calibration
         return self._elongation(c.f_0, cable.total_free_length(self.robot, c.theta_0))
 
-    def update(self, f_d, f, theta, f_min, f_max, f_ff=None) -> np.ndarray:
+    def update(self, f_d, f, theta, f_min, f_max, f_ff=None, x_d=None) -> np.ndarray:
         """Desired and measured forces [N], encoder lengths θ [m] -> Δq_CFC [m] (3.23); f_ff a
-        feed-forward other than f_d (see :meth:`CableForceController.update`)."""
+        feed-forward other than f_d (see :meth:`CableForceController.update`); x_d (6,) the
+        set-point, whose A^T (2.10) confines the integral part to the internal forces where
+        ``internal_integral`` is on (None: the printed (3.19))."""
         if not self.enabled:
             return np.zeros(self.robot.m)
         l_t = cable.total_free_length(self.robot, theta)                      # (2.14)
@@ -260,6 +347,9 @@ class CableForceControl:
                 c.reset(self._calibrated_dq_0(), f=f, ramp=self.start_ramp and c.feedback_filter.y is None)
             else:
                 c.dq_0 = self._calibrated_dq_0()          # the start-up window's running mean
-        if c.feedback_filter.y is not None and not c.pi.hold:
+        AT = None
+        if x_d is not None and self.params.internal_integral:
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")       # (2.10) at x_d
+        if c.feedback_filter.y is not None and not c.pi.hold and AT is None:
             return c.update_period(f_d, f, l_t, self._constants, f_min, f_max, f_ff)
-        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff)
+        return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff, AT)

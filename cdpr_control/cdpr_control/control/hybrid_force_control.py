@@ -1036,6 +1036,9 @@ class ContactCableForceControl:
         controller's contact force (``HPFCState.F_vec``; None: the error along a stays on f_d, see
         :meth:`CFCCoupling.run`) -> Δq_CFC (m,) [m]."""
         state = state or IDLE
+        # idle with the set-point's ramp-out done: the CFC's own integral part, internal where
+        # CFCParams.internal_integral is on (not in A-D, R: there it carries the contact's hand-over)
+        x_internal = None if self.needs_setpoint(state) else x_d
         if F_d0 is not None:
             F_d0 = np.asarray(F_d0, dtype=float)
             key = F_d0.tobytes()
@@ -1060,7 +1063,7 @@ class ContactCableForceControl:
         f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
-            self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff)
+            self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff, x_d=x_internal)
         self.f_set, self.f_ff, self.paused = f_set, f_ff, paused
         return self.dq_cfc
 

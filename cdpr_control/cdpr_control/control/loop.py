@@ -212,7 +212,7 @@ class ControlLoop:
                                                p.ospc_enabled or not p.cfc_enabled) if force_control else None
         s_ospc = self.blend_ospc.update(force_control and (p.ospc_enabled or self.refusal is not None))
         if hpfc is None:
-            self.dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max)
+            self.dq_cfc = self.cfc.update(dist.f, f, theta, dist.f_min, dist.f_max, x_d=x_d)
         else:                                          # section 5.1.2: held during contact establishment
             self.dq_cfc = self.contact.update(hpfc.state, hpfc.F_d0, x_d, dist.f, f, theta, dist.f_min, dist.f_max,
                                               hpfc.F_vec)

@@ -56,6 +56,9 @@ PARAMS = [
     ParamSpec("widen_factor", _D.widen_factor, "saturation multiplier reached at a force limit [-]", range=(1.0, 100.0)),
     ParamSpec("stiffness_model", _D.stiffness_model, "K_l of (3.23): linear (k_spec nominal / l_t, as the thesis) or "
               "nonlinear (secant of (2.16)-(2.17))", choices=("linear", "nonlinear")),
+    ParamSpec("internal_integral", _D.internal_integral, "the integral part of (3.19) integrates only internal forces "
+              "(the nullspace of A^T(x_d), (2.41)): the pose is the OSPC's; needs force_controller (the set-point), "
+              "and not in contact (5.1.2)"),
     ParamSpec("T_MA", default("hybrid_force_controller", "T_MA"), "moving average T_MA,HPFC of the set-point after a contact [s], "
               "table 5.1 (section 5.1.2)", range=(0.0, 60.0)),
     ParamSpec("allow_unstable", False, "accept gains that the stability analysis (thesis 3.4) calls unstable"),
@@ -182,7 +185,8 @@ class CableForceControllerNode(CdprNode):
             F_d0, F_vec = hpfc.reference[:3], hpfc.feedback[:3]
             # x_d only where the stage uses it (not idle with the ramp-out done: the most frequent
             # case by far); its pose StampSync found finite
-            x_d = pose_from_msg(sp.pose) if self.contact.needs_setpoint(state) else None
+            x_d = (pose_from_msg(sp.pose) if self.contact.needs_setpoint(state) or self.stage.params.internal_integral
+                   else None)
             if not (all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist()))):
                 F_d0 = x_d = F_vec = None
                 self.report(DiagnosticStatus.ERROR, "invalid set-point or hybrid force controller state; "
