@@ -269,9 +269,12 @@ def test_a_bag_of_two_graphs_is_refused(friction_bag, tmp_path):
     from cdpr_tools.bag.writer import BagWriter
     from cdpr_tools.identify import bag_data
 
-    twice = tmp_path / "twice"
+    twice, start = tmp_path / "twice", None
     with BagWriter(twice) as writer:
         for message in BagReader(friction_bag).messages():
+            start = message.log_time_ns if start is None else start
+            if message.log_time_ns > start + 500_000_000:       # the first 0.5 s of the run are enough
+                break
             for shift in (0, 1):          # the second graph's messages arrive 1 ns later, stamps alike
                 writer.write(message.topic, message.type, message.data, message.log_time_ns + shift)
     with pytest.raises(ValueError, match="go back in time: two graphs published"):
