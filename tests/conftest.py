@@ -148,13 +148,18 @@ def pytest_xdist_make_scheduler(config, log):
     seconds = {**FILE_SECONDS, **(cache.get(FILE_SECONDS_KEY, {}) if cache else {})}
 
     class SlowestFileFirst(LoadFileScheduling):
-        def schedule(self):
-            if self.collection is None:   # the first call: order the collections the workers sent
-                for node, collection in self.registered_collections.items():
-                    files = list(dict.fromkeys(map(_file_of, collection)))
-                    rank = {f: (-seconds.get(f, 0.0), k) for k, f in enumerate(files)}
-                    self.registered_collections[node] = sorted(collection, key=lambda i: rank[_file_of(i)])
-            super().schedule()
+        ordered = False
+
+        def _assign_work_unit(self, node):
+            # the first assignment follows schedule() filling the work queue (one unit a file, in
+            # the order of the collection): order it once. (The workers' collections stay as they
+            # are: the scheduler sends each test as its index in them.)
+            if not self.ordered:
+                order = {f: (-seconds.get(f, 0.0), k) for k, f in enumerate(self.workqueue)}
+                for f in sorted(self.workqueue, key=order.__getitem__):
+                    self.workqueue.move_to_end(f)
+                self.ordered = True
+            super()._assign_work_unit(node)
 
     config.option.loadscopereorder = False   # keep the order above (not: most tests first)
     return SlowestFileFirst(config, log)
