@@ -15,8 +15,7 @@ demo: setup
 	@$(VENV)/bin/cdpr demo
 
 # the test files spread over one worker process per core (pytest-xdist, whole files: their module
-# fixtures and ROS domains stay in one process; tests/conftest.py orders them); TEST_WORKERS=0 runs
-# them in this process
+# fixtures and ROS domains stay in one process); TEST_WORKERS=0 runs them in this process
 TEST_WORKERS ?= auto
 export TEST_WORKERS
 
