@@ -58,7 +58,8 @@ def session_directory(tmp_path_factory, name: str) -> Path:
 def computed_once(directory: Path, compute):
     """``compute()`` (a JSON value) run by the first process of the session that asks for it while
     the others wait on the directory's lock, then read from ``directory``/result.json by every
-    process. A failed ``compute`` leaves nothing behind: the next process to ask tries again."""
+    process. A failed ``compute`` writes no result.json: the next process to ask runs it again
+    (on whatever the failed one left in ``directory``), so each of them reports the failure."""
     result = directory / "result.json"
     with locked(directory / ".lock"):
         if not result.exists():
@@ -116,4 +117,3 @@ def robot(request):
     robot = load_robot(request.param)
     kernels.warm_up(robot)
     return robot
-
