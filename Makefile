@@ -14,8 +14,13 @@ setup:
 demo: setup
 	@$(VENV)/bin/cdpr demo
 
+# the test files spread over one worker process per core (pytest-xdist, whole files: their module
+# fixtures and ROS domains stay in one process); TEST_WORKERS=0 runs them in this process
+TEST_WORKERS ?= auto
+export TEST_WORKERS
+
 test: setup
-	@$(PY) -m pytest -q tests
+	@$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile tests
 
 # the tests while two busy loops load both cores (no test may depend on an idle machine)
 test-stress: setup

@@ -1,6 +1,8 @@
 """Test-session environment: ROS 2 traffic stays on this machine, in a domain of its own."""
+import json
 import os
 import random
+from pathlib import Path
 
 # Discovery only on localhost (no multicast leaves the machine), and a random domain so that
 # concurrent test runs on one machine do not see each other's nodes.
@@ -18,7 +20,7 @@ os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 import pytest  # noqa: E402
 
-from cdpr_tools.file_lock import claim_ros_domain as claim_domain  # noqa: E402
+from cdpr_tools.file_lock import claim_ros_domain as claim_domain, locked  # noqa: E402
 
 
 _NEXT_DOMAIN = [SESSION_DOMAIN]
@@ -42,33 +44,67 @@ def ros_domain_of_the_module():
         lock.close()
 
 
+def session_directory(tmp_path_factory, name: str) -> Path:
+    """A directory of this test session that every one of its processes shares: with pytest-xdist
+    (`make test`) each worker has a temporary directory of its own under the session's, so a
+    session-scoped result that several test files need (and which those files' workers would each
+    compute) is made once in the session's and read by the others (:func:`computed_once`)."""
+    base = tmp_path_factory.getbasetemp()
+    directory = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / name
+    directory.mkdir(parents=True, exist_ok=True)
+    return directory
+
+
+def computed_once(directory: Path, compute):
+    """``compute()`` (a JSON value) run by the first process of the session that asks for it while
+    the others wait on the directory's lock, then read from ``directory``/result.json by every
+    process. A failed ``compute`` writes no result.json: the next process to ask runs it again
+    (on whatever the failed one left in ``directory``), so each of them reports the failure."""
+    result = directory / "result.json"
+    with locked(directory / ".lock"):
+        if not result.exists():
+            value = compute()
+            result.with_suffix(".tmp").write_text(json.dumps(value))
+            result.with_suffix(".tmp").rename(result)
+    return json.loads(result.read_text())
+
+
 @pytest.fixture(scope="session")
 def friction_bag(tmp_path_factory):
     """A short friction identification run of the IPAnema 3 Mini (section 3.7.2 trajectory: a few
-    seconds of stop-and-go and alternating moves, then faster ones), recorded once per session."""
+    seconds of stop-and-go and alternating moves, then faster ones), recorded once per session (once
+    for all the session's worker processes)."""
     from cdpr_tools.identify import experiments
 
-    return experiments.record_friction_run(
-        tmp_path_factory.mktemp("identification") / "friction", "ipanema3_mini", seed=3,
-        amplitudes=(0.0005, 0.002, 0.005), pause=0.05, fast_amplitude=0.01, fast_velocities=(0.2, 0.4))
+    directory = session_directory(tmp_path_factory, "identification")
+    return Path(computed_once(directory, lambda: str(experiments.record_friction_run(
+        directory / "friction", "ipanema3_mini", seed=3,
+        amplitudes=(0.0005, 0.002, 0.005), pause=0.05, fast_amplitude=0.01, fast_velocities=(0.2, 0.4)))))
 
 
 @pytest.fixture(scope="session")
 def identified_friction(friction_bag, tmp_path_factory):
     """``cdpr identify friction BAG -o friction.yaml --plot fit.png`` on the session's friction run,
-    run once (the fit of 8 cables takes about 10 s): tests/tools/test_identify.py asserts on its
-    exit status, output and files, tests/model/test_friction_hysteresis.py loads its parameter file."""
+    run once (the fit of 8 cables takes about 10 s; once for all the session's worker processes):
+    tests/tools/test_identify.py asserts on its exit status, output and files,
+    tests/model/test_friction_hysteresis.py loads its parameter file."""
     import contextlib
     import io
     from types import SimpleNamespace
 
     from cdpr_tools import cli
 
-    directory = tmp_path_factory.mktemp("identified_friction")
-    params, plot, out = directory / "friction.yaml", directory / "fit.png", io.StringIO()
-    with contextlib.redirect_stdout(out):
-        code = cli.main(["identify", "friction", str(friction_bag), "-o", str(params), "--plot", str(plot)])
-    return SimpleNamespace(code=code, out=out.getvalue(), params=params, plot=plot)
+    directory = session_directory(tmp_path_factory, "identified_friction")
+    params, plot = directory / "friction.yaml", directory / "fit.png"
+
+    def identify():
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = cli.main(["identify", "friction", str(friction_bag), "-o", str(params), "--plot", str(plot)])
+        return {"code": code, "out": out.getvalue()}
+
+    run = computed_once(directory, identify)
+    return SimpleNamespace(code=run["code"], out=run["out"], params=params, plot=plot)
 
 
 @pytest.fixture(scope="module", params=("ipanema3_mini", "ipanema3"))
