@@ -30,6 +30,7 @@ import numpy as np
 from cdpr_control.model import cable
 from cdpr_control import kernels
 from cdpr_control.model.calibration import DEFAULT_WINDOW, StartupCalibration
+from cdpr_control.model.memo import Memo
 from cdpr_control.control.bumpless import START_FORCE_RANGE_TIME
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.pi_control import PIController, pi_update
@@ -180,7 +181,7 @@ class CableForceController:
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
         self._f_ref: np.ndarray | None = None    # the start ramp's set-point, None once it has caught up
-        self._projector: tuple[bytes, np.ndarray] | None = None   # (A^T's bytes, its nullspace projector)
+        self._projector = Memo(read_only=True)     # the nullspace projector of A^T's bytes (x_d repeats while holding)
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -245,11 +246,9 @@ class CableForceController:
             u = pi.update(e_f, sat_n, sat_p)                        # (3.19) with saturation
         else:                                                       # (3.19), its integral internal
             AT = np.asarray(AT, dtype=float)
-            key = AT.tobytes()
-            if self._projector is None or self._projector[0] != key:     # (x_d repeats while holding)
-                self._projector = (key, nullspace_projector(AT))
+            P = self._projector(AT.tobytes(), nullspace_projector, AT)
             pi.integrator, pi.saturated, pi.output = internal_pi_update(e_f, pi.K_p, pi.T_i, pi.dt, pi.integrator,
-                                                                        sat_n, sat_p, AT, self._projector[1])
+                                                                        sat_n, sat_p, AT, P)
             u = pi.output
         self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
