@@ -21,7 +21,6 @@ then SIGKILL if they hang), the bag is closed.
 """
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import importlib
 import importlib.metadata
@@ -229,10 +228,6 @@ class Launcher:
         return self
 
     def _start_composed(self) -> None:
-        with observers_published_asynchronously(self.intra_process):
-            self._build_composed()
-
-    def _build_composed(self) -> None:
         context = self._new_context()
         IntraProcess.set_enabled(context, self.intra_process)
         # in-process, the loop's messages never reach the executor, which only runs timers, services
@@ -399,32 +394,6 @@ class Launcher:
 
     def __exit__(self, *exc) -> None:
         self.stop()
-
-
-PUBLICATION_MODE = "RMW_FASTRTPS_PUBLICATION_MODE"
-
-
-@contextlib.contextmanager
-def observers_published_asynchronously(intra_process: bool):
-    """While a composed graph's context and nodes are created: Fast DDS's asynchronous publication.
-
-    In a composed graph with in-process delivery nothing of the loop goes over DDS; what does is
-    for observers outside the process (`cdpr view`, a recorder or ``ros2 topic echo`` elsewhere).
-    rmw_fastrtps writes synchronously by default (Jazzy), on the publishing thread, which is the
-    loop's: a watched /cable_forces cost that thread about 100 us a period (docs/visualization.md).
-    Asynchronously, the writer only queues the sample and Fast DDS's own thread sends it. The mode
-    is read from RMW_FASTRTPS_PUBLICATION_MODE when the context's participant is created (with its
-    first node), so it is set around that and restored: other contexts of the process keep theirs.
-    A mode the user set is kept; without in-process delivery (the loop over DDS) nothing changes.
-    """
-    if not intra_process or PUBLICATION_MODE in os.environ:
-        yield
-        return
-    os.environ[PUBLICATION_MODE] = "ASYNCHRONOUS"
-    try:
-        yield
-    finally:
-        os.environ.pop(PUBLICATION_MODE, None)
 
 
 def _signal(process: subprocess.Popen, sig: signal.Signals) -> None:
