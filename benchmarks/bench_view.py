@@ -31,8 +31,8 @@ period, the DDS copies of in-process messages that its subscriptions' DDS reader
 (``dds_copies_per_period``: ``LocalSubscription.from_dds`` calls, which drop them,
 cdpr_control/ros/intraprocess.py), and the thread CPU time spent inside rclpy's
 ``Publisher.publish`` (``dds_publish_us_per_period``: converting the message, serializing it and
-writing it to the DDS readers, on the publishing thread unless the publication is asynchronous,
-cdpr_tools/launch.py ``observers_published_asynchronously``).
+writing it to the DDS readers, on the publishing thread unless Fast DDS publishes
+asynchronously: docs/visualization.md).
 
 Targets (issue 27): unwatched within 5 % of the baseline's RTF, one topic watched within 10 %.
 Writes bench/view.json. Run: .venv/bin/python benchmarks/bench_view.py [--rounds N]
