@@ -892,8 +892,6 @@ class CFCCoupling:
 
 NO_HAND_OVER = np.zeros(6)          # x_comp while nothing is handed over (shared, read-only)
 NO_HAND_OVER.flags.writeable = False
-_ZERO_BYTES = np.array(0.0).tobytes()    # +0.0 (HybridForceStage._idle_period)
-_F64 = np.dtype(float)
 
 
 class ContactHandOver:
@@ -949,7 +947,6 @@ class HybridForceStage:
                  enabled: bool = False):
         self.control = HybridForceControl(robot, dt, params, enabled=enabled)
         self.hand_over = ContactHandOver(T_c, dt)
-        self._idle_x = self._idle_out = None     # _idle_period's output x + 0.0 of the idle state's x
 
     @property
     def k_t(self) -> float:
@@ -965,43 +962,11 @@ class HybridForceStage:
         """F_d,0 (3,) [N], the measured wrench w (6,), cfc_on: Δq_CFC applied (in the last period),
         x_d and the distribution's (f_min, f_max) as :meth:`HybridForceControl.update`
         -> (the period's HPFCState, x_d,HPFC + x_comp (6,) [m, rad])."""
-        idle = self._idle_period(F_d0, w)
-        if idle is not None:
-            return idle
         s = self.control.update(F_d0, w, x_d, limits)
         x_comp = self.hand_over.update(s, self.k_t, cfc_on)
         # x + 0.0 is x + np.zeros(6) (the same numbers, -0.0 becoming 0.0 alike) and a new array:
         # the idle state's x is read-only and shared by the periods
         return s, s.x + (0.0 if x_comp is NO_HAND_OVER else x_comp)
-
-    def _idle_period(self, F_d0, w) -> tuple[HPFCState, np.ndarray] | None:
-        """:meth:`update` in the period that is most of them, None where it does not apply: state I
-        and not wanted, F_d,0 the float64 (3,) of the last period (bytes: its axis and F_d known and
-        valid), w a finite float64 (6,), and the hand-over's F_c exactly +0.0 (no contact force to
-        hand over since the last contact, so x_comp = 0 whatever cfc_on). What is constant there is
-        not computed again: the checks of F_d,0, the hand-over's PT1 of 0.0 (0.0 + α (0.0 - 0.0) is
-        0.0) and the output x + 0.0, shared read-only while the idle state's x is the same array
-        (HybridForceControl._idle_state keeps it while z_t, F_d,0 and x_t do not change). The rest
-        is the full path's own code (the force filter, _idle_state), so the same numbers;
-        tests/control/test_hpfc_idle_path.py compares both with the full path."""
-        c = self.control
-        if not (c.state == IDLE and c.idle_path and type(F_d0) is np.ndarray and type(w) is np.ndarray
-                and F_d0.dtype is _F64 and w.dtype is _F64 and F_d0.shape == (3,) and w.shape == (6,)):
-            return None
-        y = self.hand_over.filter.y
-        if y is None or y.tobytes() != _ZERO_BYTES:      # (one float: the bytes of +0.0)
-            return None
-        key = F_d0.tobytes()
-        if key != c._z_t_of or (c.enabled and c._F_d >= c.params.F_th):
-            return None
-        w_floats = w.tolist()
-        if not all_finite(w_floats):
-            return None
-        s = c._idle_state(F_d0, key, c._F_d, c._filter_force(w_floats))
-        if s.x is not self._idle_x:              # a new idle state's x: x + 0.0 (-0.0 becomes 0.0), once
-            self._idle_x, self._idle_out = s.x, s.x + 0.0
-            self._idle_out.flags.writeable = False
-        return s, self._idle_out
 
 
 class ContactCableForceControl:

@@ -25,9 +25,6 @@ import numpy as np
 from cdpr_control.control.safety import NON_FINITE, STALE_INPUT, Fault, all_finite
 
 
-_F64 = np.dtype(float)
-
-
 @dataclass
 class OffsetSample:
     """What the producer of one offset input said for a period."""
@@ -94,9 +91,7 @@ class OffsetInputs:
             active = config.enabled and sample is not None and sample.active
             if active:
                 age = now - sample.t
-                x = sample.x
-                if type(x) is not np.ndarray or x.dtype is not _F64:
-                    x = np.asarray(x, dtype=float)
+                x = np.asarray(sample.x, dtype=float)
                 if age > config.deadline:
                     faults.append(Fault(STALE_INPUT, f"stale input offset {name}: older than its deadline "
                                         f"{1e3 * config.deadline:.0f} ms", True))

@@ -241,10 +241,7 @@ class ForceWatch:
         """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
         while the limits' bytes repeat (the robot's, every period), and the last three as the rows of
         an array (force_watch_period's bounds)."""
-        if not (type(f_min) is np.ndarray and f_min.dtype is _F64):
-            f_min = np.asarray(f_min, dtype=float)
-        if not (type(f_max) is np.ndarray and f_max.dtype is _F64):
-            f_max = np.asarray(f_max, dtype=float)
+        f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
         return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
 
     def _bands(self, f_min, f_max, m: int) -> tuple:
@@ -261,7 +258,8 @@ class ForceWatch:
         (None: not watched) -> the latched fault, None while all is well."""
         if self.fault is not None or not self.config.force_watch:
             return self.fault
-        self._remember(_copy(offset), _copy(dq_cfc), None if f_d is None else _copy(f_d))
+        self._remember(np.array(offset, dtype=float), np.array(dq_cfc, dtype=float),
+                       None if f_d is None else np.array(f_d, dtype=float))
         values = None if f is None else _vector(f)
         m = 0 if values is None else len(values)
         fresh = self._state is None or self._state.shape[1] != m     # the first period: the rate from 0
@@ -281,17 +279,12 @@ class ForceWatch:
             return None
         clean, longest, i_longest, worst, i_worst = self._out.tolist()
         self._periods += 1
-        # the first of _band, _oscillation (from rate_watch_delay on), _lag that trips (each None below its limit)
-        if longest > self._limit_periods:
-            self.fault = self._band(values, bounds, longest, int(i_longest))
-        elif worst > 1.0 and self._periods > self._rate_from:
-            self.fault = self._oscillation(values, bounds, worst, int(i_worst))
-        elif x_d is not None and x is not None:
-            self.fault = self._lag(x_d, x)
+        self.fault = (self._band(values, bounds, longest, int(i_longest))
+                      or (self._oscillation(values, bounds, worst, int(i_worst)) if self._periods > self._rate_from
+                          else None) or self._lag(x_d, x))
         self._clean = self._clean + 1 if clean else 0
-        history = self._history
-        if self._clean >= len(history) and len(history) == history.maxlen:
-            self._outputs = history[0]
+        if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
+            self._outputs = self._history[0]
         if self.fault is not None:
             self.safe = (np.array(x_d, dtype=float), *self._outputs)
         return self.fault
@@ -326,21 +319,11 @@ class ForceWatch:
     def _lag(self, x_d, x) -> Fault | None:
         if x_d is None or x is None:
             return None
-        dr = math.dist(_position(x_d), _position(x))
+        dr = math.dist(_floats(x_d)[:3], _floats(x)[:3])
         if not dr > self.config.max_position_lag:
             return None
         return Fault(FORCE_WATCH, f"force watch: position error {1e3 * dr:.1f} mm beyond "
                      f"{1e3 * self.config.max_position_lag:.1f} mm", True)
-
-
-def _copy(values) -> np.ndarray:
-    """A float64 copy of values (``np.array(values, dtype=float)``; a float64 array's own copy, cheaper)."""
-    return values.copy() if type(values) is np.ndarray and values.dtype is _F64 else np.array(values, dtype=float)
-
-
-def _position(x) -> list:
-    """The first three entries of the pose x as floats (``_floats(x)[:3]``; of a flat array, only those)."""
-    return x[:3].tolist() if type(x) is np.ndarray and x.ndim == 1 else _floats(x)[:3]
 
 
 def _vector(values) -> np.ndarray:
