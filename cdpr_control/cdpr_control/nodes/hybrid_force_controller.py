@@ -37,6 +37,8 @@ The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForce
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -162,7 +164,7 @@ class HybridForceControllerNode(CdprNode):
         # values are formatted only then)
         level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
         message = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
-        limited = s.F_d_requested == s.F_d_requested     # (not NaN) F_d limited to the pose's capacity
+        limited = not math.isnan(s.F_d_requested)        # F_d limited to the pose's capacity
         if limited:
             level = DiagnosticStatus.WARN
             message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "

@@ -302,40 +302,24 @@ def _controller_capacity(rec: Recorder) -> float:
     return float("nan")
 
 
-def contact_capacity(robot, x, rtol: float = 1e-3) -> float:
+def contact_capacity(robot, x) -> float:
     """The largest force [N] the platform can press down at x at rest with cable forces within the
-    shipped distribution's limits (the parameter file's f_min, the robot's f_max): the wrench of the
-    weight plus that contact's reaction, F e_z, wrench-feasible (2.40), by bisection to rtol of the
-    robot's nominal contact force (the controller's own, :func:`cdpr_control.control.hybrid_force_control.contact_capacity`,
-    is an LP of the same). Reported: a contact beyond it asks forces the distribution cannot plan
-    (it overloads or leaves a cable below its planned f_min) whatever the controller does, which
-    since session 12 limits the force it regulates (``F_d_regulated_N``, docs/validation.md,
-    "Beyond the pose's contact capacity")."""
+    shipped distribution's limits (the parameter file's f_min, the robot's f_max): the controller's
+    own :func:`cdpr_control.control.hybrid_force_control.contact_capacity` (an LP: the weight's
+    wrench plus the contact's reaction F e_z wrench-feasible (2.40)) for a press along -e_z.
+    Reported: a contact beyond it asks forces the distribution cannot plan (it overloads or leaves a
+    cable below its planned f_min) whatever the controller does, which since session 12 limits the
+    force it regulates (``F_d_regulated_N``, docs/validation.md, "Beyond the pose's contact capacity")."""
     from cdpr_control import kernels
-    from cdpr_control.force_distribution.methods import distribute
-    from cdpr_control.force_distribution.result import Status
+    from cdpr_control.control import hybrid_force_control
     from cdpr_control.model.dynamics import gravity_wrench
     from cdpr_tools.validate.grid import planned_f_min
 
     x = np.asarray(x, dtype=float)
     AT, = kernels.inverse_kinematics_fields(robot, x, "AT")
-    f_min = planned_f_min(robot)
     f_max = np.asarray(robot.cable.f_max, dtype=float) * np.ones(robot.m)
-    w_g = gravity_wrench(robot, x)
-
-    def holds(F: float) -> bool:
-        return distribute(AT, w_g + np.r_[0.0, 0.0, F, 0.0, 0.0, 0.0], f_min, f_max, f_min).status == Status.FEASIBLE
-
-    nominal = NOMINAL_CONTACT_FORCE[robot.file.stem]
-    lo, hi = 0.0, nominal
-    while holds(hi) and hi < 1e3 * nominal:
-        lo, hi = hi, 2.0 * hi
-    if not holds(lo):
-        return 0.0
-    while hi - lo > rtol * nominal:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
-    return lo
+    return hybrid_force_control.contact_capacity(AT, gravity_wrench(robot, x), np.array([0.0, 0.0, -1.0]),
+                                                 planned_f_min(robot), f_max)
 
 
 def _settled_watch(rec: Recorder, F_d: float):
