@@ -174,3 +174,23 @@ def test_stamps_ahead_of_the_clock_are_refused_every_time():
     assert "ahead" in jumps.check("s", 5000 * period, clock=lambda: None)
     assert jumps.check("s", 5001 * period, clock=lambda: None) is None   # no clock yet: a restarted publisher
     assert jumps.newest["s"] == 5001 * period
+
+
+def test_a_stream_behind_the_clock_is_refused_and_a_restart_with_the_clock_is_taken():
+    """A stamp behind its stream and more than the limit behind the simulated clock is a second,
+    older stream: refused every time (the restart rule let every second one through). A simulator
+    that restarts takes the clock back with it: then the restart rule applies as before."""
+    period = 1_000_000
+    jumps = StampJumps(50, 50 * period)
+    clock = [400 * period]
+    now = lambda: clock[0]                                          # noqa: E731
+    assert jumps.check("s", 400 * period, clock=now) is None
+    for k in range(1, 6):
+        assert "behind the clock" in jumps.check("s", (100 + k) * period, clock=now)
+        clock[0] = (400 + k) * period
+        assert jumps.check("s", (400 + k) * period, clock=now) is None
+    assert jumps.newest["s"] == 405 * period
+    clock[0] = 3 * period                                           # the simulator restarted
+    assert "older" in jumps.check("s", 2 * period, clock=now)
+    assert jumps.check("s", 3 * period, clock=now) is None          # continues from there: taken
+    assert jumps.newest["s"] == 3 * period

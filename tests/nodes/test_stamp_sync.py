@@ -101,3 +101,25 @@ def test_a_stream_of_one_far_stamp_is_refused_while_the_clock_runs(sim_time):
         assert sync.now < far
     else:              # no clock of its own: the restart rule, but the real stream still runs on
         assert ran[-1] == 199 * PERIOD
+
+
+@pytest.mark.parametrize("lag", [60, 265])
+def test_a_second_older_stream_on_an_input_never_takes_turns_with_the_real_one(lag):
+    """A second publisher on an input whose stamps run ``lag`` periods behind the real stream (another
+    graph on the ROS domain, a bag played into the graph): the restart rule took every second message
+    of it for a restarted publisher, so the input's newest stamp jumped back and forth, the node
+    reported it stale and fresh again every time its clock ticked (seen in a stress run: ages
+    265-414 periods), and the older data ran periods. Against the simulated clock each such stamp is
+    refused: every real period runs once, with real data, and nothing goes stale."""
+    node, sync, runs = make()
+    a, b = node.receivers["a"], node.receivers["b"]
+    for k in range(lag + 1, lag + 200):
+        node.clock_ns = k * PERIOD
+        a(state(k * PERIOD))
+        b(state(k * PERIOD))
+        b(state((k - lag) * PERIOD, value=-1.0))     # the other stream, interleaved
+        sync.advance(node.clock_ns)                  # the node's clock tick (StampSync._watch)
+    assert [t for t, _, _ in runs] == [k * PERIOD for k in range(lag + 1, lag + 200)]
+    assert all(b_value == 1.0 for _, _, b_value in runs)
+    assert node.stale == []
+    assert all("behind the clock" in reason for _, reason in node.faults) and len(node.faults) == 199

@@ -158,7 +158,10 @@ class StampJumps:
     stamp continues from it (a restarted publisher). Where the receiver has a ``clock`` of its own
     (simulated time from /clock), a stamp more than ``limit_ns`` ahead of that clock is refused
     every time: no publisher can be ahead of time, and a stream of far-future stamps (a clock
-    fault, a foreign publisher) repeating the same stamp must not pass for a restarted publisher."""
+    fault, a foreign publisher) repeating the same stamp must not pass for a restarted publisher.
+    Likewise a stamp behind its stream's newest and more than ``limit_ns`` behind that clock: a
+    second, older stream on the topic, which the restart rule would let take turns with the real
+    one (measured: a graph's /cable_forces alternated with another's 265-414 periods older)."""
 
     def __init__(self, periods: int, limit_ns: int):
         self.periods, self.limit_ns = periods, limit_ns
@@ -175,14 +178,20 @@ class StampJumps:
                 or (last < t and reference is not None and t <= reference() + self.limit_ns):
             self.newest[name] = t
             return None
-        if last < t and clock is not None:
-            now = clock()
-            if now is not None:
+        now = clock() if clock is not None else None
+        if now is not None:
+            if last < t:
                 if t > now + self.limit_ns:
                     return (f"stamp {t * 1e-9:.3f} s is more than {self.periods} periods ahead of the clock "
                             f"{now * 1e-9:.3f} s")
                 self.newest[name] = t               # the clock vouches for it
                 return None
+            if t < now - self.limit_ns:
+                # behind the stream and behind the clock: a publisher that restarted would have
+                # restarted the clock with it; this is a second stream (a bag played into the
+                # graph, another graph on the domain) and must not take turns with the real one
+                return (f"stamp {t * 1e-9:.3f} s is more than {self.periods} periods behind the clock "
+                        f"{now * 1e-9:.3f} s (older than the last {last * 1e-9:.3f} s)")
         jumped = self.jumped.pop(name, None)
         if jumped is not None and jumped <= t <= jumped + self.limit_ns:
             self.newest[name] = t
