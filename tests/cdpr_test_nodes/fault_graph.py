@@ -157,6 +157,7 @@ class FaultGraph(Recording):
         self.spinner = Spinner()
         self.collector = self.spinner.add(Collector, topics=TOPICS, qos=QoSProfile(depth=10000))
         self.probe = self.spinner.add(Node, node_name="fault_probe")
+        self.publishers: dict = {}
         self.launcher = Launcher(description, mode=mode)
         try:
             self.launcher.start()
@@ -207,9 +208,17 @@ class FaultGraph(Recording):
         return self.collector.count("/diagnostics")
 
     # -- acting ---------------------------------------------------------------------------------
-    def publish(self, msg_type, topic: str, msg, count: int = 1) -> None:
-        publisher = self.probe.create_publisher(msg_type, topic, 10)
+    def publisher(self, msg_type, topic: str):
+        """The probe's publisher of ``topic`` (one per topic for the module: a test's publisher must
+        not stay behind as one more writer for the next test), once a subscriber has matched it."""
+        publisher = self.publishers.get(topic)
+        if publisher is None:
+            publisher = self.publishers[topic] = self.probe.create_publisher(msg_type, topic, 10)
         wait_for(lambda: publisher.get_subscription_count() > 0, what=f"a subscriber of {topic}")
+        return publisher
+
+    def publish(self, msg_type, topic: str, msg, count: int = 1) -> None:
+        publisher = self.publisher(msg_type, topic)
         for _ in range(count):
             publisher.publish(msg)
             time.sleep(0.01)

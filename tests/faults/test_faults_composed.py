@@ -114,8 +114,7 @@ def test_a_publisher_ten_periods_ahead_does_not_stall_the_loop(graph):
     input may be reported stale (a hold): that is the fault; after it the loop runs on."""
     sim = node(graph, "winch_platform_sim")
     start = graph.newest_command()
-    publisher = graph.probe.create_publisher(CableForces, "/cable_forces", 10)
-    wait_for(lambda: publisher.get_subscription_count() > 0, what="a subscriber of /cable_forces")
+    publisher = graph.publisher(CableForces, "/cable_forces")
     for _ in range(30):
         ahead = sim.sim.steps * sim.period_ns + 10_000_000
         publisher.publish(CableForces(header=header(ahead), f=[10.0] * 8))
