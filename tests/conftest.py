@@ -4,10 +4,23 @@ import os
 import random
 from pathlib import Path
 
-# Discovery only on localhost (no multicast leaves the machine), and a random domain so that
-# concurrent test runs on one machine do not see each other's nodes.
+from cdpr_tools.file_lock import claim_ros_domain as claim_domain, locked  # noqa: E402
+
+# Discovery only on localhost (no multicast leaves the machine), and a domain of the session's own
+# (held like a module's, below) so that concurrent test runs on one machine, and the other worker
+# processes of this one, do not see each other's nodes: what runs outside a module's domain (a
+# session fixture such as the friction run, set up before the module's) uses it, and no module of
+# another worker may claim it meanwhile (an unclaimed session domain let another worker's graph
+# share it).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+# (A pytest-xdist worker inherits the controller's environment: it claims a session domain of its
+# own unless the user chose ROS_DOMAIN_ID.)
+_SESSION_LOCK = None
+if "ROS_DOMAIN_ID" not in os.environ or (
+        os.environ.get("PYTEST_XDIST_WORKER")
+        and os.environ.get("CDPR_TEST_SESSION_DOMAIN") == os.environ["ROS_DOMAIN_ID"]):
+    _domain, _SESSION_LOCK = claim_domain(random.Random(os.getpid()).randint(1, 100))
+    os.environ["ROS_DOMAIN_ID"] = os.environ["CDPR_TEST_SESSION_DOMAIN"] = str(_domain)
 SESSION_DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 # `cdpr` commands called in a test discover the graph themselves unless the test starts the graph
 # daemon (and stops it) itself: tests/tools/test_cli_daemon.py
@@ -20,10 +33,8 @@ os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")
 
 import pytest  # noqa: E402
 
-from cdpr_tools.file_lock import claim_ros_domain as claim_domain, locked  # noqa: E402
 
-
-_NEXT_DOMAIN = [SESSION_DOMAIN]
+_NEXT_DOMAIN = [SESSION_DOMAIN % 100 + 1]
 
 
 @pytest.fixture(scope="module", autouse=True)
