@@ -90,6 +90,16 @@ K_MIN = 0.25
 # of F_d (table 5.2: 11.3 % max), then still asks forces the distribution can plan within its
 # limits (the lead's decision in session 12; docs/hybrid_force_control.md, "Beyond the pose's capacity")
 CAPACITY_OVERSHOOT = 0.2
+# Contact is refused where the force the controller would regulate (F_d, limited to the capacity as
+# above) is below F_th / (1 - CAPACITY_OVERSHOOT): the accepted transient's lower edge, F_d (1 -
+# 0.2), would then be below the contact threshold F_th at which D takes the contact for lost (Fig.
+# 5.4: D -> C, a new approach and impact), so the band cannot be held by construction (session 13;
+# docs/hybrid_force_control.md, "Session 13"). Below F_th itself the controller would not even start.
+MIN_CONTACT_FACTOR = 1.0 / (1.0 - CAPACITY_OVERSHOOT)
+# s: /diagnostics while a reason's numbers change (F_d limited, moving x_d): at most once per this
+# (ContactDiagnostics); a change of level or reason is reported at once
+DIAGNOSTICS_REPEAT = 1.0
+OK, WARN, ERROR = 0, 1, 2           # diagnostic levels (diagnostic_msgs/DiagnosticStatus's, as ints)
 
 
 @dataclass
@@ -248,6 +258,10 @@ class HPFCState:
     F_d_requested: float = math.nan   # N, the F_d asked for (F_d,0 of the set-point along z_t) where it was
                                  # limited to the pose's capacity (F_d, F_d0 then the limited ones); NaN: not limited
     capacity: float = math.inf   # N, the pose's contact capacity (contact_capacity) where known, else inf
+    refused: bool = False        # contact refused at x_d: the force it could regulate, min(F_d_requested,
+                                 # capacity / (1 + CAPACITY_OVERSHOOT)) where that limited it, is below
+                                 # minimum_contact_force; the controller releases (R, I), F_d and F_d,0
+                                 # are 0 and F_d_requested says what was asked
 
 
 class HybridForceControl:
@@ -402,19 +416,29 @@ class HybridForceControl:
             self._F_d = float(self.z_t @ F_d0)                   # (5.2): the z entry of R_t^T F_d,0
         F_d = self._F_d
         F_d_requested = math.nan
+        refused = False
         if (x_d is not None and limits is not None and F_d > 0.0
                 and (self.state != IDLE or (self.enabled and F_d >= p.F_th))):
             F_cap = self._limited(x_d, limits)
             if F_d > F_cap:
                 F_d_requested, F_d = F_d, F_cap
                 F_d0 = F_d * self.z_t
+            if F_d < self.minimum_contact_force() and not math.isnan(F_d_requested):
+                # the pose's capacity leaves less than the controller can regulate: refused, released
+                # as if the force were taken back (R, I); the state says why (an F_d asked for below
+                # the minimum where the pose has the capacity is the program's choice, not refused)
+                refused, F_d, F_d0 = True, 0.0, np.zeros(3)
+                key = F_d0.tobytes()
         w_floats = w.tolist() if w.shape == (6,) else None
         if w_floats is not None and all_finite(w_floats):
             F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
         if self.state == IDLE and self.idle_path and not (self.enabled and F_d >= p.F_th):
-            return self._idle_state(F_d0, key, F_d, F_vec)       # I, not wanted: most periods
+            s = self._idle_state(F_d0, key, F_d, F_vec)          # I, not wanted: most periods
+            if refused:
+                s.F_d_requested, s.capacity, s.refused = F_d_requested, self.capacity, True
+            return s
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
             # a reading below F_th / 2 is taken for the sensors' offset, above it for contact; a
@@ -500,7 +524,13 @@ class HybridForceControl:
         # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, active, self.z_t.copy(), F_d0.copy(),
                          F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x,
-                         F_d_requested, self.capacity)
+                         F_d_requested, self.capacity, refused)
+
+    def minimum_contact_force(self) -> float:
+        """The smallest force [N] the controller regulates: F_th / (1 - CAPACITY_OVERSHOOT)
+        (:data:`MIN_CONTACT_FACTOR`); where the pose's capacity leaves less (or less is asked) contact
+        is refused. Not in the thesis (docs/hybrid_force_control.md, "Session 13")."""
+        return MIN_CONTACT_FACTOR * self.params.F_th
 
     def _limited(self, x_d, limits) -> float:
         """The largest F_d [N] the controller regulates at x_d: the pose's contact capacity along z_t
@@ -1026,11 +1056,69 @@ class ContactCableForceControl:
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
         f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
+        if self.needs_setpoint(state):
+            # no set-point beyond the distribution's limits (2.39) reaches the drives: where the wrench
+            # with the expected contact has no solution within them the distribution returns its
+            # least-violating forces (section 3.6.2), and the coupling's live share along a and its
+            # bias move the set-point further; clipped here, as the force set-point clips them while a
+            # user guides (docs/hybrid_force_control.md, "Session 13")
+            f_set, f_ff = np.clip(f_set, f_min, f_max), np.clip(f_ff, f_min, f_max)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff, x_d=x_internal)
         self.f_set, self.f_ff, self.paused = f_set, f_ff, paused
         return self.dq_cfc
+
+
+def _pose_text(x_d) -> str:
+    return "[" + " ".join(f"{v:.4g}" for v in np.asarray(x_d, dtype=float).tolist()) + "]" if x_d is not None else "[?]"
+
+
+def refusal_message(s: HPFCState, x_d, F_min: float) -> str:
+    """Why contact is refused (:attr:`HPFCState.refused`): F_d asked, the capacity, the pose, what is left."""
+    return (f"contact refused: F_d {s.F_d_requested:.4g} N asked, the contact capacity of the pose {_pose_text(x_d)} "
+            f"is {s.capacity:.4g} N and leaves {s.capacity / (1.0 + CAPACITY_OVERSHOOT):.4g} N to regulate, below "
+            f"the smallest force the controller regulates, {F_min:.4g} N (F_th / {1.0 - CAPACITY_OVERSHOOT:g})")
+
+
+class ContactDiagnostics:
+    """What the node ``hybrid_force_controller`` reports on ``/diagnostics`` each period: (level,
+    message, values) or None (nothing to publish).
+
+    The level and the *reason* (the state, x_t saturated, F_d limited to the pose's capacity,
+    contact refused) decide a report: a change of either is published at once. While F_d is limited
+    (or refused) and x_d moves, the message's numbers (F_d asked, the capacity, the pose, the force
+    regulated) change every period; they are published at most every ``repeat`` s (the latest ones;
+    until session 12 each period: the report flooded /diagnostics). The values (F, F_d, x_t) are
+    those of the period published."""
+
+    def __init__(self, repeat: float = DIAGNOSTICS_REPEAT):
+        self.repeat = repeat
+        self.key: tuple | None = None            # (level, reason) last published
+        self.message: str | None = None          # the message last published
+        self.t_last = -math.inf                  # s, when
+
+    def update(self, s: HPFCState, x_d, t: float, F_min: float) -> tuple[int, str, dict] | None:
+        """The period's state s, pose set-point x_d (6,) (None: not known), time t [s] and the smallest
+        force regulated (:meth:`HybridForceControl.minimum_contact_force`) -> a report or None."""
+        level = WARN if s.saturated else OK
+        reason = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+        message = reason
+        values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
+        if s.refused:
+            level, reason = ERROR, reason + ", contact refused: the pose's capacity is below the smallest force regulated"
+            message = f"state {s.state}: {STATE_NAMES[s.state]}, " + refusal_message(s, x_d, F_min)
+            values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}", F_min=f"{F_min:.4g}")
+        elif not math.isnan(s.F_d_requested):
+            level, reason = WARN, reason + ", F_d limited to the pose's contact capacity"
+            message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
+                        f"{_pose_text(x_d)}: regulating {s.F_d:.4g} N")
+            values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}")
+        key = (level, reason)
+        if key == self.key and (message == self.message or t - self.t_last < self.repeat - 1e-9):
+            return None
+        self.key, self.message, self.t_last = key, message, t
+        return level, message, values
 
 
 def format_state(controller: str, state: str) -> str:
