@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import daqp
 import numpy as np
@@ -100,6 +100,16 @@ MIN_CONTACT_FACTOR = 1.0 / (1.0 - CAPACITY_OVERSHOOT)
 # (ContactDiagnostics); a change of level or reason is reported at once
 DIAGNOSTICS_REPEAT = 1.0
 OK, WARN, ERROR = 0, 1, 2           # diagnostic levels (diagnostic_msgs/DiagnosticStatus's, as ints)
+# -: the cable force controller's saturation F_sat,n / F_sat,p (3.19) is this many times wider in D and
+# R (ASSUMPTION, session 13). The saturation limits the CFC's influence on the position (section
+# 3.5.2); in D the task axis is force-controlled, and the corrections the CFC has to make grow with
+# the cable force changes the contact brings (hundreds of N on the IPAnema 3's lower cables): the
+# cables settle under them (section 4.1.3; the default plant's settlement, 0.3 of the extra force's
+# elastic strain) and the plant's geometry and stiffness errors scale with them. With the printed
+# saturation the outputs sat at it through D at border poses and the contact force stayed 5-40 %
+# low (docs/validation.md, "Contact after session 13"). After the contact the saturation returns to
+# F_sat as far as the output held allows (ContactCableForceControl._saturation: no step)
+CONTACT_SATURATION = 4.0
 
 
 @dataclass
@@ -1018,6 +1028,33 @@ class ContactCableForceControl:
         self.a_zero = np.zeros(robot.m)             # a without a set-point (never modified)
         self.dq_cfc = np.zeros(robot.m)
         self.F_a = 0.0
+        self.saturation_factor = 1.0                # CONTACT_SATURATION in D and R (_saturation)
+        self._base_params = cfc.params              # the CFC's parameters as set (F_sat,n/p unscaled)
+        self._scaled_params = cfc.params            # what _saturation last set
+
+    def _saturation(self, state: str) -> None:
+        """The CFC's saturation in D and R: CONTACT_SATURATION times F_sat,n/p; after them back to
+        F_sat as far as the PI output held allows (the factor never below what the output needs,
+        rounded up to 1 %, so nothing is clipped: a step of the output would step the drives)."""
+        c = self.cfc
+        if c.params is not self._scaled_params:     # set from outside (the node's parameters): the base
+            self._base_params = self._scaled_params = c.params
+            self.saturation_factor = 1.0
+        base = self._base_params
+        if state in (CONTACT, RELEASE):
+            k = CONTACT_SATURATION
+        elif self.saturation_factor > 1.0:
+            u = c.controller.pi.output
+            need = max(float(np.max(u)) / base.F_sat_p if base.F_sat_p > 0.0 else 1.0,
+                       float(np.max(-u)) / base.F_sat_n if base.F_sat_n > 0.0 else 1.0)
+            k = min(self.saturation_factor, max(1.0, math.ceil(100.0 * need) / 100.0))
+        else:
+            return
+        if k != self.saturation_factor:
+            self.saturation_factor = k
+            self._scaled_params = base if k == 1.0 else replace(base, F_sat_n=k * base.F_sat_n,
+                                                                  F_sat_p=k * base.F_sat_p)
+            c.set_params(self._scaled_params)
 
     def needs_setpoint(self, state: str | None) -> bool:
         """Whether :meth:`update` uses x_d: not while idle with the set-point's ramp-out done, where
@@ -1065,6 +1102,7 @@ class ContactCableForceControl:
             f_set, f_ff = np.clip(f_set, f_min, f_max), np.clip(f_ff, f_min, f_max)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
+            self._saturation(state)
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff, x_d=x_internal)
         self.f_set, self.f_ff, self.paused = f_set, f_ff, paused
         return self.dq_cfc
