@@ -1110,12 +1110,15 @@ class ContactCableForceControl:
         cfc = self.cfc
         f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
         if self.needs_setpoint(state):
-            # no set-point beyond the distribution's limits (2.39) reaches the drives: where the wrench
-            # with the expected contact has no solution within them the distribution returns its
-            # least-violating forces (section 3.6.2), and the coupling's live share along a and its
-            # bias move the set-point further; clipped here, as the force set-point clips them while a
-            # user guides (docs/hybrid_force_control.md, "Session 13")
-            f_set, f_ff = np.clip(f_set, f_min, f_max), np.clip(f_ff, f_min, f_max)
+            # no set-point above f_max (2.39) reaches the drives: where the wrench with the expected
+            # contact has no solution within the limits the distribution returns its least-violating
+            # forces (section 3.6.2), and the coupling's live share along a and its bias move the
+            # set-point further (Mini #25, seed 2: 2.4 N above f_max); clipped here, as the force
+            # set-point clips them while a user guides. Not at f_min: the coupling plans the contact
+            # with set-points there on purpose, and clipped, the feed-forward no longer balanced the
+            # wrench (the floor program's drive command stepped 0.35 mm; docs/hybrid_force_control.md,
+            # "Session 13")
+            f_set, f_ff = np.minimum(f_set, f_max), np.minimum(f_ff, f_max)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
             self._saturation(state)
