@@ -116,6 +116,7 @@ def test_no_hand_over_while_a_cfc_output_is_saturated_switched_over_the_hand_ove
     switched off and on again over HAND_OVER_TIME: F_a = gain dt / T_i a . I, the gain ramped. (The
     floor program's 1.19 mm drive command step of session 9's attempt was R -> I, the next test.)"""
     stage = _contact_stage(MINI)
+    stage.contact_saturation = 1.0      # (the gate at the printed saturation; its widening in D: below)
     x_d, f_d, theta, f_min, f_max = _mini_contact_inputs()
     F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.5])
     AT, = kernels.inverse_kinematics_fields(MINI, x_d, "AT")
@@ -475,3 +476,27 @@ def test_diagnostics_report_a_change_of_reason_at_once_and_moving_numbers_at_mos
     k, (_, message, values) = published[2]
     assert f"{200.0 + 0.01 * k:.4g} N" in message and values["capacity"] == f"{200.0 + 0.01 * k:.4g}"
     assert DIAGNOSTICS_REPEAT == 1.0
+
+
+def test_the_cfc_saturation_is_wider_in_contact_and_returns_without_a_step():
+    """In D and R the CFC's outputs may reach CONTACT_SATURATION times F_sat (session 13: the
+    settlement and the plant's errors under the contact's loads); back in I the saturation returns
+    to F_sat only as far as the output held allows: no period clips the output (a step of Δq_CFC),
+    and it is F_sat again once the output is within it."""
+    from cdpr_control.control.hybrid_force_control import CONTACT_SATURATION
+
+    stage = _contact_stage(MINI)
+    F_sat = stage.cfc.params.F_sat_p
+    x_d, f_d, theta, f_min, f_max = _mini_contact_inputs()
+    F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.5])
+    pi = stage.cfc.controller.pi
+    for _ in range(3000):                                # below the set-point (not near f_min): they saturate
+        stage.update(CONTACT, F_d0, x_d, f_d, f_d - 3.0, theta, f_min, f_max, F_vec)
+    assert pi.output.max() == pytest.approx(CONTACT_SATURATION * F_sat, rel=1e-6) and CONTACT_SATURATION > 1.0
+    outputs = [pi.output.copy()]
+    for _ in range(3000):                                # idle, the cables a little above: it unwinds
+        stage.update(IDLE, np.zeros(3), x_d, f_d, f_d + 0.5, theta, f_min, f_max, None)
+        outputs.append(pi.output.copy())
+    steps = np.abs(np.diff(np.array(outputs), axis=0)).max()
+    assert steps < 0.1 * F_sat                           # unwound by its integral part, not clipped
+    assert stage.saturation_factor == 1.0 and stage.cfc.params.F_sat_p == F_sat

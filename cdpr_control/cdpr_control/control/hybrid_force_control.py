@@ -1044,7 +1044,8 @@ class ContactCableForceControl:
         self.a_zero = np.zeros(robot.m)             # a without a set-point (never modified)
         self.dq_cfc = np.zeros(robot.m)
         self.F_a = 0.0
-        self.saturation_factor = 1.0                # CONTACT_SATURATION in D and R (_saturation)
+        self.contact_saturation = CONTACT_SATURATION   # the CFC's saturation factor in D and R (_saturation)
+        self.saturation_factor = 1.0                # the factor applied now
         self._base_params = cfc.params              # the CFC's parameters as set (F_sat,n/p unscaled)
         self._scaled_params = cfc.params            # what _saturation last set
 
@@ -1058,7 +1059,7 @@ class ContactCableForceControl:
             self.saturation_factor = 1.0
         base = self._base_params
         if state in (CONTACT, RELEASE):
-            k = CONTACT_SATURATION
+            k = self.contact_saturation
         elif self.saturation_factor > 1.0:
             u = c.controller.pi.output
             need = max(float(np.max(u)) / base.F_sat_p if base.F_sat_p > 0.0 else 1.0,
