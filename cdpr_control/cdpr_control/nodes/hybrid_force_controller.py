@@ -4,7 +4,9 @@ Subscribes ``setpoint`` (cdpr_msgs/OperationalSetpoint; ``force`` = F_d,0, the f
 ``platform/wrench`` (geometry_msgs/WrenchStamped, the measured wrench w (2.11)) and
 ``platform/pose`` (the pose estimate, which paces the node with the forward kinematics); publishes
 ``hybrid_force_controller/state`` (cdpr_msgs/ControllerState) every period, enabled or not, and
-``/diagnostics`` when the contact state changes. The joint command adds the state's ``output``
+``/diagnostics`` when the level or the reason changes (state, saturation, F_d limited, contact
+refused), a reason's changing numbers at most once a second
+(:class:`cdpr_control.control.hybrid_force_control.ContactDiagnostics`). The joint command adds the state's ``output``
 (x_d,HPFC) to x_d when ``hybrid_force_controller`` is one of its ``offset_inputs``.
 
 ControllerState fields (names x y z a b c, base frame):
@@ -31,7 +33,10 @@ It subscribes ``force_distribution`` (not synchronised: the last one) for the di
 and f_max: while enabled or active, F_d is limited to the contact capacity of the pose x_d over 1.2
 (:meth:`cdpr_control.control.hybrid_force_control.HybridForceControl.update`), the state's
 ``reference`` is then the limited F_d,0, and ``/diagnostics`` carries a WARN naming the F_d asked
-for, the capacity and the pose.
+for, the capacity and the pose. Where what the capacity leaves is below the smallest force the
+controller regulates (``HybridForceControl.minimum_contact_force``) contact is refused: an ERROR
+naming them, and ``enabled: true`` (a program's M103) is refused there with that reason, so the
+program fails at its M103.
 
 The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceStage` (as ControlLoop runs it).
 """
