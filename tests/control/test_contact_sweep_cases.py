@@ -116,6 +116,7 @@ def test_no_hand_over_while_a_cfc_output_is_saturated_switched_over_the_hand_ove
     switched off and on again over HAND_OVER_TIME: F_a = gain dt / T_i a . I, the gain ramped. (The
     floor program's 1.19 mm drive command step of session 9's attempt was R -> I, the next test.)"""
     stage = _contact_stage(MINI)
+    stage.contact_saturation = 1.0      # (the gate at the printed saturation; its widening in D: below)
     x_d, f_d, theta, f_min, f_max = _mini_contact_inputs()
     F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.5])
     AT, = kernels.inverse_kinematics_fields(MINI, x_d, "AT")
@@ -366,3 +367,137 @@ def test_beyond_capacity_the_contact_keeps_its_cables_and_set_points_within_limi
     assert r.metrics["F_d_regulated_N"] == pytest.approx(r.metrics["contact_capacity_N"] / (1 + CAPACITY_OVERSHOOT),
                                                          rel=0.01)
     assert r.checks["slack_s"] and r.checks["overshoot_percent"]
+
+
+# ---- session 13: the set-point within the limits, contact refused, /diagnostics ---------------------
+
+def test_the_cfc_set_point_under_hybrid_control_stays_within_the_distributions_limits():
+    """A distribution beyond f_max (its least-violating forces where the wrench with the expected
+    contact has no solution, section 3.6.2) and the coupling's live share along a never reach the
+    drives above f_max: in A, D, R and while the coupling ramps out in I the CFC's set-point and
+    feed-forward are at most f_max (until session 13 they were passed on). Not clipped at f_min
+    (the coupling plans set-points there; clipped, the feed-forward no longer balanced the wrench)."""
+    stage = _contact_stage(MINI)
+    x_d = np.r_[MINI.home[:3], 0.0, 0.0, 0.0]
+    F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.0])
+    f_min, f_max = np.full(MINI.m, 7.5), np.full(MINI.m, 40.0)
+    f_d = np.linspace(5.0, 44.0, MINI.m)                # two cables beyond f_max, one below f_min
+    f, theta = f_d - 0.5, np.zeros(MINI.m)
+    seen = []
+    for state in ["A"] * 50 + [CONTACT] * 300 + [RELEASE] * 50 + [IDLE] * 50:
+        stage.update(state, F_d0, x_d, f_d, f, theta, f_min, f_max, F_vec)
+        seen.append((stage.f_set.max(), stage.f_ff.max(), stage.f_set.min(), stage.f_ff.min()))
+    seen = np.array(seen)
+    assert seen[:, :2].max() == 40.0                    # clipped at f_max, not moved elsewhere
+    assert seen[:, 2:].min() < 7.5                      # (the cable below f_min is left to the CFC)
+
+
+def test_mini_25_seed_2_no_force_set_point_above_f_max_reaches_the_drives():
+    """Mini #25 (border, mismatched seed 2, 10 N on 5e5 N/m, within its capacity of 24.4 N): the
+    distribution's least-violating forces went up to 0.14 N above f_max in D (session 12's sweep,
+    failed); the CFC's set-point is now clipped to the limits (the distribution's own excess is
+    reported as distribution_above_f_max_N, not judged)."""
+    r = _sweep_contact("ipanema3_mini", 25, "mismatched", 2, 1.0, 5e5)
+    assert r.metrics["setpoint_above_f_max_N"] <= 0.0
+    assert r.checks["setpoint_above_f_max_N"] and r.checks["slack_s"] and r.checks["overshoot_percent"]
+
+
+def _limits_with_capacity(robot, x, capacity):
+    """(f_min, f_max) (m,) [N]: the planned f_min and a common f_max scaled so that the pose's
+    contact capacity along -z is ``capacity`` (bisection on f_max; the capacity grows with it)."""
+    from cdpr_control.control.hybrid_force_control import contact_capacity
+    AT, w_g, f_min, f_max = _capacity_inputs(robot, x)
+    lo, hi = float(f_min.max()), float(f_max.max())
+    z = np.array([0.0, 0.0, -1.0])
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if contact_capacity(AT, w_g, z, f_min, np.full(robot.m, mid)) < capacity else (lo, mid)
+    return f_min, np.full(robot.m, hi)
+
+
+@pytest.mark.parametrize("capacity, refused", [(1.2, True), (1.6, False)])
+def test_contact_is_refused_where_the_capacity_leaves_less_than_the_controller_regulates(capacity, refused):
+    """The Mini (F_th 1 N) asked for 10 N at a border pose where the distribution's limits leave a
+    capacity of 1.2 N: the force it could regulate, 1.2 / 1.2 = 1.0 N, is below F_th / 0.8 = 1.25
+    N (the accepted transient's lower edge would read as contact lost): refused, the controller stays
+    idle (no approach), its F_d is 0 and the state names the request and the capacity; /diagnostics
+    gets an ERROR naming F_d, the capacity and the pose. With 1.6 N (1.33 N regulated) it approaches
+    the limited force."""
+    from cdpr_control.control.hybrid_force_control import ERROR, WARN, ContactDiagnostics, HybridForceControl
+    from cdpr_tools.validate.cases import shipped_hpfc
+    from cdpr_tools.validate.grid import sweep_poses
+
+    x = np.asarray(sweep_poses(MINI)[35].x, dtype=float)
+    limits = _limits_with_capacity(MINI, x, capacity)
+    hpfc = HybridForceControl(MINI, 1e-3, shipped_hpfc("ipanema3_mini"), enabled=True)
+    assert hpfc.minimum_contact_force() == pytest.approx(1.25)
+    w = np.r_[MINI.platform.mass * np.asarray(MINI.gravity, dtype=float), 0.0, 0.0, 0.0]    # the weight: no contact
+    diagnostics = ContactDiagnostics()
+    reports = []
+    for k in range(600):
+        s = hpfc.update(np.array([0.0, 0.0, -10.0]), w, x, limits)
+        report = diagnostics.update(s, x, k * 1e-3, hpfc.minimum_contact_force())
+        if report is not None:
+            reports.append(report)
+    assert s.capacity == pytest.approx(capacity, rel=1e-6)
+    if refused:
+        assert s.refused and s.state == IDLE and s.F_d == 0.0 and s.F_d_requested == 10.0
+        level, message, values = reports[-1]
+        assert level == ERROR and "contact refused" in message and "F_d 10 N" in message
+        assert f"{capacity:.4g} N" in message and f"{x[0]:.4g}" in message
+        assert len(reports) == 1                         # and not again each period
+    else:
+        assert not s.refused and s.state == "A" and s.F_d == pytest.approx(capacity / 1.2, rel=1e-6)
+        assert reports[-1][0] == WARN
+
+
+def test_diagnostics_report_a_change_of_reason_at_once_and_moving_numbers_at_most_once_a_second():
+    """While F_d is limited to the capacity of a moving x_d the message's numbers change every
+    period (until session 13 each period was published: 1000 reports a second); now a change of
+    level or reason is published at once, the numbers of the same reason at most every second, the
+    latest ones."""
+    from cdpr_control.control.hybrid_force_control import DIAGNOSTICS_REPEAT, ERROR, WARN, ContactDiagnostics, HPFCState
+
+    def state(k, refused=False):
+        capacity = 200.0 + 0.01 * k                        # moving pose, moving capacity
+        return HPFCState(CONTACT, True, np.array([0.0, 0.0, -1.0]), np.zeros(3), np.zeros(3),
+                         capacity / 1.2, 150.0, 0.0, 0.01, 0.0, 0.01, False, np.zeros(6),
+                         F_d_requested=500.0, capacity=capacity, refused=refused)
+
+    diagnostics = ContactDiagnostics()
+    published = []
+    for k in range(3500):
+        x_d = np.array([1.0 + 1e-5 * k, 0.0, 0.5, 0.0, 0.0, 0.0])
+        report = diagnostics.update(state(k, refused=k >= 3200), x_d, k * 1e-3, 31.25)
+        if report is not None:
+            published.append((k, report))
+    ks = [k for k, _ in published]
+    assert ks == [0, 1000, 2000, 3000, 3200]            # 1 Hz while limited; the refusal at once
+    assert all(r[0] == WARN for _, r in published[:4]) and published[4][1][0] == ERROR
+    k, (_, message, values) = published[2]
+    assert f"{200.0 + 0.01 * k:.4g} N" in message and values["capacity"] == f"{200.0 + 0.01 * k:.4g}"
+    assert DIAGNOSTICS_REPEAT == 1.0
+
+
+def test_the_cfc_saturation_is_wider_in_contact_and_returns_without_a_step():
+    """In D and R the CFC's outputs may reach CONTACT_SATURATION times F_sat (session 13: the
+    settlement and the plant's errors under the contact's loads); back in I the saturation returns
+    to F_sat only as far as the output held allows: no period clips the output (a step of Δq_CFC),
+    and it is F_sat again once the output is within it."""
+    from cdpr_control.control.hybrid_force_control import CONTACT_SATURATION
+
+    stage = _contact_stage(MINI)
+    F_sat = stage.cfc.params.F_sat_p
+    x_d, f_d, theta, f_min, f_max = _mini_contact_inputs()
+    F_d0, F_vec = np.array([0.0, 0.0, -6.0]), np.array([0.0, 0.0, -5.5])
+    pi = stage.cfc.controller.pi
+    for _ in range(3000):                                # below the set-point (not near f_min): they saturate
+        stage.update(CONTACT, F_d0, x_d, f_d, f_d - 3.0, theta, f_min, f_max, F_vec)
+    assert pi.output.max() == pytest.approx(CONTACT_SATURATION * F_sat, rel=1e-6) and CONTACT_SATURATION > 1.0
+    outputs = [pi.output.copy()]
+    for _ in range(3000):                                # idle, the cables a little above: it unwinds
+        stage.update(IDLE, np.zeros(3), x_d, f_d, f_d + 0.5, theta, f_min, f_max, None)
+        outputs.append(pi.output.copy())
+    steps = np.abs(np.diff(np.array(outputs), axis=0)).max()
+    assert steps < 0.1 * F_sat                           # unwound by its integral part, not clipped
+    assert stage.saturation_factor == 1.0 and stage.cfc.params.F_sat_p == F_sat

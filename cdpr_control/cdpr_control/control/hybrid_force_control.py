@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import daqp
 import numpy as np
@@ -85,11 +85,35 @@ LAG_SHARE = 0.1
 # the stiffness B measures is taken as at least this share of K_p (a force that hardly rises yet
 # would plan a stroke of metres; ASSUMPTION)
 K_MIN = 0.25
+# A and C approach at most so fast that the force the drives' lag and the contact force's PT1 carry
+# past the detection at F_th at stiffness K_p is this share of F_d - F_th (approach_speed; ASSUMPTION,
+# session 13: the other half for B's braking and contacts stiffer than K_p)
+APPROACH_LAG_SHARE = 0.5
 # The force the controller regulates is limited to the pose's contact capacity (contact_capacity) over
 # 1 + CAPACITY_OVERSHOOT: the largest transient the validation's bands accept, an overshoot of 20 %
 # of F_d (table 5.2: 11.3 % max), then still asks forces the distribution can plan within its
 # limits (the lead's decision in session 12; docs/hybrid_force_control.md, "Beyond the pose's capacity")
 CAPACITY_OVERSHOOT = 0.2
+# Contact is refused where the force the controller would regulate (F_d, limited to the capacity as
+# above) is below F_th / (1 - CAPACITY_OVERSHOOT): the accepted transient's lower edge, F_d (1 -
+# 0.2), would then be below the contact threshold F_th at which D takes the contact for lost (Fig.
+# 5.4: D -> C, a new approach and impact), so the band cannot be held by construction (session 13;
+# docs/hybrid_force_control.md, "Session 13"). Below F_th itself the controller would not even start.
+MIN_CONTACT_FACTOR = 1.0 / (1.0 - CAPACITY_OVERSHOOT)
+# s: /diagnostics while a reason's numbers change (F_d limited, moving x_d): at most once per this
+# (ContactDiagnostics); a change of level or reason is reported at once
+DIAGNOSTICS_REPEAT = 1.0
+OK, WARN, ERROR = 0, 1, 2           # diagnostic levels (diagnostic_msgs/DiagnosticStatus's, as ints)
+# -: the cable force controller's saturation F_sat,n / F_sat,p (3.19) is this many times wider in D and
+# R (ASSUMPTION, session 13). The saturation limits the CFC's influence on the position (section
+# 3.5.2); in D the task axis is force-controlled, and the corrections the CFC has to make grow with
+# the cable force changes the contact brings (hundreds of N on the IPAnema 3's lower cables): the
+# cables settle under them (section 4.1.3; the default plant's settlement, 0.3 of the extra force's
+# elastic strain) and the plant's geometry and stiffness errors scale with them. With the printed
+# saturation the outputs sat at it through D at border poses and the contact force stayed 5-40 %
+# low (docs/validation.md, "Contact after session 13"). After the contact the saturation returns to
+# F_sat as far as the output held allows (ContactCableForceControl._saturation: no step)
+CONTACT_SATURATION = 4.0
 
 
 @dataclass
@@ -248,6 +272,10 @@ class HPFCState:
     F_d_requested: float = math.nan   # N, the F_d asked for (F_d,0 of the set-point along z_t) where it was
                                  # limited to the pose's capacity (F_d, F_d0 then the limited ones); NaN: not limited
     capacity: float = math.inf   # N, the pose's contact capacity (contact_capacity) where known, else inf
+    refused: bool = False        # contact refused at x_d: the force it could regulate, min(F_d_requested,
+                                 # capacity / (1 + CAPACITY_OVERSHOOT)) where that limited it, is below
+                                 # minimum_contact_force; the controller releases (R, I), F_d and F_d,0
+                                 # are 0 and F_d_requested says what was asked
 
 
 class HybridForceControl:
@@ -361,12 +389,24 @@ class HybridForceControl:
         F_d at the impact alone, before any control acts: v (sqrt(k_env m) + d_env) bounds that
         press (a mass on a spring and damper in parallel: the spring stores at most the kinetic
         energy, k delta <= v sqrt(k m); the surface is entered at most at v, d delta' <= d v).
-        Not in the thesis, which approaches at v_max,HPFC and names the overshoot its price."""
+        Also at most APPROACH_LAG_SHARE (F_d - F_th) / (K_p (T_F + T_a)): the force still on its way
+        when contact is detected (below). Not in the thesis, which approaches at v_max,HPFC and names
+        the overshoot its price."""
         p = self.params
+        v = p.v_max
         impedance = math.sqrt(p.k_env * self.mass) + p.d_env        # N s/m
-        if impedance <= 0.0:
-            return p.v_max
-        return min(p.v_max, max(F_d, p.F_th) / impedance)
+        if impedance > 0.0:
+            v = min(v, max(F_d, p.F_th) / impedance)
+        # contact is detected at F_th at the earliest, and the force the drives' lag and the PT1 of T_F
+        # still carry then, K_p v T_lag (the lead of _brake_ahead), comes on top whatever B does: it
+        # may use APPROACH_LAG_SHARE of what is left to F_d (the rest: B's braking, a contact stiffer
+        # than K_p). Session 13: the Mini's 3 N at 2 mm/s carried 1.6-2.1 N past a detection at 1.1 N,
+        # 20.6 % overshoot at #20 (seed 1, 2e6 N/m); slower only for small forces (the IPAnema 3 at 150
+        # N: 50 mm/s, above its k_env bound)
+        T_lag = p.T_F + self.drive_lag
+        if T_lag > 0.0 and F_d > p.F_th:
+            v = min(v, APPROACH_LAG_SHARE * (F_d - p.F_th) / (p.K_p * T_lag))
+        return v
 
     def _move(self, v_target: float) -> None:
         """x_t towards the velocity v_target with |dv/dt| <= a_max (approach, brake, release)."""
@@ -402,19 +442,29 @@ class HybridForceControl:
             self._F_d = float(self.z_t @ F_d0)                   # (5.2): the z entry of R_t^T F_d,0
         F_d = self._F_d
         F_d_requested = math.nan
+        refused = False
         if (x_d is not None and limits is not None and F_d > 0.0
                 and (self.state != IDLE or (self.enabled and F_d >= p.F_th))):
             F_cap = self._limited(x_d, limits)
             if F_d > F_cap:
                 F_d_requested, F_d = F_d, F_cap
                 F_d0 = F_d * self.z_t
+            if F_d < self.minimum_contact_force() and not math.isnan(F_d_requested):
+                # the pose's capacity leaves less than the controller can regulate: refused, released
+                # as if the force were taken back (R, I); the state says why (an F_d asked for below
+                # the minimum where the pose has the capacity is the program's choice, not refused)
+                refused, F_d, F_d0 = True, 0.0, np.zeros(3)
+                key = F_d0.tobytes()
         w_floats = w.tolist() if w.shape == (6,) else None
         if w_floats is not None and all_finite(w_floats):
             F_vec = self._filter_force(w_floats)                 # contact_force(w, self.mass, g)
         else:                                                    # keep the last estimate
             F_vec = self.force_filter.y if self.force_filter.y is not None else np.zeros(3)
         if self.state == IDLE and self.idle_path and not (self.enabled and F_d >= p.F_th):
-            return self._idle_state(F_d0, key, F_d, F_vec)       # I, not wanted: most periods
+            s = self._idle_state(F_d0, key, F_d, F_vec)          # I, not wanted: most periods
+            if refused:
+                s.F_d_requested, s.capacity, s.refused = F_d_requested, self.capacity, True
+            return s
         if self.state == IDLE and self.enabled and F_d >= p.F_th:  # an approach starts: tare
             raw = float(self.z_t @ F_vec)
             # a reading below F_th / 2 is taken for the sensors' offset, above it for contact; a
@@ -500,7 +550,13 @@ class HybridForceControl:
         # (F_vec: the array built above for this state alone)
         return HPFCState(self.state, active, self.z_t.copy(), F_d0.copy(),
                          F_vec, F_d, F, e_F, x_t, self.v_t, self.integrator, self.saturated, x,
-                         F_d_requested, self.capacity)
+                         F_d_requested, self.capacity, refused)
+
+    def minimum_contact_force(self) -> float:
+        """The smallest force [N] the controller regulates: F_th / (1 - CAPACITY_OVERSHOOT)
+        (:data:`MIN_CONTACT_FACTOR`); where the pose's capacity leaves less (or less is asked) contact
+        is refused. Not in the thesis (docs/hybrid_force_control.md, "Session 13")."""
+        return MIN_CONTACT_FACTOR * self.params.F_th
 
     def _limited(self, x_d, limits) -> float:
         """The largest F_d [N] the controller regulates at x_d: the pose's contact capacity along z_t
@@ -988,6 +1044,34 @@ class ContactCableForceControl:
         self.a_zero = np.zeros(robot.m)             # a without a set-point (never modified)
         self.dq_cfc = np.zeros(robot.m)
         self.F_a = 0.0
+        self.contact_saturation = CONTACT_SATURATION   # the CFC's saturation factor in D and R (_saturation)
+        self.saturation_factor = 1.0                # the factor applied now
+        self._base_params = cfc.params              # the CFC's parameters as set (F_sat,n/p unscaled)
+        self._scaled_params = cfc.params            # what _saturation last set
+
+    def _saturation(self, state: str) -> None:
+        """The CFC's saturation in D and R: CONTACT_SATURATION times F_sat,n/p; after them back to
+        F_sat as far as the PI output held allows (the factor never below what the output needs,
+        rounded up to 1 %, so nothing is clipped: a step of the output would step the drives)."""
+        c = self.cfc
+        if c.params is not self._scaled_params:     # set from outside (the node's parameters): the base
+            self._base_params = self._scaled_params = c.params
+            self.saturation_factor = 1.0
+        base = self._base_params
+        if state in (CONTACT, RELEASE):
+            k = self.contact_saturation
+        elif self.saturation_factor > 1.0:
+            u = c.controller.pi.output
+            need = max(float(np.max(u)) / base.F_sat_p if base.F_sat_p > 0.0 else 1.0,
+                       float(np.max(-u)) / base.F_sat_n if base.F_sat_n > 0.0 else 1.0)
+            k = min(self.saturation_factor, max(1.0, math.ceil(100.0 * need) / 100.0))
+        else:
+            return
+        if k != self.saturation_factor:
+            self.saturation_factor = k
+            self._scaled_params = base if k == 1.0 else replace(base, F_sat_n=k * base.F_sat_n,
+                                                                  F_sat_p=k * base.F_sat_p)
+            c.set_params(self._scaled_params)
 
     def needs_setpoint(self, state: str | None) -> bool:
         """Whether :meth:`update` uses x_d: not while idle with the set-point's ramp-out done, where
@@ -1026,11 +1110,73 @@ class ContactCableForceControl:
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
         f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
+        if self.needs_setpoint(state):
+            # no set-point above f_max (2.39) reaches the drives: where the wrench with the expected
+            # contact has no solution within the limits the distribution returns its least-violating
+            # forces (section 3.6.2), and the coupling's live share along a and its bias move the
+            # set-point further (Mini #25, seed 2: 2.4 N above f_max); clipped here, as the force
+            # set-point clips them while a user guides. Not at f_min: the coupling plans the contact
+            # with set-points there on purpose, and clipped, the feed-forward no longer balanced the
+            # wrench (the floor program's drive command stepped 0.35 mm; docs/hybrid_force_control.md,
+            # "Session 13")
+            f_set, f_ff = np.minimum(f_set, f_max), np.minimum(f_ff, f_max)
         self.F_a = F_a if cfc.enabled and cfc.controller.dq_0 is not None else 0.0
         if not paused:                               # held during contact establishment
+            self._saturation(state)
             self.dq_cfc = cfc.update(f_set, f, theta, f_min, f_max, f_ff, x_d=x_internal)
         self.f_set, self.f_ff, self.paused = f_set, f_ff, paused
         return self.dq_cfc
+
+
+def _pose_text(x_d) -> str:
+    return "[" + " ".join(f"{v:.4g}" for v in np.asarray(x_d, dtype=float).tolist()) + "]" if x_d is not None else "[?]"
+
+
+def refusal_message(s: HPFCState, x_d, F_min: float) -> str:
+    """Why contact is refused (:attr:`HPFCState.refused`): F_d asked, the capacity, the pose, what is left."""
+    return (f"contact refused: F_d {s.F_d_requested:.4g} N asked, the contact capacity of the pose {_pose_text(x_d)} "
+            f"is {s.capacity:.4g} N and leaves {s.capacity / (1.0 + CAPACITY_OVERSHOOT):.4g} N to regulate, below "
+            f"the smallest force the controller regulates, {F_min:.4g} N (F_th / {1.0 - CAPACITY_OVERSHOOT:g})")
+
+
+class ContactDiagnostics:
+    """What the node ``hybrid_force_controller`` reports on ``/diagnostics`` each period: (level,
+    message, values) or None (nothing to publish).
+
+    The level and the *reason* (the state, x_t saturated, F_d limited to the pose's capacity,
+    contact refused) decide a report: a change of either is published at once. While F_d is limited
+    (or refused) and x_d moves, the message's numbers (F_d asked, the capacity, the pose, the force
+    regulated) change every period; they are published at most every ``repeat`` s (the latest ones;
+    until session 12 each period: the report flooded /diagnostics). The values (F, F_d, x_t) are
+    those of the period published."""
+
+    def __init__(self, repeat: float = DIAGNOSTICS_REPEAT):
+        self.repeat = repeat
+        self.key: tuple | None = None            # (level, reason) last published
+        self.message: str | None = None          # the message last published
+        self.t_last = -math.inf                  # s, when
+
+    def update(self, s: HPFCState, x_d, t: float, F_min: float) -> tuple[int, str, dict] | None:
+        """The period's state s, pose set-point x_d (6,) (None: not known), time t [s] and the smallest
+        force regulated (:meth:`HybridForceControl.minimum_contact_force`) -> a report or None."""
+        level = WARN if s.saturated else OK
+        reason = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+        message = reason
+        values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
+        if s.refused:
+            level, reason = ERROR, reason + ", contact refused: the pose's capacity is below the smallest force regulated"
+            message = f"state {s.state}: {STATE_NAMES[s.state]}, " + refusal_message(s, x_d, F_min)
+            values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}", F_min=f"{F_min:.4g}")
+        elif not math.isnan(s.F_d_requested):
+            level, reason = WARN, reason + ", F_d limited to the pose's contact capacity"
+            message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
+                        f"{_pose_text(x_d)}: regulating {s.F_d:.4g} N")
+            values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}")
+        key = (level, reason)
+        if key == self.key and (message == self.message or t - self.t_last < self.repeat - 1e-9):
+            return None
+        self.key, self.message, self.t_last = key, message, t
+        return level, message, values
 
 
 def format_state(controller: str, state: str) -> str:

@@ -4,7 +4,9 @@ Subscribes ``setpoint`` (cdpr_msgs/OperationalSetpoint; ``force`` = F_d,0, the f
 ``platform/wrench`` (geometry_msgs/WrenchStamped, the measured wrench w (2.11)) and
 ``platform/pose`` (the pose estimate, which paces the node with the forward kinematics); publishes
 ``hybrid_force_controller/state`` (cdpr_msgs/ControllerState) every period, enabled or not, and
-``/diagnostics`` when the contact state changes. The joint command adds the state's ``output``
+``/diagnostics`` when the level or the reason changes (state, saturation, F_d limited, contact
+refused), a reason's changing numbers at most once a second
+(:class:`cdpr_control.control.hybrid_force_control.ContactDiagnostics`). The joint command adds the state's ``output``
 (x_d,HPFC) to x_d when ``hybrid_force_controller`` is one of its ``offset_inputs``.
 
 ControllerState fields (names x y z a b c, base frame):
@@ -31,13 +33,14 @@ It subscribes ``force_distribution`` (not synchronised: the last one) for the di
 and f_max: while enabled or active, F_d is limited to the contact capacity of the pose x_d over 1.2
 (:meth:`cdpr_control.control.hybrid_force_control.HybridForceControl.update`), the state's
 ``reference`` is then the limited F_d,0, and ``/diagnostics`` carries a WARN naming the F_d asked
-for, the capacity and the pose.
+for, the capacity and the pose. Where what the capacity leaves is below the smallest force the
+controller regulates (``HybridForceControl.minimum_contact_force``) contact is refused: an ERROR
+naming them, and ``enabled: true`` (a program's M103) is refused there with that reason, so the
+program fails at its M103.
 
 The computation is :class:`cdpr_control.control.hybrid_force_control.HybridForceStage` (as ControlLoop runs it).
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
@@ -45,8 +48,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from cdpr_control.control.force_setpoint import ForceSetpointParams
-from cdpr_control.control.hybrid_force_control import (CONTACT, IDLE, STATE_NAMES, HPFCParams, HybridForceStage,
-    format_state)
+from cdpr_control.control.hybrid_force_control import (CONTACT, ERROR, IDLE, OK, WARN, ContactDiagnostics,
+    HPFCParams, HybridForceStage, format_state, refusal_message)
 from cdpr_control.control.ospc import AXES
 
 from cdpr_control.control.params import default, section
@@ -57,6 +60,7 @@ from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync, stamp_ns
 
 NAME = "hybrid_force_controller"
+_LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 _ZERO3, _ZEROS = [0.0] * 3, [0.0] * 6     # (the message constructor copies them)
 _D = HPFCParams()          # the one source of the defaults (table 5.1)
 PARAMS = [
@@ -97,6 +101,8 @@ class HybridForceControllerNode(CdprNode):
         self.cfc_on = False                # the last cable_force_controller/hand_over: Δq_CFC applied
         self.hand_overs: list = []         # hand-overs not yet taken on x_t
         self.limits = None                 # the force distribution's last (f_min, f_max) [N]
+        self.last_setpoint = None          # the last period's set-point message: M103's refusal (_validate)
+        self.diagnostics = ContactDiagnostics()
         self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(ControllerState, f"{NAME}/state", CONTROL)
         self.sync = StampSync(self, {
@@ -123,7 +129,24 @@ class HybridForceControllerNode(CdprNode):
             self.hand_overs.append(msg)
 
     def _validate(self, v: dict) -> None:
-        section(HPFCParams, v).validate()
+        params = section(HPFCParams, v)
+        params.validate()
+        if v["enabled"] and self.stage is not None and not self.stage.control.enabled:
+            # M103 where the pose's capacity leaves less than the controller regulates: refused, and
+            # the program that asked fails at its M103 with the reason (the interpreter reports a
+            # refused parameter); a refusal later in contact releases and reports ERROR (_cycle)
+            reason = self._refusal(params)
+            if reason is not None:
+                raise ValueError(reason)
+
+    def _refusal(self, params: HPFCParams) -> str | None:
+        """Why contact would be refused at the last set-point (None: it would not, or not known)."""
+        if self.last_setpoint is None or self.limits is None or self.robot is None:
+            return None
+        F_d0, x_d = from_vector3(self.last_setpoint.force), pose_from_msg(self.last_setpoint.pose)
+        probe = HybridForceStage(self.robot, self.dt, params, enabled=True).control
+        s = probe.update(F_d0, np.zeros(6), x_d, self.limits)
+        return refusal_message(s, x_d, probe.minimum_contact_force()) if s.refused else None
 
     def _apply(self, v: dict) -> None:
         if self.stage is None:
@@ -160,20 +183,14 @@ class HybridForceControllerNode(CdprNode):
             reference=reference, feedback=feedback, error=[r - f for r, f in zip(reference, feedback)],
             integrator=[integrator * z for z in s.z_t.tolist()] + _ZERO3, feedforward=feedforward,
             output=output.tolist(), saturated=[bool(s.saturated)] * 6))
-        # published when state or saturation change (report() compares level and message; the
-        # values are formatted only then)
-        level = DiagnosticStatus.WARN if s.saturated else DiagnosticStatus.OK
-        message = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
-        limited = not math.isnan(s.F_d_requested)        # F_d limited to the pose's capacity
-        if limited:
-            level = DiagnosticStatus.WARN
-            message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
-                        f"[{' '.join(f'{v:.4g}' for v in x_d)}]: regulating {s.F_d:.4g} N")
-        if (level, message) != self._last_diagnostic:
-            values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
-            if limited:
-                values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}")
-            self.report(level, message, values, stamp_ns=t_ns)
+        self.last_setpoint = setpoint      # (M103's refusal reads it: _validate)
+        # published when the level or the reason change (state, saturation, F_d limited, contact
+        # refused), the changing numbers of a reason at most every DIAGNOSTICS_REPEAT s
+        # (ContactDiagnostics; each period until session 13)
+        report = self.diagnostics.update(s, x_d, t_ns * 1e-9, c.minimum_contact_force())
+        if report is not None:
+            level, message, values = report
+            self.report(_LEVELS[level], message, values, stamp_ns=t_ns, always=True)
 
 
 def main(args=None):

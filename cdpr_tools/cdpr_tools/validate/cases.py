@@ -237,23 +237,35 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     held = {}
     n_settle = int(round(SETTLE_TIME / DT))
 
+    cfc_setpoint = []                          # per period: the CFC's set-point and feed-forward, the larger
+
     def settle_then_press(k_, loop, sim):
         if k_ == n_settle:                     # the floor in place, then M103
             sim.place_obstacle(0, (x[0], x[1], lowest - gap))
             loop.set_parameter("hybrid_force_controller", "enabled", True)
         if loop.failure is not None:
             held.setdefault("reason", loop.failure)
+        if k_ > 0 and loop.contact is not None and hasattr(loop.contact, "f_set"):
+            cfc_setpoint.append(np.maximum(loop.contact.f_set, loop.contact.f_ff))   # (of period k_ - 1, as rec's rows)
     rec.hooks += [settle_then_press, _settled_watch(rec, F_d)]
     params = control_loop_params(robot, hpfc=hpfc, hpfc_enabled=False)
     v_approach = HybridForceControl(robot, DT, hpfc).approach_speed(F_d)      # (below v_max on stiff floors)
     duration = SETTLE_TIME + params.transfer_time + gap / v_approach + CONTACT_TIME
     ok = recorded_run(robot, rec, source, duration, params, x0=x, config=sim_config(spec, obstacles=(floor,)))
+    refused = next((s.hpfc for s in rec.rows["state"] if s.hpfc is not None and s.hpfc.refused), None)
+    if refused is not None:
+        # the controller refuses contact where the pose's capacity leaves less than it can regulate
+        # (HybridForceControl.minimum_contact_force; docs/validation.md, "Contact after session 13")
+        from cdpr_control.control.hybrid_force_control import refusal_message
+        F_min = HybridForceControl(robot, DT, hpfc).minimum_contact_force()
+        return CaseResult(spec, {"contact_capacity_N": contact_capacity(robot, x), "F_d_requested_N": F_d}, {},
+                          "refused", refusal_message(refused, x, F_min))
     t, F, f = rec.array("t"), rec.array("w_contact")[:, 2], rec.array("f")
     states = np.array([s.hpfc.state for s in rec.rows["state"]])
     F_c = np.array([s.hpfc.F for s in rec.rows["state"]])          # the controller's contact force
     touched = np.flatnonzero(F > 0.0)
     metrics = dict.fromkeys(("overshoot_percent", "settling_s", "steady_error_percent", "steady_error_true_percent",
-                             "slack_s", "setpoint_above_f_max_N"), float("nan"))
+                             "slack_s", "setpoint_above_f_max_N", "distribution_above_f_max_N"), float("nan"))
     metrics["time_in_B_s"] = float(np.count_nonzero(states == "B") * DT)
     metrics["contact_capacity_N"] = capacity = contact_capacity(robot, x)
     metrics["impact_s"] = float(t[touched[0]]) if len(touched) else float("nan")
@@ -267,13 +279,18 @@ def contact_case(spec: CaseSpec) -> CaseResult:
         # control error e_F = F_d - F of the force the robot measures (section 5.1.3, as table 5.2);
         # the true force's steady error beside it, reported: the sensors' calibration, not the control
         acting = ~np.array([any(fault.holds for fault in s.faults) for s in rec.rows["state"]])
-        f_d = np.array([s.f_d for s in rec.rows["state"]])          # the force set-point
+        f_d = np.array([s.f_d for s in rec.rows["state"]])          # the force distribution's set-point
+        # what reaches the drives: the CFC's set-point and feed-forward (ContactCableForceControl
+        # clips them to the distribution's limits since session 13; the distribution's least-violating
+        # forces beside it, reported: distribution_above_f_max_N)
+        f_cfc = np.array(cfc_setpoint[:len(t)]) if len(cfc_setpoint) >= len(t) else f_d
         metrics.update(overshoot_percent=criteria.overshoot_percent(F[i:], F_d_run),
                        settling_s=criteria.settling_time(t[i:], F_c[i:], F_d_run),
                        steady_error_percent=criteria.steady_error_percent(F_c[i:], F_d_run, n),
                        steady_error_true_percent=criteria.steady_error_percent(F[i:], F_d_run, n),
                        slack_s=criteria.slack_time(f[i:], robot.cable.f_min, DT),
-                       setpoint_above_f_max_N=criteria.above_limit(f_d[i:][acting[i:]], robot.cable.f_max))
+                       setpoint_above_f_max_N=criteria.above_limit(f_cfc[i:][acting[i:]], robot.cable.f_max),
+                       distribution_above_f_max_N=criteria.above_limit(f_d[i:][acting[i:]], robot.cable.f_max))
     note = "" if len(touched) else "never touched the floor"
     if capacity < F_d:
         note = "; ".join(n for n in (note, f"F_d beyond the pose's contact capacity ({capacity:.4g} N within the "
