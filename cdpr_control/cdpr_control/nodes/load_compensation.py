@@ -71,6 +71,9 @@ PARAMS = [
     ParamSpec("settlement_ratio", D.settlement_ratio, "cable settlement model (section 4.1.3; `cdpr identify "
               "settlement`): settlement strain per elastic strain of the extra force; 0: off", range=(0.0, 10.0)),
     ParamSpec("settlement_time", D.settlement_time, "time constant of the cable settlement [s]", range=(1e-3, 1e3)),
+    ParamSpec("settlement_identified", D.settlement_identified, "the settlement ratio was identified on this robot "
+              "(`cdpr identify settlement -o` writes true): its s also lengthens the forward kinematics' cables "
+              "(the ControlLoop's pose estimator; the forward_kinematics node does not take it yet); false: x_d,LC only"),
 ]
 
 

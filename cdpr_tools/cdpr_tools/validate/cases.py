@@ -122,6 +122,9 @@ class CaseSpec:
     # the pulley friction of the case's friction compensation (validate.friction): {"source":
     # "shipped"} the robot file's; {"source": "identified", "file", "mu", "sigma", "F_pv", ...}
     friction: dict = field(default_factory=lambda: {"source": "shipped"})
+    # the cable settlement of the payload cases' load compensation (validate.settlement): {"source":
+    # "shipped"} the parameter file's; {"source": "identified", "file", "settlement_ratio", ...}
+    settlement: dict = field(default_factory=lambda: {"source": "shipped"})
 
 
 @dataclass
@@ -671,8 +674,11 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
 
     x = np.asarray(spec.x, dtype=float)
+    from cdpr_tools.validate.settlement import lc_values as settlement_values
+
     lc_values = {k: v for k, v in file_section(spec.robot, "load_compensation").items()
                  if k in LoadCompensationParams.__dataclass_fields__}
+    lc_values.update(settlement_values(spec.settlement))      # identified on the plant: also in the pose
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
