@@ -33,10 +33,11 @@ def add_parser(sub) -> None:
     p.add_argument("--friction", default="identified", choices=FRICTION_MODES,
                    help="the guiding cases' pulley friction: identified on each plant first, as a user runs the robot, "
                    "the parameter files cached in OUTPUT/friction/ (default), or shipped (the robot file's)")
-    p.add_argument("--settlement", default="identified", choices=SETTLEMENT_MODES,
-                   help="the payload cases' cable settlement: identified on each plant first (`cdpr identify "
-                   "settlement`, cached in OUTPUT/settlement/; it then also goes to the pose estimator), the default, "
-                   "or shipped (the parameter file's model)")
+    p.add_argument("--settlement", default="shipped", choices=SETTLEMENT_MODES,
+                   help="the payload cases' cable settlement: shipped (the parameter file's model, never in the pose "
+                   "estimator; the default) or identified on each plant first (`cdpr identify settlement`, cached in "
+                   "OUTPUT/settlement/; it then also goes to the pose estimator: docs/validation.md, \"Payload after "
+                   "session 13\")")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
     p.add_argument("--from-cases", metavar="FILE",
                    help="report the cases.jsonl of an earlier (or interrupted) run instead of running")

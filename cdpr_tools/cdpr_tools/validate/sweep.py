@@ -108,7 +108,7 @@ def _timed(spec: CaseSpec) -> list[CaseResult]:
 
 
 def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate",
-             friction_mode: str = "identified", log=print, settlement_mode: str = "identified"):
+             friction_mode: str = "identified", log=print, settlement_mode: str = "shipped"):
     """Plan, run and report the sweep -> (results, the JSON document, figure paths).
 
     The guiding family runs with ``friction_mode``'s friction (:mod:`.friction`): identified, the
