@@ -223,7 +223,8 @@ def run_settlement(args) -> int:
 
         with open(args.output, "w") as f:
             yaml.safe_dump({"load_compensation": {"ros__parameters": {
-                "settlement_ratio": float(fit.ratio), "settlement_time": float(fit.T)}}}, f, sort_keys=False)
+                "settlement_ratio": float(fit.ratio), "settlement_time": float(fit.T),
+                "settlement_identified": True}}}, f, sort_keys=False)
         print(f"wrote {args.output}")
     return 0
 

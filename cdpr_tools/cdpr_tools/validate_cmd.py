@@ -13,6 +13,7 @@ import sys
 
 from cdpr_tools.validate.cases import FAMILIES
 from cdpr_tools.validate.friction import MODES as FRICTION_MODES
+from cdpr_tools.validate.settlement import MODES as SETTLEMENT_MODES
 from cdpr_tools.validate.sweep import DEFAULT_POSES, DEFAULT_SEEDS, MAX_JOBS, ROBOTS
 
 DEFAULT_OUT = "out/validation"
@@ -32,6 +33,11 @@ def add_parser(sub) -> None:
     p.add_argument("--friction", default="identified", choices=FRICTION_MODES,
                    help="the guiding cases' pulley friction: identified on each plant first, as a user runs the robot, "
                    "the parameter files cached in OUTPUT/friction/ (default), or shipped (the robot file's)")
+    p.add_argument("--settlement", default="shipped", choices=SETTLEMENT_MODES,
+                   help="the payload cases' cable settlement: shipped (the parameter file's model, never in the pose "
+                   "estimator; the default) or identified on each plant first (`cdpr identify settlement`, cached in "
+                   "OUTPUT/settlement/; it then also goes to the pose estimator: docs/validation.md, \"Payload after "
+                   "session 13\")")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
     p.add_argument("--from-cases", metavar="FILE",
                    help="report the cases.jsonl of an earlier (or interrupted) run instead of running")
@@ -75,13 +81,14 @@ def run(args) -> int:
         raise ValueError(f"--poses must be >= 3, got {args.poses}")
     print(f"[validate] {', '.join(robots)}; {', '.join(families)}; {args.poses} poses per robot; plants "
           f"{', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s); "
-          f"guiding with {args.friction} friction", flush=True)
+          f"guiding with {args.friction} friction; payload with {args.settlement} settlement", flush=True)
     progress = Progress("validate")
     command = "cdpr " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["validate"] else "cdpr validate"
     try:
         results, doc, figures = validate(robots, families, plant_list, args.poses, args.jobs, args.output,
                                          lambda done, total, r: progress.update(done / total, f"{r.spec.family} {r.status}"),
-                                         command, args.friction, lambda line: print(line, flush=True))
+                                         command, args.friction, lambda line: print(line, flush=True),
+                                         args.settlement)
     finally:
         progress.done()
     return _summarise(results, doc, figures, args.output)

@@ -381,6 +381,11 @@ class LoadCompensationParams:
     omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
     settlement_ratio: float = 0.0   # -, cable settlement model (SettlementModel, identified); 0: off
     settlement_time: float = 2.0    # s, its time constant
+    # the ratio was identified on this robot (`cdpr identify settlement -o` writes true): the model's
+    # s then also lengthens the forward kinematics' cables (PoseEstimator.settlement, cause A of
+    # docs/load_compensation.md "The settlement in the pose estimator"); false (default): s acts in
+    # x_d,LC only, as an assumed ratio over-compensates a plant that does not settle
+    settlement_identified: bool = False
 
     def validate(self) -> None:
         if self.acceleration_source not in ACCELERATION_SOURCES:
@@ -690,6 +695,14 @@ class LoadCompensation:
         self.x_lc = self.x_lc + np.clip(change, -step, step)
         return self.x_lc.copy()
 
+    def pose_settlement(self) -> np.ndarray | None:
+        """The settlement s (m,) [m] for the pose estimator (section 4.1.3: the settled cables are
+        longer than the encoders say, at the same forces), None unless the ratio was identified
+        (``settlement_identified``) and is not zero: an assumed ratio stays out of the pose."""
+        if not (self.params.settlement_identified and self.settlement.ratio > 0.0):
+            return None
+        return self.settlement.s.copy()
+
     def slack_problem(self) -> str | None:
         """Why the compensation cannot hold the payload stiffly (None while it can, or is disabled):
         cables the payload has slackened. x_d,LC is a pose offset, which cannot tension them (the
@@ -726,3 +739,7 @@ class LoadCompensationStage:
         x = lc.update(inputs.x_d, inputs.xdot_d, inputs.xddot_d, inputs.f, inputs.x, inputs.ik_d)
         w = lc.payload_wrench(inputs.x_d, inputs.xdot_d, inputs.xddot_d) if self.feed_force_setpoint else None
         return OffsetOutput(lc.params.enabled, x, w)
+
+    def pose_settlement(self) -> np.ndarray | None:
+        """For the loop's pose estimator: :meth:`LoadCompensation.pose_settlement`."""
+        return self.compensation.pose_settlement()

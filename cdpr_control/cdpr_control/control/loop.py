@@ -188,6 +188,9 @@ class ControlLoop:
         if self.offset_stages:
             inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
             outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
+            # the load compensation's identified settlement for the next period's pose (section 4.1.3)
+            self.estimator.settlement = next((stage.pose_settlement() for stage in self.offset_stages.values()
+                                              if hasattr(stage, "pose_settlement")), None)
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None] if outputs else None
         hpfc = x_hpfc = contact = None
         if self.hpfc is not None:

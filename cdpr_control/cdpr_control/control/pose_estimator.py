@@ -32,6 +32,13 @@ class PoseEstimator:
     IPAnema 3 under a payload) the last step, just above 1e-8, gains less than the cost's rounding:
     the solver takes such steps (docs/model.md, "Steps within the cost's rounding") instead of
     stalling into ``max_iterations``.
+
+    ``settlement`` (m,) [m] or None: the growth of the unstretched cable lengths under load since
+    the cables settled (section 4.1.3), which the encoders do not see: a settled cable is longer by
+    s_i at the same winch length and force, so the FK takes θ + s as the winch lengths. The load
+    compensation's identified settlement model sets it (``LoadCompensation.pose_settlement``; None,
+    the default, where the ratio was not identified): without it the OSPC holds the forward
+    kinematics' pose while the settled platform hangs lower (docs/load_compensation.md, cause A).
     """
 
     def __init__(self, robot, pulleys: str = "frozen", max_iterations: int = 30, xtol: float = 1e-8,
@@ -43,6 +50,7 @@ class PoseEstimator:
         self.dq_0: np.ndarray | None = None
         self.x: np.ndarray | None = None
         self.result: FKResult | None = None
+        self.settlement: np.ndarray | None = None
         kernels.warm_up(robot)               # the compiled FK loaded now, not in the first period
 
     def update(self, theta, f, x_d, ik_d=None) -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +61,8 @@ class PoseEstimator:
         if self.calibration.update(f, theta) or self.dq_0 is None:            # (3.7) at calibration
             c = self.calibration
             self.dq_0 = cable.elongation_from_force_and_winch_length(self.robot, c.f_0, c.theta_0)
+        if self.settlement is not None:                                     # section 4.1.3
+            theta = np.asarray(theta, dtype=float) + self.settlement
         self.result = self.solver.elastic(theta, f, x_d, self.dq_0, pulleys=self.pulleys, ik_d=ik_d)
         if self.result.converged:
             self.x = self.result.x

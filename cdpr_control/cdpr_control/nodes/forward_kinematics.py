@@ -7,7 +7,10 @@ warm start and the pose of the frozen pulley model of section 3.2); publishes ``
 the home calibration (``home_forces``) or, without one, the mean of the first
 ``calibration_window`` measured forces (:mod:`cdpr_control.model.calibration`). A solve that does not
 converge is published with ``converged = false`` (and reported on /diagnostics); the pose message
-then carries the last converged estimate. The computation is
+then carries the last converged estimate. ``load_compensation/settlement`` (JointState, position = s
+[m] per cable), published by the load compensation only where its settlement ratio was identified,
+lengthens the FK's cables from the next period on (section 4.1.3; PoseEstimator.settlement, as
+ControlLoop hands it). The computation is
 :class:`cdpr_control.control.pose_estimator.PoseEstimator`.
 """
 from __future__ import annotations
@@ -65,11 +68,18 @@ class ForwardKinematicsNode(CdprNode):
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
+        # the load compensation's identified cable settlement (none published: the FK takes θ as it is)
+        self.create_subscription(JointState, "load_compensation/settlement", self._keep_settlement, CONTROL,
+                                 adapted=True)
         self.sync = StampSync(self, {
             "theta": (JointState, "winch/state"),
             "f": (CableForces, "cable_forces"),
             "setpoint": (OperationalSetpoint, "setpoint"),
         }, primary="f", callback=self._cycle, mode=self.sync_mode)
+
+    def _keep_settlement(self, msg: JointState) -> None:
+        s = np.asarray(msg.position, dtype=float)
+        self.estimator.settlement = s if s.shape == (self.robot.m,) and all_finite(s.tolist()) else None
 
     def _apply(self, v: dict) -> None:
         e = self.estimator

@@ -14,6 +14,10 @@ enabled or not:
   are zero (not identified). The force distribution takes it into its model wrench with its
   ``payload_input`` parameter.
 
+- ``load_compensation/settlement`` (sensor_msgs/JointState, ``position`` = the settlement model's s [m]
+  per cable), only where ``settlement_identified`` and the ratio is not zero: the forward kinematics
+  lengthens its cables by it (section 4.1.3; cause A of docs/load_compensation.md).
+
 Service ``~/tare`` (std_srvs/Trigger): tare the estimate at a known state (at rest with the payload
 ``tare_payload`` on, e.g. empty at home after power-on); ``tare_at_start`` does it once by itself.
 
@@ -25,6 +29,7 @@ import numpy as np
 from cdpr_msgs.msg import CableForces, ControllerState, OperationalSetpoint
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseStamped
+from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from cdpr_control.control.load_compensation import (ACCELERATION_SOURCES, OFFSET_MODELS, STIFFNESS_MODELS,
@@ -71,6 +76,9 @@ PARAMS = [
     ParamSpec("settlement_ratio", D.settlement_ratio, "cable settlement model (section 4.1.3; `cdpr identify "
               "settlement`): settlement strain per elastic strain of the extra force; 0: off", range=(0.0, 10.0)),
     ParamSpec("settlement_time", D.settlement_time, "time constant of the cable settlement [s]", range=(1e-3, 1e3)),
+    ParamSpec("settlement_identified", D.settlement_identified, "the settlement ratio was identified on this robot "
+              "(`cdpr identify settlement -o` writes true): its s also lengthens the forward kinematics' cables "
+              "(published on load_compensation/settlement); false: x_d,LC only"),
 ]
 
 
@@ -86,6 +94,7 @@ class LoadCompensationNode(CdprNode):
         self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.state_pub = self.create_publisher(ControllerState, "load_compensation/state", CONTROL)
         self.payload_pub = self.create_publisher(InertiaStamped, "load_compensation/payload", CONTROL)
+        self.settlement_pub = None       # created at the first identified settlement (none in the default graph)
         self.sync = StampSync(self, {
             "setpoint": (OperationalSetpoint, "setpoint"),
             "f": (CableForces, "cable_forces"),
@@ -134,6 +143,10 @@ class LoadCompensationNode(CdprNode):
         com = (0.0, 0.0, 0.0) if lc.cog is None else lc.cog
         self.payload_pub.publish(builder(InertiaStamped)(header=self.header(t_ns, "platform"),
                                                          inertia=builder(Inertia)(m=float(lc.m_c), com=vector3(com))))
+        if (s := lc.pose_settlement()) is not None:          # identified: for the forward kinematics
+            if self.settlement_pub is None:
+                self.settlement_pub = self.create_publisher(JointState, "load_compensation/settlement", CONTROL)
+            self.settlement_pub.publish(builder(JointState)(header=header, position=s.tolist()))
         if not valid:
             self.report(DiagnosticStatus.ERROR, "invalid input (shape or non-finite): holding", stamp_ns=t_ns)
         elif lc.guarded:

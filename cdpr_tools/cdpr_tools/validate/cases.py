@@ -122,6 +122,9 @@ class CaseSpec:
     # the pulley friction of the case's friction compensation (validate.friction): {"source":
     # "shipped"} the robot file's; {"source": "identified", "file", "mu", "sigma", "F_pv", ...}
     friction: dict = field(default_factory=lambda: {"source": "shipped"})
+    # the cable settlement of the payload cases' load compensation (validate.settlement): {"source":
+    # "shipped"} the parameter file's; {"source": "identified", "file", "settlement_ratio", ...}
+    settlement: dict = field(default_factory=lambda: {"source": "shipped"})
 
 
 @dataclass
@@ -688,8 +691,11 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
 
     x = np.asarray(spec.x, dtype=float)
+    from cdpr_tools.validate.settlement import lc_values as settlement_values
+
     lc_values = {k: v for k, v in file_section(spec.robot, "load_compensation").items()
                  if k in LoadCompensationParams.__dataclass_fields__}
+    lc_values.update(settlement_values(spec.settlement))      # identified on the plant: also in the pose
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
@@ -888,8 +894,50 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
         # IK-only hangs the platform on fewer cables here: its sag (or rise) is not the elastic
         # sag of the pose, so force control is judged against (4.5)-(4.6) at its own unloaded forces
         sag_reference, note_ref = None, MODEL_REFERENCE_NOTE
-    return [CaseResult(s, dict(base), {}, "refused", unheld) if unheld and s.variant["controller"] == "ik_lc"
+    # IK-only carries the empty platform but not this payload: the watch would hold ik_lc under it
+    refusal = unheld or (ik_only_payload_slack(robot, reference, mass) if ok_ref else None)
+    return [CaseResult(s, dict(base), {}, "refused", refusal) if refusal and s.variant["controller"] == "ik_lc"
             else _payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
+
+
+def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None:
+    """Why IK-only control cannot carry the payload ``mass`` [kg] at this pose (None where it can),
+    from the reference run (IK-only under the same payload on the same plant, its force watch off),
+    from the step on: a cable below the force watch's lower edge (f_min less its band) for longer
+    than the watch's ``force_limit_time``, i.e. where the watch would hold ik_lc under this payload.
+    The load compensation cannot change that: x_d,LC is a pose offset, which moves a cable force by
+    0.03-0.05 N per mm on the Mini and 0.25-0.34 N per mm on the IPAnema 3 (K_g of (2.22) only,
+    docs/load_compensation.md "IK-only + LC refused where IK-only leaves cables slack"), and its
+    slack warning comes from a 0.24 s window, after the watch has held (docs/validation.md,
+    "Payload after session 13"). So the configuration refuses the payload before any hold, with this
+    reason, as force control refuses one beyond its capacity (:func:`dynamic_capacity`)."""
+    from cdpr_tools.identify.load_steps import loop_params
+
+    t, f = reference.array("t"), reference.array("f")
+    states = reference.rows.get("state", [])
+    if len(states) == len(t) and all(s is not None for s in states):
+        f = np.array([s.f for s in states])              # the forces the watch sees (friction-compensated sensors)
+    after = t > PAYLOAD_REST
+    if not after.any():
+        return None
+    safety = loop_params(REFERENCE, robot.file.stem).safety
+    f_min, f_max = (np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min,
+                                                                                        robot.cable.f_max))
+    edge = f_min - safety.force_band * (f_max - f_min)
+    below = f[after] < edge
+    n_limit = int(round(safety.force_limit_time / DT))
+    run = np.zeros(robot.m, dtype=int)
+    for k, row in enumerate(below):                      # consecutive periods below the edge, per cable
+        run = np.where(row, run + 1, 0)
+        if (run > n_limit).any():
+            c = int(np.argmax(run))
+            low = f[after][: k + 1, c].min()
+            return (f"IK-only control cannot carry {mass:.3g} kg at this pose: under it (the IK-only reference, same "
+                    f"plant and payload) cable {c + 1} falls to {low:.3g} N, below the force watch's edge "
+                    f"{edge[c]:.3g} N for more than {1e3 * safety.force_limit_time:.0f} ms from "
+                    f"{t[after][k - n_limit]:.3f} s, where the watch would hold ik_lc; x_d,LC cannot tension a "
+                    "cable: carry this payload under force control")
+    return None
 
 
 MODEL_REFERENCE_NOTE = ("sag reference: the elastic sag C_x w (4.5)-(4.6) at the run's unloaded forces (IK-only "

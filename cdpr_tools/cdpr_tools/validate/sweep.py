@@ -108,13 +108,14 @@ def _timed(spec: CaseSpec) -> list[CaseResult]:
 
 
 def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate",
-             friction_mode: str = "identified", log=print):
+             friction_mode: str = "identified", log=print, settlement_mode: str = "shipped"):
     """Plan, run and report the sweep -> (results, the JSON document, figure paths).
 
     The guiding family runs with ``friction_mode``'s friction (:mod:`.friction`): identified, the
     friction of each (robot, plant, seed) among its cases is identified before the cases run
     (:func:`with_friction`; reused from ``outdir`` when there); its time is the meta's
-    ``friction_wall_s``, not the cases'."""
+    ``friction_wall_s``, not the cases'. The payload family likewise runs with ``settlement_mode``'s
+    cable settlement (:mod:`.settlement`, :func:`with_settlement`)."""
     import platform
 
     from cdpr_tools.validate import report
@@ -124,6 +125,7 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
     specs = [spec for group in itertools.zip_longest(*per_robot) for spec in group if spec is not None]
     start = time.perf_counter()
     specs, frictions = with_friction(specs, friction_mode, outdir, jobs, log)
+    specs, settlements = with_settlement(specs, settlement_mode, outdir, log)
     friction_wall = time.perf_counter() - start
     start = time.perf_counter()
     with report.CaseLog(outdir) as case_log:
@@ -132,7 +134,8 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
             "plants": [list(p) for p in plant_list], "poses": n_poses, "jobs": jobs,
             "wall_s": time.perf_counter() - start, "cpu_s": cpu_seconds(results), "host": platform.node(),
             "friction": {"mode": friction_mode, "families": list(FRICTION_FAMILIES), "wall_s": friction_wall,
-                         "plants": frictions}}
+                         "plants": frictions},
+            "settlement": {"mode": settlement_mode, "families": ["payload"], "plants": settlements}}
     doc, figures = report.write(results, meta, outdir)
     return results, doc, figures
 
@@ -162,6 +165,28 @@ def with_friction(specs, mode: str, outdir, jobs: int = 1, log=print) -> tuple[l
             f"{record['file']}; mu / sigma / F_pv up to {d['mu']:.3g} / {d['sigma']:.3g} / {d['F_pv']:.3g} % "
             "from the robot file's")
     specs = [replace(s, friction=by_key[(s.robot, s.plant, s.seed)]) if s.family in FRICTION_FAMILIES else s
+             for s in specs]
+    return specs, {_plant_name(*key): record for key, record in by_key.items()}
+
+
+def with_settlement(specs, mode: str, outdir, log=print) -> tuple[list, dict]:
+    """The payload specs with their cable settlement (:attr:`CaseSpec.settlement`) -> (specs,
+    {"<robot> <plant>": record}). ``mode`` identified: identified once per (robot, plant, seed) on
+    that plant (about 10 s CPU each) or reused from ``outdir`` (:func:`.settlement.identified`);
+    shipped: the parameter file's model."""
+    from cdpr_tools.validate import settlement
+
+    if mode not in settlement.MODES:
+        raise ValueError(f"--settlement must be one of {', '.join(settlement.MODES)}, got {mode!r}")
+    if mode == "shipped":
+        return list(specs), {}
+    by_key = {}
+    for key in sorted({(s.robot, s.plant, s.seed) for s in specs if s.family == "payload"}):
+        record, reused = settlement.identified(outdir, *key)
+        by_key[key] = record
+        log(f"[validate] {_plant_name(*key)}: settlement {'reused from' if reused else 'identified into'} "
+            f"{record['file']}; ratio {record['settlement_ratio']:.3g}, T {record['settlement_time']:.3g} s")
+    specs = [replace(s, settlement=by_key[(s.robot, s.plant, s.seed)]) if s.family == "payload" else s
              for s in specs]
     return specs, {_plant_name(*key): record for key, record in by_key.items()}
 
