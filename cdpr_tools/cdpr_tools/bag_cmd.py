@@ -25,6 +25,10 @@ from cdpr_control.ros.runner import spin, stop_on_signals
 from cdpr_tools.progress import Progress
 from cdpr_tools.ros_graph import fully_qualified, new_context
 
+# s: at the end of `bag play`, how long the reliable subscribers may take to acknowledge the last
+# messages before the player's context goes (it would drop them)
+DELIVERY_TIMEOUT = 5.0
+
 
 def add_parser(sub) -> None:
     p = sub.add_parser("bag", help="record, inspect and play bags (rosbag2 MCAP layout)",
@@ -264,6 +268,9 @@ def run_play(args) -> int:
             except CorruptBagError as exc:
                 print(f"published {player.published} of {bag.message_count} messages, then: {exc}", file=sys.stderr)
                 return 1
+            if not stop.is_set() and not player.wait_for_delivery(DELIVERY_TIMEOUT):
+                print(f"warning: not every subscriber acknowledged the last messages within {DELIVERY_TIMEOUT:g} s",
+                      file=sys.stderr)
         print(f"published {count} messages" + (" (stopped)" if stop.is_set() else ""))
         if bag.damage:                         # (each was warned about before playing; again at the end)
             counted, unknown = bag.lost_messages

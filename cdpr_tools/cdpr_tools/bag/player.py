@@ -12,6 +12,7 @@ import time
 from typing import Callable, Iterable
 
 from builtin_interfaces.msg import Time
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -90,6 +91,15 @@ class BagPlayer:
             self._play_once(stop)
             if not self.loop or stop.is_set():
                 return self.published
+
+    def wait_for_delivery(self, timeout: float) -> bool:
+        """Wait until the reliable subscribers have acknowledged every message published, at most
+        ``timeout`` s in all (True: all acknowledged): a context shut down right after the last
+        publish drops what is still on its way (a test's subscriber missed the last of 20 messages)."""
+        deadline = time.monotonic() + timeout
+        publishers = list(self.publishers.values()) + ([self.clock_publisher] if self.clock_publisher else [])
+        return all(p.wait_for_all_acked(Duration(nanoseconds=int(max(0.0, deadline - time.monotonic()) * 1e9)))
+                   for p in publishers)
 
     def _play_once(self, stop: threading.Event) -> None:
         wall0 = time.monotonic()
