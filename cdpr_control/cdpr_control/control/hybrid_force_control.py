@@ -1161,19 +1161,25 @@ class ContactDiagnostics:
         force regulated (:meth:`HybridForceControl.minimum_contact_force`) -> a report or None."""
         level = WARN if s.saturated else OK
         reason = f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+        limited = not math.isnan(s.F_d_requested)
+        if s.refused:
+            level, reason = ERROR, reason + ", contact refused: the pose's capacity is below the smallest force regulated"
+        elif limited:
+            level, reason = WARN, reason + ", F_d limited to the pose's contact capacity"
+        key = (level, reason)
+        if key == self.key and (not limited or t - self.t_last < self.repeat - 1e-9):
+            return None                          # (the numbers are formatted only for a report)
         message = reason
         values = {"F": f"{s.F:.1f}", "F_d": f"{s.F_d:.1f}", "x_t": f"{s.x_t:.4f}"}
         if s.refused:
-            level, reason = ERROR, reason + ", contact refused: the pose's capacity is below the smallest force regulated"
             message = f"state {s.state}: {STATE_NAMES[s.state]}, " + refusal_message(s, x_d, F_min)
             values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}", F_min=f"{F_min:.4g}")
-        elif not math.isnan(s.F_d_requested):
-            level, reason = WARN, reason + ", F_d limited to the pose's contact capacity"
-            message += (f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
-                        f"{_pose_text(x_d)}: regulating {s.F_d:.4g} N")
+        elif limited:
+            message = (f"state {s.state}: {STATE_NAMES[s.state]}" + (", x_t saturated" if s.saturated else "")
+                       + f", F_d {s.F_d_requested:.4g} N beyond the contact capacity {s.capacity:.4g} N of the pose "
+                       f"{_pose_text(x_d)}: regulating {s.F_d:.4g} N")
             values.update(F_d_requested=f"{s.F_d_requested:.4g}", capacity=f"{s.capacity:.4g}")
-        key = (level, reason)
-        if key == self.key and (message == self.message or t - self.t_last < self.repeat - 1e-9):
+        if key == self.key and message == self.message:
             return None
         self.key, self.message, self.t_last = key, message, t
         return level, message, values

@@ -143,6 +143,9 @@ class ControlLoop:
         self._limits = None                      # the distribution's (f_min, f_max) of the last period (hybrid force control)
         self.dq_cfc = np.zeros(robot.m)
         self.offset_stages = dict(offset_stages or {})
+        # the stage whose cable settlement the pose estimator takes (the load compensation; section 4.1.3)
+        self._settlement_source = next((stage for stage in self.offset_stages.values()
+                                        if hasattr(stage, "pose_settlement")), None)
         # the offset inputs in the joint command node's order (params: offset_inputs)
         names = ["ospc"] + ([] if self.hpfc is None else ["hybrid_force_controller"]) + list(self.offset_stages)
         self.offsets = OffsetInputs(names, dt, p.transfer_time)
@@ -188,9 +191,8 @@ class ControlLoop:
         if self.offset_stages:
             inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
             outputs = {name: stage.offset(inputs) for name, stage in self.offset_stages.items()}
-            # the load compensation's identified settlement for the next period's pose (section 4.1.3)
-            self.estimator.settlement = next((stage.pose_settlement() for stage in self.offset_stages.values()
-                                              if hasattr(stage, "pose_settlement")), None)
+            if self._settlement_source is not None:  # the identified settlement, for the next period's pose
+                self.estimator.settlement = self._settlement_source.pose_settlement()
         w_models = [out.w_model for out in outputs.values() if out.w_model is not None] if outputs else None
         hpfc = x_hpfc = contact = None
         if self.hpfc is not None:

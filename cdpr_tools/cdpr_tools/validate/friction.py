@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_tools.file_lock import locked
+from cdpr_tools.validate import plant_cache
 
 MODES = ("identified", "shipped")
 FAMILIES = ("guiding",)          # the families --friction applies to; the others run with the robot file's
@@ -33,8 +33,7 @@ def shipped() -> dict:
 
 def parameter_path(outdir, robot_name: str, plant: str, seed: int) -> Path:
     """Where the sweep keeps the friction identified on a plant."""
-    name = f"{robot_name}_{plant}" + (f"_seed{seed}" if plant != "nominal" else "")
-    return Path(outdir) / "friction" / f"{name}.yaml"
+    return plant_cache.parameter_path(outdir, "friction", robot_name, plant, seed)
 
 
 def read_parameters(path) -> dict:
@@ -57,11 +56,7 @@ def identify_on_plant(robot_name: str, plant: str, seed: int, path: Path, progre
         compiled = None
 
     robot = load_robot(robot_name)
-    bag_dir = path.parent / f"{path.stem}_run"
-    if bag_dir.exists():                               # a run cut off before its fit was written
-        import shutil
-        shutil.rmtree(bag_dir)
-    bag = experiments.record_friction_run(bag_dir, robot, seed=seed or 1, plant=plant, plant_seed=seed or 1)
+    bag = experiments.record_friction_run(plant_cache.run_directory(path), robot, seed=seed or 1, plant=plant, plant_seed=seed or 1)
     _, fits = friction.identify(BagReader(bag), robot, jit=compiled, progress=progress)
     tmp = path.with_suffix(".yaml.tmp")
     friction.write_parameter_file(fits, tmp)
@@ -74,11 +69,7 @@ def identified(outdir, robot_name: str, plant: str, seed: int, progress=None) ->
     it was there), its values and how far they are from the robot file's (``deviation_percent``:
     worst cable per parameter)."""
     path = parameter_path(outdir, robot_name, plant, seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with locked(path.with_suffix(".lock")):         # two sweeps, or two processes of one, share the directory
-        reused = path.is_file()
-        if not reused:
-            identify_on_plant(robot_name, plant, seed, path, progress)
+    reused = plant_cache.identified_once(path, lambda p: identify_on_plant(robot_name, plant, seed, p, progress))
     values = read_parameters(path)
     return {"source": "identified", "file": str(path), **values,
             "deviation_percent": deviation_percent(robot_name, values)}, reused

@@ -19,6 +19,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from cdpr_tools.validate import plant_cache
+
 MODES = ("identified", "shipped")
 NAMES = ("settlement_ratio", "settlement_time")
 PAYLOAD_SHARE = 0.4    # the run's payload: this share of the planned static capacity at home (64 kg on the IPAnema 3)
@@ -31,8 +33,7 @@ def shipped() -> dict:
 
 def parameter_path(outdir, robot_name: str, plant: str, seed: int) -> Path:
     """Where the sweep keeps the settlement identified on a plant."""
-    name = f"{robot_name}_{plant}" + (f"_seed{seed}" if plant != "nominal" else "")
-    return Path(outdir) / "settlement" / f"{name}.yaml"
+    return plant_cache.parameter_path(outdir, "settlement", robot_name, plant, seed)
 
 
 def run_payload(robot) -> float:
@@ -53,12 +54,8 @@ def identify_on_plant(robot_name: str, plant: str, seed: int, path: Path) -> Non
     from cdpr_tools.identify import experiments, settlement
 
     robot = load_robot(robot_name)
-    bag_dir = path.parent / f"{path.stem}_run"
-    if bag_dir.exists():                               # a run cut off before its fit was written
-        import shutil
-        shutil.rmtree(bag_dir)
     payload = run_payload(robot)
-    bag = experiments.record_settlement_run(bag_dir, robot, payload=payload, hold=6.0, seed=seed or 1,
+    bag = experiments.record_settlement_run(plant_cache.run_directory(path), robot, payload=payload, hold=6.0, seed=seed or 1,
                                             plant=plant, plant_seed=seed or 1)
     fit = settlement.identify(BagReader(bag), robot)
     tmp = path.with_suffix(".yaml.tmp")
@@ -79,14 +76,8 @@ def read_parameters(path) -> dict:
 def identified(outdir, robot_name: str, plant: str, seed: int) -> tuple[dict, bool]:
     """The settlement identified on (robot, plant, seed) -> (the cases' settlement record, reused):
     the parameter file (identified now, under a file lock, if the output directory has none)."""
-    from cdpr_tools.file_lock import locked
-
     path = parameter_path(outdir, robot_name, plant, seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with locked(path.with_suffix(".lock")):
-        reused = path.is_file()
-        if not reused:
-            identify_on_plant(robot_name, plant, seed, path)
+    reused = plant_cache.identified_once(path, lambda p: identify_on_plant(robot_name, plant, seed, p))
     return {"source": "identified", "file": str(path), **read_parameters(path)}, reused
 
 
