@@ -29,10 +29,10 @@ share of them, which the RTF includes and the CPU per period does not.
 Two counts in the graph's process say where a watched topic's cost goes, whatever the load: per
 period, the DDS copies of in-process messages that its subscriptions' DDS readers hand to Python
 (``dds_copies_per_period``: ``LocalSubscription.from_dds`` calls, which drop them,
-cdpr_control/ros/intraprocess.py), and the thread CPU time spent inside rclpy's
-``Publisher.publish`` (``dds_publish_us_per_period``: converting the message, serializing it and
-writing it to the DDS readers, on the publishing thread unless Fast DDS publishes
-asynchronously: docs/visualization.md).
+cdpr_control/ros/intraprocess.py), and the thread CPU time spent writing to DDS
+(``dds_publish_us_per_period``: ``IntraProcessPublisher.to_dds``, encoding the CDR and writing it
+to the DDS readers, on the publishing thread unless Fast DDS publishes asynchronously:
+docs/visualization.md).
 
 Targets (issue 27): unwatched within 5 % of the baseline's RTF, one topic watched within 10 %.
 Writes bench/view.json. Run: .venv/bin/python benchmarks/bench_view.py [--rounds N]
@@ -223,28 +223,26 @@ class View:
 
 class Counts:
     """In this process (the graph's): DDS copies handed to local subscriptions, and thread CPU time in
-    rclpy's Publisher.publish (every publication over DDS). Installed before the graph is built
+    ``IntraProcessPublisher.to_dds`` (every publication over DDS). Installed before the graph is built
     (``from_dds`` is bound when a subscription is created)."""
 
     def __init__(self):
-        from rclpy.publisher import Publisher
-
-        from cdpr_control.ros.intraprocess import LocalSubscription
+        from cdpr_control.ros.intraprocess import IntraProcessPublisher, LocalSubscription
 
         self.copies = self.publish_ns = 0
-        from_dds, publish = LocalSubscription.from_dds, Publisher.publish
+        from_dds, publish = LocalSubscription.from_dds, IntraProcessPublisher.to_dds
 
         def counted_from_dds(local, msg):
             self.copies += 1
             return from_dds(local, msg)
 
-        def timed_publish(publisher, msg):
+        def timed_publish(publisher, msg, data=None):
             t0 = time.thread_time_ns()
             try:
-                return publish(publisher, msg)
+                return publish(publisher, msg, data)
             finally:
                 self.publish_ns += time.thread_time_ns() - t0
-        LocalSubscription.from_dds, Publisher.publish = counted_from_dds, timed_publish
+        LocalSubscription.from_dds, IntraProcessPublisher.to_dds = counted_from_dds, timed_publish
 
     def snapshot(self) -> tuple[int, int]:
         return self.copies, self.publish_ns

@@ -2,15 +2,18 @@
 the ROS message is built only for whoever needs one, once per publication, and is an ordinary message."""
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
 import pytest
 from cdpr_msgs.msg import CableForces, ControllerState
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from test_intraprocess import DEEP, joint_state, spaces, wait_for  # noqa: F401 (fixture)
 
-from cdpr_control.ros import adapted
+from cdpr_control.ros import adapted, cdr
 from cdpr_control.ros.adapted import Payload, as_message, payload_class, payload_of
 from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode
 from cdpr_control.ros.message_builders import builder
@@ -113,7 +116,10 @@ def test_no_message_is_built_while_only_adapted_subscribers_take_the_topic(space
     assert got[0] is p and p._adapted_msg_ is None
 
 
-def test_a_node_outside_the_process_gets_the_message_over_dds(spaces):
+@pytest.mark.parametrize("encoded", [True, False], ids=["cdr_from_the_payload", "rclpy_fallback"])
+def test_a_node_outside_the_process_gets_the_message_over_dds(spaces, encoded):
+    """Outside, the ordinary message arrives; it left as CDR bytes encoded from the payload (no message
+    built, rclpy's publish not called), or through rclpy where cdr.py cannot encode a value."""
     inside, outside = spaces(), spaces()
     publisher = inside.node("adapt_dds_pub").create_publisher(JointState, "/adapt/dds", DEEP)
     local, remote = [], []
@@ -122,11 +128,19 @@ def test_a_node_outside_the_process_gets_the_message_over_dds(spaces):
     inside.start()
     outside.start()
     wait_for(lambda: publisher.get_subscription_count() >= 2, "discovery")
-    for k in range(3):
-        publisher.publish(payload_of(joint_state(k)))
+    sent = [payload_of(joint_state(k)) for k in range(3)]
+    with mock.patch.object(cdr, "to_bytes", side_effect=cdr.to_bytes if encoded else lambda obj, cls: None), \
+            mock.patch.object(Publisher, "publish", autospec=True, side_effect=Publisher.publish) as rclpy_publish:
+        for p in sent:
+            publisher.publish(p)
     wait_for(lambda: len(remote) == 3 and len(local) == 3, "3 messages inside and outside")
     assert remote == [joint_state(k) for k in range(3)]
     assert all(isinstance(p, Payload) for p in local)
+    rclpy_calls = [call for call in rclpy_publish.call_args_list if call.args[0] is publisher]
+    if encoded:
+        assert not rclpy_calls and all(p._adapted_msg_ is None for p in sent)   # nothing built for DDS
+    else:
+        assert len(rclpy_calls) == 3
 
 
 def test_without_intra_process_delivery_nodes_build_messages(spaces):

@@ -9,13 +9,12 @@ from unittest import mock
 import pytest
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
-from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
-from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode
+from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode, IntraProcessPublisher
 from cdpr_control.ros.qos import CONTROL, STATUS
 from cdpr_control.ros.runner import spin
 from cdpr_tools.ros_graph import new_context
@@ -116,7 +115,7 @@ def test_nothing_goes_over_dds_without_a_subscriber_outside_the_process(spaces):
     node.create_subscription(Int64, "/ipc_alone/n", local.append, CONTROL)
     publisher = node.create_publisher(Int64, "/ipc_alone/n", CONTROL)
     wait_for(lambda: publisher.get_subscription_count() == 1, "the local subscription to match over DDS")
-    with mock.patch.object(Publisher, "publish", autospec=True, side_effect=Publisher.publish) as dds:
+    with mock.patch.object(IntraProcessPublisher, "to_dds", autospec=True, side_effect=IntraProcessPublisher.to_dds) as dds:
         for k in range(50):
             publisher.publish(Int64(data=k))
         ours = lambda: sum(1 for call in dds.call_args_list if call.args[0] is publisher)  # noqa: E731

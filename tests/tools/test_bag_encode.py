@@ -11,7 +11,8 @@ from rosidl_parser.definition import (AbstractSequence, AbstractString, Array, B
 
 from cdpr_control.ros.message_builders import builder
 from cdpr_tools.bag.cdr import trimmed
-from cdpr_tools.bag.encode import HEADER, encoder, serialize
+from cdpr_control.ros.cdr import HEADER
+from cdpr_tools.bag.encode import encoder, serialize
 from cdpr_tools.message_convert import message_class, type_name_of
 
 # what closed_loop.yaml publishes (and the recorder records) but /parameter_events, whose octet sequences
