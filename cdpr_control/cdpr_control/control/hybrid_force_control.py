@@ -299,6 +299,7 @@ class HybridForceControl:
         self.F_tare = NO_TARE                  # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
+        self.k_pid = 0.0                       # N/m, the stiffness the PID (5.3) divides by in D (_pid_stiffness)
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
         self.drive_lag = drive_ramp_lag(robot.drive)   # s, the drives' lag behind a ramp of x_t (_brake_ahead)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
@@ -530,9 +531,10 @@ class HybridForceControl:
                 x_c, F_c = self.contact                          # the stiffness met from contact to here
                 if self.x_t - x_c > 0.0 and F - F_c > 0.0:
                     self.k_contact = (F - F_c) / (self.x_t - x_c)
+                self.k_pid = self._pid_stiffness()
                 # bumpless: the integral part takes over what the P part does not give (the D part
                 # of the contact transient is left out: it would stay in the integrator)
-                self.integrator = self.x_t - e_F / p.K_p
+                self.integrator = self.x_t - e_F / self.k_pid
         if self.state == CONTACT:
             self._pid(e_F, dF)
         elif self.state == RELEASE:
@@ -604,6 +606,18 @@ class HybridForceControl:
         return (self.z_t.copy(), F_d0.copy(),
                 np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0]))    # R_t [0 0 x_t]
 
+    def _pid_stiffness(self) -> float:
+        """The stiffness [N/m] the PID (5.3) divides the force error by in D: K_p, or the stiffness
+        met in B (:attr:`k_contact`) where that is stiffer. (5.3)'s gain 1/K_p is tuned for contacts
+        of about K_p (table 5.1: the IPAnema 3's z stiffness at home); the loop's gain is the
+        stiffness met over K_p, and where the cables and the surface are several times stiffer (border
+        poses) the P part alone crosses over at tens of Hz, where the drives' lag and the platform's
+        modes leave no phase: a growing 50 Hz oscillation (IPAnema 3 sweep #33, seed 2, 1e5 N/m, met
+        at 5 K_p; docs/hybrid_force_control.md, "Session 14"). Never below K_p (a softer contact keeps
+        the thesis's gain)."""
+        k = self.params.K_p
+        return max(k, self.k_contact) if self.k_contact is not None and math.isfinite(self.k_contact) else k
+
     def absorb(self, dx: float) -> None:
         """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
         the cable force controller's integral part along the task axis, see ``ControlLoop``): x_t
@@ -616,8 +630,9 @@ class HybridForceControl:
     def _pid(self, e_F: float, dF: float) -> None:
         """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
         p, dt = self.params, self.dt
-        pd = (e_F - p.T_d * dF) / p.K_p
-        candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
+        k = self.k_pid or p.K_p
+        pd = (e_F - p.T_d * dF) / k
+        candidate = self.integrator + dt / (k * p.T_i) * e_F
         free = pd + candidate
         blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
         self.integrator = _clip(self.integrator if blocked else candidate, p.x_max)
