@@ -75,6 +75,9 @@ PRE_TENSION_TIME = 0.3
 # pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
 # (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
 PRE_TENSION_SETTLE = 0.15
+# bisection steps for the largest share of F_d whose pre-contact forces exist, where the full F_d's
+# do not (partial_pre_contact_forces; a resolution of 1/64 of F_d)
+PRE_TENSION_STEPS = 6
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -612,8 +615,8 @@ class HybridForceControl:
         of about K_p (table 5.1: the IPAnema 3's z stiffness at home); the loop's gain is the
         stiffness met over K_p, and where the cables and the surface are several times stiffer (border
         poses) the P part alone crosses over at tens of Hz, where the drives' lag and the platform's
-        modes leave no phase: a growing 50 Hz oscillation (IPAnema 3 sweep #33, seed 2, 1e5 N/m, met
-        at 5 K_p; docs/hybrid_force_control.md, "Session 14"). Never below K_p (a softer contact keeps
+        modes leave no phase: a growing 52 Hz oscillation (IPAnema 3 sweep #33, seed 2, 1e5 N/m, met
+        at 2.1 K_p; docs/hybrid_force_control.md, "Session 14"). Never below K_p (a softer contact keeps
         the thesis's gain)."""
         k = self.params.K_p
         return max(k, self.k_contact) if self.k_contact is not None and math.isfinite(self.k_contact) else k
@@ -630,9 +633,8 @@ class HybridForceControl:
     def _pid(self, e_F: float, dF: float) -> None:
         """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
         p, dt = self.params, self.dt
-        k = self.k_pid or p.K_p
-        pd = (e_F - p.T_d * dF) / k
-        candidate = self.integrator + dt / (k * p.T_i) * e_F
+        pd = (e_F - p.T_d * dF) / (self.k_pid or p.K_p)          # (_pid_stiffness)
+        candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
         free = pd + candidate
         blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
         self.integrator = _clip(self.integrator if blocked else candidate, p.x_max)
@@ -667,7 +669,7 @@ def contact_response(AT, k_l, z_t) -> np.ndarray:
     return k_l * (AT.T @ np.linalg.solve(AT @ (k_l[:, None] * AT.T), g))
 
 
-def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | None:
+def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max, f_min_after=None) -> np.ndarray | None:
     """The cable forces to hold before the impact (state A) so that pressing F_d [N], which adds
     e F_d (:func:`contact_response`), keeps every cable within [f_min, f_max]: the issue's "force
     planned for contact before impact". With the CFC paused in B as in the thesis (section 5.1.2), x_t
@@ -679,14 +681,53 @@ def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | 
     (3.27)-(3.28) with those limits and f_ref = f_from), so f_from itself where it already keeps
     the cables within their limits under the contact, and only the internal tension (the nullspace
     of A^T) changed otherwise; None where no such forces exist (the pose cannot hold the contact both
-    ways: the CFC then holds f_from, as the thesis)."""
+    ways: the CFC then holds f_from, as the thesis). f_min_after (m,) [N]: the lower limit once
+    pressed where it is not f_min (:func:`partial_pre_contact_forces`)."""
     AT, f_from = np.asarray(AT, dtype=float), np.asarray(f_from, dtype=float)
     df = np.asarray(e, dtype=float) * F_d
-    lo, hi = np.maximum(f_min, f_min - df), np.minimum(f_max, f_max - df)
+    after = f_min if f_min_after is None else f_min_after
+    lo, hi = np.maximum(f_min, after - df), np.minimum(f_max, f_max - df)
     if not (np.all(np.isfinite(f_from)) and np.all(lo <= hi)):
         return None
     result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
     return result.f if result.status == Status.FEASIBLE else None
+
+
+def partial_pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max, f_floor=None,
+                               steps: int = PRE_TENSION_STEPS) -> tuple[np.ndarray | None, float, np.ndarray | None]:
+    """The pre-contact forces where :func:`pre_contact_forces` has none for F_d within the
+    distribution's [f_min, f_max] -> (forces, share s of F_d they hold, the lower limit once pressed
+    (None: f_min)), the first that exists of: F_d with the cables within the limits both ways; F_d
+    with the cables at or above f_floor (m,) [N] (the robot's f_min, below the distribution's) once
+    pressed; the largest share s F_d (bisection of ``steps`` steps) with f_floor once pressed;
+    (None, 0, None) where not even f_from has them.
+
+    Near the border of the workspace the cables' elastic response e F_d can take a cable below
+    f_min, or another above f_max, for every internal tension although the pose's contact capacity
+    (the LP, which plans the press freely) holds F_d. Holding f_from there (sessions 11 to 13), the
+    press took IPAnema 3 #37's cable 1 (seed 2, 150 N of 185 N capacity) from 150 N to 74 N, below
+    the robot's f_min (100 N) for 0.33 s in D. The distribution's f_min is a margin above the
+    robot's (150 N on the IPAnema 3) for the force control's transients; pre-tensioned for 90 % of
+    the press within it, the upper cables rose by up to 430 N and the pose estimate's errors at those
+    tensions read 12 N of contact force before the impact (22.8 % overshoot of the true force), so the
+    pressed side keeps the robot's f_min before the share shrinks (docs/hybrid_force_control.md,
+    "Session 14")."""
+    full = pre_contact_forces(AT, e, F_d, f_from, f_min, f_max)
+    if full is not None:
+        return full, 1.0, None
+    floor = None if f_floor is None else np.minimum(np.asarray(f_min, dtype=float), f_floor)
+    full = pre_contact_forces(AT, e, F_d, f_from, f_min, f_max, floor)
+    if full is not None:
+        return full, 1.0, floor
+    best, share, lo, hi = None, 0.0, 0.0, 1.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        f = pre_contact_forces(AT, e, mid * F_d, f_from, f_min, f_max, floor)
+        if f is None:
+            hi = mid
+        else:
+            best, share, lo = f, mid, mid
+    return best, share, floor if best is not None else None
 
 
 def contact_capacity(AT, w, z_t, f_min, f_max) -> float:
@@ -785,6 +826,8 @@ class CFCCoupling:
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
         self.pre_from: np.ndarray | None = None  # the set-point when A began (pre_tension), None outside A
         self.pre_periods = 0                    # periods of A with the pre-contact forces (ramp, then settling)
+        self.pre_share = 1.0                    # share of F_d the pre-contact forces hold (partial_pre_contact_forces)
+        self.pre_floor: np.ndarray | None = None  # their lower limit once pressed (None: f_min)
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -815,13 +858,23 @@ class CFCCoupling:
         """In A, the set-point's ramp to the pre-contact forces not done (:meth:`pre_tension` wanted)."""
         return self.pre_from is None or self.pre_periods * self.dt < PRE_TENSION_TIME + PRE_TENSION_SETTLE - 1e-9
 
-    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
+    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max, f_floor=None) -> np.ndarray | None:
         """A period of A while :attr:`pre_tensioning`: :func:`pre_contact_forces` (f_from: f_d in A's
-        first period; the stage sets :attr:`pre_from` to None outside A)."""
+        first period; the stage sets :attr:`pre_from` to None outside A) for the share of F_d
+        :func:`partial_pre_contact_forces` finds in A's first period (1 where the full F_d has
+        pre-contact forces; one QP a period, a bisection in A's first period and again, below the
+        share of the last, where that share no longer has them: e follows the cables' stiffness at
+        f_d and θ, and a share found at the edge lost its forces a period later)."""
         f_d = np.asarray(f_d, dtype=float)
         if self.pre_from is None:
-            self.pre_from, self.pre_periods = f_d.copy(), 0
-        return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
+            self.pre_from, self.pre_periods, self.pre_share, self.pre_floor = f_d.copy(), 0, 1.0, None
+        f_pre = pre_contact_forces(AT, e, self.pre_share * F_d, self.pre_from, f_min, f_max, self.pre_floor)
+        if f_pre is None and self.pre_share > 0.0:
+            f_pre, share, floor = partial_pre_contact_forces(AT, e, self.pre_share * F_d, self.pre_from, f_min, f_max,
+                                                             f_floor)
+            self.pre_share *= share
+            self.pre_floor = floor if floor is not None else self.pre_floor
+        return f_pre
 
     def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
                        d=None) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -1060,6 +1113,7 @@ class ContactCableForceControl:
         self.dq_cfc = np.zeros(robot.m)
         self.F_a = 0.0
         self.contact_saturation = CONTACT_SATURATION   # the CFC's saturation factor in D and R (_saturation)
+        self.f_floor = np.asarray(robot.cable.f_min, dtype=float) * np.ones(robot.m)   # N, the robot's f_min
         self.saturation_factor = 1.0                # the factor applied now
         self._base_params = cfc.params              # the CFC's parameters as set (F_sat,n/p unscaled)
         self._scaled_params = cfc.params            # what _saturation last set
@@ -1116,7 +1170,7 @@ class ContactCableForceControl:
             if not np.all(np.isfinite(e)):
                 e = None
             if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning and e is not None:
-                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
+                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max, self.f_floor)
         if state != APPROACH:
             self.coupling.pre_from = None                # the next A starts from its own f_d
         e_F = None
