@@ -75,9 +75,6 @@ PRE_TENSION_TIME = 0.3
 # pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
 # (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
 PRE_TENSION_SETTLE = 0.15
-# bisection steps for the largest share of F_d whose pre-contact forces exist, where the full F_d's
-# do not (partial_pre_contact_forces; a resolution of 1/64 of F_d)
-PRE_TENSION_STEPS = 6
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -669,7 +666,7 @@ def contact_response(AT, k_l, z_t) -> np.ndarray:
     return k_l * (AT.T @ np.linalg.solve(AT @ (k_l[:, None] * AT.T), g))
 
 
-def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max, f_min_after=None) -> np.ndarray | None:
+def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | None:
     """The cable forces to hold before the impact (state A) so that pressing F_d [N], which adds
     e F_d (:func:`contact_response`), keeps every cable within [f_min, f_max]: the issue's "force
     planned for contact before impact". With the CFC paused in B as in the thesis (section 5.1.2), x_t
@@ -681,53 +678,37 @@ def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max, f_min_after=None
     (3.27)-(3.28) with those limits and f_ref = f_from), so f_from itself where it already keeps
     the cables within their limits under the contact, and only the internal tension (the nullspace
     of A^T) changed otherwise; None where no such forces exist (the pose cannot hold the contact both
-    ways: the CFC then holds f_from, as the thesis). f_min_after (m,) [N]: the lower limit once
-    pressed where it is not f_min (:func:`partial_pre_contact_forces`)."""
+    ways: the CFC then holds f_from, as the thesis)."""
     AT, f_from = np.asarray(AT, dtype=float), np.asarray(f_from, dtype=float)
     df = np.asarray(e, dtype=float) * F_d
-    after = f_min if f_min_after is None else f_min_after
-    lo, hi = np.maximum(f_min, after - df), np.minimum(f_max, f_max - df)
+    lo, hi = np.maximum(f_min, f_min - df), np.minimum(f_max, f_max - df)
     if not (np.all(np.isfinite(f_from)) and np.all(lo <= hi)):
         return None
     result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
     return result.f if result.status == Status.FEASIBLE else None
 
 
-def partial_pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max, f_floor=None,
-                               steps: int = PRE_TENSION_STEPS) -> tuple[np.ndarray | None, float, np.ndarray | None]:
-    """The pre-contact forces where :func:`pre_contact_forces` has none for F_d within the
-    distribution's [f_min, f_max] -> (forces, share s of F_d they hold, the lower limit once pressed
-    (None: f_min)), the first that exists of: F_d with the cables within the limits both ways; F_d
-    with the cables at or above f_floor (m,) [N] (the robot's f_min, below the distribution's) once
-    pressed; the largest share s F_d (bisection of ``steps`` steps) with f_floor once pressed;
-    (None, 0, None) where not even f_from has them.
+def post_contact_forces(AT, e, F_d: float, f_hold, f_min, f_max) -> np.ndarray | None:
+    """The set-point the cable force control resumes from in D: f_hold (m,) [N], held since the
+    pause (A-C), whose press e F_d (:func:`contact_response`) the coupling adds along a, with its
+    internal tension (the nullspace of A^T) moved so that f_hold + e F_d is within [f_min, f_max]:
+    the forces nearest to f_hold with its wrench within [f_min - e F_d, f_max - e F_d] (the QP
+    (3.27)-(3.28) with f_ref = f_hold); f_hold itself where it already is (the pre-contact forces
+    of :func:`pre_contact_forces` are), None where no such forces exist.
 
-    Near the border of the workspace the cables' elastic response e F_d can take a cable below
-    f_min, or another above f_max, for every internal tension although the pose's contact capacity
-    (the LP, which plans the press freely) holds F_d. Holding f_from there (sessions 11 to 13), the
-    press took IPAnema 3 #37's cable 1 (seed 2, 150 N of 185 N capacity) from 150 N to 74 N, below
-    the robot's f_min (100 N) for 0.33 s in D. The distribution's f_min is a margin above the
-    robot's (150 N on the IPAnema 3) for the force control's transients; pre-tensioned for 90 % of
-    the press within it, the upper cables rose by up to 430 N and the pose estimate's errors at those
-    tensions read 12 N of contact force before the impact (22.8 % overshoot of the true force), so the
-    pressed side keeps the robot's f_min before the share shrinks (docs/hybrid_force_control.md,
-    "Session 14")."""
-    full = pre_contact_forces(AT, e, F_d, f_from, f_min, f_max)
-    if full is not None:
-        return full, 1.0, None
-    floor = None if f_floor is None else np.minimum(np.asarray(f_min, dtype=float), f_floor)
-    full = pre_contact_forces(AT, e, F_d, f_from, f_min, f_max, floor)
-    if full is not None:
-        return full, 1.0, floor
-    best, share, lo, hi = None, 0.0, 0.0, 1.0
-    for _ in range(steps):
-        mid = 0.5 * (lo + hi)
-        f = pre_contact_forces(AT, e, mid * F_d, f_from, f_min, f_max, floor)
-        if f is None:
-            hi = mid
-        else:
-            best, share, lo = f, mid, mid
-    return best, share, floor if best is not None else None
+    Where no pre-contact forces hold the whole press before the impact, f_hold + e F_d took a cable
+    below f_min for the 2 s the moving average of T_MA took to bring the distribution's internal
+    tension (IPAnema 3 #37, seed 2: cable 1's set-point 94.5 N for f_min 150 N, the cable at 74-82 N,
+    below the robot's 100 N for 0.24-0.33 s; docs/hybrid_force_control.md, "Session 14")."""
+    AT, f_hold = np.asarray(AT, dtype=float), np.asarray(f_hold, dtype=float)
+    df = np.asarray(e, dtype=float) * F_d
+    lo, hi = np.asarray(f_min, dtype=float) - df, np.asarray(f_max, dtype=float) - df
+    if not np.all(np.isfinite(f_hold)) or not np.all(lo <= hi):
+        return None
+    if np.all(f_hold >= lo) and np.all(f_hold <= hi):
+        return f_hold
+    result = distribute(AT, -(AT @ f_hold), lo, hi, f_hold, method="qp")
+    return result.f if result.status == Status.FEASIBLE else None
 
 
 def contact_capacity(AT, w, z_t, f_min, f_max) -> float:
@@ -826,8 +807,8 @@ class CFCCoupling:
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
         self.pre_from: np.ndarray | None = None  # the set-point when A began (pre_tension), None outside A
         self.pre_periods = 0                    # periods of A with the pre-contact forces (ramp, then settling)
-        self.pre_share = 1.0                    # share of F_d the pre-contact forces hold (partial_pre_contact_forces)
-        self.pre_floor: np.ndarray | None = None  # their lower limit once pressed (None: f_min)
+        self.hold: np.ndarray | None = None     # the set-point held at the pause (A-C)
+        self.shift: np.ndarray | None = None    # post_contact_forces - the held set-point, ramped in D
 
     def set_time_constant(self, T_MA: float) -> None:
         self.bias.set_time_constant(T_MA)
@@ -858,26 +839,16 @@ class CFCCoupling:
         """In A, the set-point's ramp to the pre-contact forces not done (:meth:`pre_tension` wanted)."""
         return self.pre_from is None or self.pre_periods * self.dt < PRE_TENSION_TIME + PRE_TENSION_SETTLE - 1e-9
 
-    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max, f_floor=None) -> np.ndarray | None:
+    def pre_tension(self, AT, e, F_d: float, f_d, f_min, f_max) -> np.ndarray | None:
         """A period of A while :attr:`pre_tensioning`: :func:`pre_contact_forces` (f_from: f_d in A's
-        first period; the stage sets :attr:`pre_from` to None outside A) for the share of F_d
-        :func:`partial_pre_contact_forces` finds in A's first period (1 where the full F_d has
-        pre-contact forces; one QP a period, a bisection in A's first period and again, below the
-        share of the last, where that share no longer has them: e follows the cables' stiffness at
-        f_d and θ, and a share found at the edge lost its forces a period later)."""
+        first period; the stage sets :attr:`pre_from` to None outside A)."""
         f_d = np.asarray(f_d, dtype=float)
         if self.pre_from is None:
-            self.pre_from, self.pre_periods, self.pre_share, self.pre_floor = f_d.copy(), 0, 1.0, None
-        f_pre = pre_contact_forces(AT, e, self.pre_share * F_d, self.pre_from, f_min, f_max, self.pre_floor)
-        if f_pre is None and self.pre_share > 0.0:
-            f_pre, share, floor = partial_pre_contact_forces(AT, e, self.pre_share * F_d, self.pre_from, f_min, f_max,
-                                                             f_floor)
-            self.pre_share *= share
-            self.pre_floor = floor if floor is not None else self.pre_floor
-        return f_pre
+            self.pre_from, self.pre_periods = f_d.copy(), 0
+        return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
 
     def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
-                       d=None) -> tuple[np.ndarray, np.ndarray, bool]:
+                       d=None, f_post=None) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
         :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
@@ -935,10 +906,23 @@ class CFCCoupling:
                 self.average.reset(f_d)
                 self.hold = f_d.copy()
                 self.share = 0.0
+            elif self.share == 0.0:                   # resumed after the pause: no shift yet
+                self.shift = None
+                if f_post is not None and not np.array_equal(f_post, self.hold):
+                    # the held set-point's internal tension moved so that its press stays within the
+                    # limits (post_contact_forces); the average starts there, the step ramped in below
+                    f_post = np.asarray(f_post, dtype=float)
+                    self.shift = f_post - self.hold
+                    self.hold = f_post.copy()
+                    self.average.reset(f_post)
             self.weight = 1.0
             # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
             self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
             y = self.average.update(f_d).copy()
+            if self.shift is not None:
+                y -= (1.0 - self.share) * self.shift     # the shift ramped in with the hand-over
+                if self.share >= 1.0:
+                    self.shift = None
             f_err = y
             if aa > 0.0:
                 target = self.hold + self.share * (f_d - self.hold)
@@ -951,7 +935,7 @@ class CFCCoupling:
 
 
     def run(self, state: str, f_d, a, controller, f, e_F: float | None = None, f_pre=None,
-            d=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
+            d=None, f_post=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
         before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
@@ -991,7 +975,7 @@ class CFCCoupling:
             # paused: the CFC resumes bumpless from the pause; else ramped out
             bias = 0.0 if state in CFC_PAUSED else math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
             self.bias.reset(bias)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d, f_post)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             # the PI's output held at the pause (its P part too: after the pre-tension's ramp in A the
@@ -1113,7 +1097,6 @@ class ContactCableForceControl:
         self.dq_cfc = np.zeros(robot.m)
         self.F_a = 0.0
         self.contact_saturation = CONTACT_SATURATION   # the CFC's saturation factor in D and R (_saturation)
-        self.f_floor = np.asarray(robot.cable.f_min, dtype=float) * np.ones(robot.m)   # N, the robot's f_min
         self.saturation_factor = 1.0                # the factor applied now
         self._base_params = cfc.params              # the CFC's parameters as set (F_sat,n/p unscaled)
         self._scaled_params = cfc.params            # what _saturation last set
@@ -1162,7 +1145,7 @@ class ContactCableForceControl:
             key = F_d0.tobytes()
             if key != self._F_d0:                   # the same F_d,0 has the same axis
                 self.z_t, self._F_d0 = task_axis(F_d0, self.z_t), key
-        a, e, f_pre = self.a_zero, None, None
+        a, e, f_pre, f_post = self.a_zero, None, None, None
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
@@ -1170,7 +1153,10 @@ class ContactCableForceControl:
             if not np.all(np.isfinite(e)):
                 e = None
             if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning and e is not None:
-                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max, self.f_floor)
+                f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
+            if (state in (CONTACT, RELEASE) and self.coupling.paused and e is not None and self.cfc.enabled
+                    and self.coupling.hold is not None):
+                f_post = post_contact_forces(AT, e, float(self.z_t @ F_d0), self.coupling.hold, f_min, f_max)
         if state != APPROACH:
             self.coupling.pre_from = None                # the next A starts from its own f_d
         e_F = None
@@ -1178,7 +1164,7 @@ class ContactCableForceControl:
             F_vec = np.asarray(F_vec, dtype=float)
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e, f_post)
         if self.needs_setpoint(state):
             # no set-point above f_max (2.39) reaches the drives: where the wrench with the expected
             # contact has no solution within the limits the distribution returns its least-violating
