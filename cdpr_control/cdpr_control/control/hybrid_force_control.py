@@ -75,6 +75,13 @@ PRE_TENSION_TIME = 0.3
 # pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
 # (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
 PRE_TENSION_SETTLE = 0.15
+# s, PT1 time constant of the CFC's bias along a against the hybrid force controller's error
+# (CFCCoupling.run; ASSUMPTION): slow against the CFC's loop (T_i 0.1 s, T_1,r 0.08 s), whose fast
+# part along a it keeps, fast against the PID's T_i (2.6 s). With T_MA (2 s, until session 13) the
+# CFC took back what x_t pressed for seconds (IPAnema 3 #17, seed 2: 1,565 N/m of the 22,143 N/m met
+# in B) and the contact force crept towards F_d (-4.0 % after 4.6 s; docs/hybrid_force_control.md,
+# "Session 14")
+BIAS_TIME = 0.5
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -801,7 +808,7 @@ class CFCCoupling:
         self.weight = 0.0                       # share of the filtered set-point, 0..1
         self.share = 1.0                        # share of the contact force handed over (contact_update)
         self.paused = False                     # the CFC paused in the last period (run)
-        self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
+        self.bias = LowPass(BIAS_TIME, dt)      # N, a . (f_d - f) - e_F in D (run)
         self.bias.reset(0.0)
         self.bias_step = 0.0                    # N per period of its ramp-out after D
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
@@ -811,7 +818,6 @@ class CFCCoupling:
         self.shift: np.ndarray | None = None    # post_contact_forces - the held set-point, ramped in D
 
     def set_time_constant(self, T_MA: float) -> None:
-        self.bias.set_time_constant(T_MA)
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
             last = self.average.y
             self.average = MovingAverage(T_MA, self.dt)
@@ -943,7 +949,7 @@ class CFCCoupling:
         forces in A (:meth:`pre_tension`) -> (set-point, feed-forward, paused, F_a).
 
         - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
-          T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
+          BIAS_TIME of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
           distribution's error as before, steady it is e_F, so the integral part handed over to
           x_t integrates the PID's own error. After D (R, I) the bias ramps out within
           HAND_OVER_TIME (dropped at once, it stepped the drive command by 0.5 mm at the release). Both read the contact force, but a is taken at x_d,
