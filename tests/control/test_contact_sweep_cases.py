@@ -8,8 +8,8 @@ import pytest
 
 from cdpr_control import kernels
 from cdpr_control.control.cable_force_control import CableForceControl
-from cdpr_control.control.hybrid_force_control import (BIAS_TIME, CONTACT, HAND_OVER_TIME, IDLE, RELEASE, ContactCableForceControl,
-                                                         contact_response, drive_ramp_lag, task_axis,
+from cdpr_control.control.hybrid_force_control import (BIAS_TIME, CONTACT, HAND_OVER_TIME, IDLE, RELEASE,
+                                                         ContactCableForceControl, contact_response, drive_ramp_lag, task_axis,
                                                          task_force_direction)
 from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.robot import load_robot

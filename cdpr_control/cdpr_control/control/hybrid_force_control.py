@@ -306,7 +306,7 @@ class HybridForceControl:
         self.F_tare = NO_TARE                  # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
-        self.k_pid = 0.0                       # N/m, the stiffness the PID (5.3) divides by in D (_pid_stiffness)
+        self.k_pid = 0.0                       # N/m, the stiffness (5.3)'s P part divides by in D (_pid_stiffness)
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
         self.drive_lag = drive_ramp_lag(robot.drive)   # s, the drives' lag behind a ramp of x_t (_brake_ahead)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
@@ -614,14 +614,14 @@ class HybridForceControl:
                 np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0]))    # R_t [0 0 x_t]
 
     def _pid_stiffness(self) -> float:
-        """The stiffness [N/m] the PID (5.3) divides the force error by in D: K_p, or the stiffness
-        met in B (:attr:`k_contact`) where that is stiffer. (5.3)'s gain 1/K_p is tuned for contacts
-        of about K_p (table 5.1: the IPAnema 3's z stiffness at home); the loop's gain is the
-        stiffness met over K_p, and where the cables and the surface are several times stiffer (border
-        poses) the P part alone crosses over at tens of Hz, where the drives' lag and the platform's
-        modes leave no phase: a growing 52 Hz oscillation (IPAnema 3 sweep #33, seed 2, 1e5 N/m, met
-        at 2.1 K_p; docs/hybrid_force_control.md, "Session 14"). Never below K_p (a softer contact keeps
-        the thesis's gain)."""
+        """The stiffness [N/m] the P part of the PID (5.3) divides the force error by in D: K_p, or
+        the stiffness met in B (:attr:`k_contact`) where that is stiffer (the I part keeps
+        1 / (K_p T_i)). (5.3)'s gain 1/K_p is tuned for contacts of about K_p (table 5.1: the
+        IPAnema 3's z stiffness at home); the loop's gain is the stiffness met over K_p, and where the
+        cables and the surface are stiffer (border poses) the P part crosses over where the drives'
+        lag and the platform's modes leave no phase: a growing 52 Hz oscillation (IPAnema 3 sweep
+        #33, seed 2, 1e5 N/m, met at 2.1 K_p; docs/hybrid_force_control.md, "Session 14"). Never below
+        K_p (a softer contact keeps the thesis's gain)."""
         k = self.params.K_p
         return max(k, self.k_contact) if self.k_contact is not None and math.isfinite(self.k_contact) else k
 
