@@ -661,3 +661,23 @@ def test_sweep_worst_case_500N_on_2e6_within_the_bands():
     print(f"\n{r.status}: " + ", ".join(f"{k} {v:.3g}" for k, v in r.metrics.items()))
     assert r.status == "passed", (r.note, r.checks)
     assert r.metrics["overshoot_percent"] <= 20.0
+
+
+@pytest.mark.parametrize("stiffness_ratio", [0.5, 3.0])
+def test_pid_p_part_divides_by_the_stiffness_met_where_it_is_stiffer_than_K_p(stiffness_ratio):
+    """In D the P part of (5.3) is e_F over the stiffness met in B where that is above K_p (the loop's
+    gain at high frequency stays the thesis's; at 2.1 K_p the IPAnema 3's contact at sweep pose #33
+    grew a 52 Hz oscillation), over K_p where the contact is softer; the I part keeps 1 / (K_p T_i)."""
+    p = HPFCParams(K_p=20000.0, T_i=0.3, T_d=0.0, F_th=1.0, v_max=0.01, a_max=1.0, x_max=0.02, T_F=0.0)
+    hpfc = HybridForceControl(MINI, 1e-3, p, enabled=True)
+    wall = Wall(MINI, stiffness_ratio * p.K_p, 0.003)
+    log = _drive(hpfc, wall, 10.0, 3000, [])
+    assert _sequence(log) == ["A", "B", "D"]
+    # measured in B (through the wall's lag: 10,764 and 75,063 N/m here), on the wall's side of K_p
+    assert (hpfc.k_contact > 2.0 * p.K_p) if stiffness_ratio > 1.0 else (hpfc.k_contact < p.K_p)
+    k = max(p.K_p, hpfc.k_contact)
+    integrator, x_t = hpfc.integrator, hpfc.x_t
+    w = np.r_[MINI.platform.mass * MINI.gravity + [0, 0, 6.0], 0, 0, 0]      # F = 6 N: e_F = 4 N
+    s = hpfc.update([0, 0, -10.0], w)
+    assert s.x_t == pytest.approx(4.0 / k + integrator + 1e-3 * 4.0 / (p.K_p * p.T_i), rel=1e-9)
+    assert s.x_t != pytest.approx(x_t)

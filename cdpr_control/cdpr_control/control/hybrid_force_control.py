@@ -75,6 +75,13 @@ PRE_TENSION_TIME = 0.3
 # pause clipped its integral part at the resumption in D, and the drive command stepped by 0.68 mm
 # (the floor program through the graph). Ramp and settling end before x_t leaves 0 (T_on 0.5 s).
 PRE_TENSION_SETTLE = 0.15
+# s, PT1 time constant of the CFC's bias along a against the hybrid force controller's error
+# (CFCCoupling.run; ASSUMPTION): slow against the CFC's loop (T_i 0.1 s, T_1,r 0.08 s), whose fast
+# part along a it keeps, fast against the PID's T_i (2.6 s). With T_MA (2 s, until session 13) the
+# CFC took back what x_t pressed for seconds (IPAnema 3 #17, seed 2: 1,565 N/m of the 22,143 N/m met
+# in B) and the contact force crept towards F_d (-4.0 % after 4.6 s; docs/hybrid_force_control.md,
+# "Session 14")
+BIAS_TIME = 0.5
 # B ends at standstill, below V_END v_max, or after B_MARGIN times its profile at stiffness K_p
 # (HybridForceControl._brake_limit); ASSUMPTIONS, not in the thesis (docs/hybrid_force_control.md)
 V_END = 0.02
@@ -299,6 +306,7 @@ class HybridForceControl:
         self.F_tare = NO_TARE                  # N, the contact force measured in free space at the tare
         self.contact = (0.0, 0.0)              # x_t and F when the contact was detected (A/C -> B)
         self.k_contact: float | None = None    # N/m, effective contact stiffness measured in B
+        self.k_pid = 0.0                       # N/m, the stiffness (5.3)'s P part divides by in D (_pid_stiffness)
         self.active_periods = 0                # periods the output has been reported active (HPFCState.active)
         self.drive_lag = drive_ramp_lag(robot.drive)   # s, the drives' lag behind a ramp of x_t (_brake_ahead)
         self.brake_periods, self.brake_limit = 0, 0.0   # periods in B, its bound [s] (_brake_limit)
@@ -530,9 +538,10 @@ class HybridForceControl:
                 x_c, F_c = self.contact                          # the stiffness met from contact to here
                 if self.x_t - x_c > 0.0 and F - F_c > 0.0:
                     self.k_contact = (F - F_c) / (self.x_t - x_c)
+                self.k_pid = self._pid_stiffness()
                 # bumpless: the integral part takes over what the P part does not give (the D part
                 # of the contact transient is left out: it would stay in the integrator)
-                self.integrator = self.x_t - e_F / p.K_p
+                self.integrator = self.x_t - e_F / self.k_pid
         if self.state == CONTACT:
             self._pid(e_F, dF)
         elif self.state == RELEASE:
@@ -604,6 +613,18 @@ class HybridForceControl:
         return (self.z_t.copy(), F_d0.copy(),
                 np.array([x_t * z_x, x_t * z_y, x_t * z_z, 0.0, 0.0, 0.0]))    # R_t [0 0 x_t]
 
+    def _pid_stiffness(self) -> float:
+        """The stiffness [N/m] the P part of the PID (5.3) divides the force error by in D: K_p, or
+        the stiffness met in B (:attr:`k_contact`) where that is stiffer (the I part keeps
+        1 / (K_p T_i)). (5.3)'s gain 1/K_p is tuned for contacts of about K_p (table 5.1: the
+        IPAnema 3's z stiffness at home); the loop's gain is the stiffness met over K_p, and where the
+        cables and the surface are stiffer (border poses) the P part crosses over where the drives'
+        lag and the platform's modes leave no phase: a growing 52 Hz oscillation (IPAnema 3 sweep
+        #33, seed 2, 1e5 N/m, met at 2.1 K_p; docs/hybrid_force_control.md, "Session 14"). Never below
+        K_p (a softer contact keeps the thesis's gain)."""
+        k = self.params.K_p
+        return max(k, self.k_contact) if self.k_contact is not None and math.isfinite(self.k_contact) else k
+
     def absorb(self, dx: float) -> None:
         """Take over dx [m] along z_t from another output acting on the contact force (in D and R:
         the cable force controller's integral part along the task axis, see ``ControlLoop``): x_t
@@ -616,7 +637,7 @@ class HybridForceControl:
     def _pid(self, e_F: float, dF: float) -> None:
         """(5.3) with gain 1/K_p, D on the measurement, saturation |x_t| <= x_max and anti-windup."""
         p, dt = self.params, self.dt
-        pd = (e_F - p.T_d * dF) / p.K_p
+        pd = (e_F - p.T_d * dF) / (self.k_pid or p.K_p)          # (_pid_stiffness)
         candidate = self.integrator + dt / (p.K_p * p.T_i) * e_F
         free = pd + candidate
         blocked = (free > p.x_max and e_F > 0.0) or (free < -p.x_max and e_F < 0.0)
@@ -671,6 +692,29 @@ def pre_contact_forces(AT, e, F_d: float, f_from, f_min, f_max) -> np.ndarray | 
     if not (np.all(np.isfinite(f_from)) and np.all(lo <= hi)):
         return None
     result = distribute(AT, -(AT @ f_from), lo, hi, f_from, method="qp")
+    return result.f if result.status == Status.FEASIBLE else None
+
+
+def post_contact_forces(AT, e, F_d: float, f_hold, f_min, f_max) -> np.ndarray | None:
+    """The set-point the cable force control resumes from in D: f_hold (m,) [N], held since the
+    pause (A-C), whose press e F_d (:func:`contact_response`) the coupling adds along a, with its
+    internal tension (the nullspace of A^T) moved so that f_hold + e F_d is within [f_min, f_max]:
+    the forces nearest to f_hold with its wrench within [f_min - e F_d, f_max - e F_d] (the QP
+    (3.27)-(3.28) with f_ref = f_hold); f_hold itself where it already is (the pre-contact forces
+    of :func:`pre_contact_forces` are), None where no such forces exist.
+
+    Where no pre-contact forces hold the whole press before the impact, f_hold + e F_d took a cable
+    below f_min for the 2 s the moving average of T_MA took to bring the distribution's internal
+    tension (IPAnema 3 #37, seed 2: cable 1's set-point 94.5 N for f_min 150 N, the cable at 74-82 N,
+    below the robot's 100 N for 0.24-0.33 s; docs/hybrid_force_control.md, "Session 14")."""
+    AT, f_hold = np.asarray(AT, dtype=float), np.asarray(f_hold, dtype=float)
+    df = np.asarray(e, dtype=float) * F_d
+    lo, hi = np.asarray(f_min, dtype=float) - df, np.asarray(f_max, dtype=float) - df
+    if not np.all(np.isfinite(f_hold)) or not np.all(lo <= hi):
+        return None
+    if np.all(f_hold >= lo) and np.all(f_hold <= hi):
+        return f_hold
+    result = distribute(AT, -(AT @ f_hold), lo, hi, f_hold, method="qp")
     return result.f if result.status == Status.FEASIBLE else None
 
 
@@ -764,15 +808,16 @@ class CFCCoupling:
         self.weight = 0.0                       # share of the filtered set-point, 0..1
         self.share = 1.0                        # share of the contact force handed over (contact_update)
         self.paused = False                     # the CFC paused in the last period (run)
-        self.bias = LowPass(T_MA, dt)           # N, a . (f_d - f) - e_F in D (run)
+        self.bias = LowPass(BIAS_TIME, dt)      # N, a . (f_d - f) - e_F in D (run)
         self.bias.reset(0.0)
         self.bias_step = 0.0                    # N per period of its ramp-out after D
         self.hand_over_gain = 1.0               # 0..1, the integral part's hand-over (run): 0 while saturated
         self.pre_from: np.ndarray | None = None  # the set-point when A began (pre_tension), None outside A
         self.pre_periods = 0                    # periods of A with the pre-contact forces (ramp, then settling)
+        self.hold: np.ndarray | None = None     # the set-point held at the pause (A-C)
+        self.shift: np.ndarray | None = None    # post_contact_forces - the held set-point, ramped in D
 
     def set_time_constant(self, T_MA: float) -> None:
-        self.bias.set_time_constant(T_MA)
         if max(1, int(round(T_MA / self.dt))) != self.average.n:
             last = self.average.y
             self.average = MovingAverage(T_MA, self.dt)
@@ -809,7 +854,7 @@ class CFCCoupling:
         return pre_contact_forces(AT, e, F_d, self.pre_from, f_min, f_max)
 
     def contact_update(self, state: str, f_d, a, bias: float = 0.0, f_pre=None,
-                       d=None) -> tuple[np.ndarray, np.ndarray, bool]:
+                       d=None, f_post=None) -> tuple[np.ndarray, np.ndarray, bool]:
         """Section 5.1.2 with the CFC running in D: desired cable forces f_d (the distribution of the
         wrench with the expected contact force, :func:`expected_contact_wrench`), a of
         :func:`task_force_direction`, bias [N] what the set-point of the error is lowered by along a
@@ -867,10 +912,23 @@ class CFCCoupling:
                 self.average.reset(f_d)
                 self.hold = f_d.copy()
                 self.share = 0.0
+            elif self.share == 0.0:                   # resumed after the pause: no shift yet
+                self.shift = None
+                if f_post is not None and not np.array_equal(f_post, self.hold):
+                    # the held set-point's internal tension moved so that its press stays within the
+                    # limits (post_contact_forces); the average starts there, the step ramped in below
+                    f_post = np.asarray(f_post, dtype=float)
+                    self.shift = f_post - self.hold
+                    self.hold = f_post.copy()
+                    self.average.reset(f_post)
             self.weight = 1.0
             # the hand-over along a ramps in over HAND_OVER_TIME (a step would step θ_d by mm)
             self.share = min(1.0, self.share + self.dt / HAND_OVER_TIME)
             y = self.average.update(f_d).copy()
+            if self.shift is not None:
+                y -= (1.0 - self.share) * self.shift     # the shift ramped in with the hand-over
+                if self.share >= 1.0:
+                    self.shift = None
             f_err = y
             if aa > 0.0:
                 target = self.hold + self.share * (f_d - self.hold)
@@ -883,7 +941,7 @@ class CFCCoupling:
 
 
     def run(self, state: str, f_d, a, controller, f, e_F: float | None = None, f_pre=None,
-            d=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
+            d=None, f_post=None) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """:meth:`contact_update` and what it does to the cable force controller (a
         :class:`cdpr_control.control.cable_force_control.CableForceController` with its ``dq_0`` set or None),
         before that controller's update of the period: f the measured cable forces (m,) [N], e_F [N]
@@ -891,7 +949,7 @@ class CFCCoupling:
         forces in A (:meth:`pre_tension`) -> (set-point, feed-forward, paused, F_a).
 
         - In D, given e_F, the error along a is a . (f_d - f) less its bias against e_F, the PT1 of
-          T_MA of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
+          BIAS_TIME of a . (f_d - f) - e_F (:attr:`bias`, from 0 at the start of D): fast it is the
           distribution's error as before, steady it is e_F, so the integral part handed over to
           x_t integrates the PID's own error. After D (R, I) the bias ramps out within
           HAND_OVER_TIME (dropped at once, it stepped the drive command by 0.5 mm at the release). Both read the contact force, but a is taken at x_d,
@@ -923,7 +981,7 @@ class CFCCoupling:
             # paused: the CFC resumes bumpless from the pause; else ramped out
             bias = 0.0 if state in CFC_PAUSED else math.copysign(max(0.0, abs(bias) - self.bias_step), bias)
             self.bias.reset(bias)
-        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d)
+        f_set, f_ff, paused = self.contact_update(state, f_d, a, bias, f_pre, d, f_post)
         c = controller
         if self.paused and not paused and c.dq_0 is not None:     # resume bumpless
             # the PI's output held at the pause (its P part too: after the pre-tension's ramp in A the
@@ -1093,7 +1151,7 @@ class ContactCableForceControl:
             key = F_d0.tobytes()
             if key != self._F_d0:                   # the same F_d,0 has the same axis
                 self.z_t, self._F_d0 = task_axis(F_d0, self.z_t), key
-        a, e, f_pre = self.a_zero, None, None
+        a, e, f_pre, f_post = self.a_zero, None, None, None
         if F_d0 is not None and x_d is not None and self.needs_setpoint(state):
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")   # (2.10) at x_d
             a = task_force_direction(AT, self.z_t)
@@ -1102,6 +1160,9 @@ class ContactCableForceControl:
                 e = None
             if state == APPROACH and self.cfc.enabled and self.coupling.pre_tensioning and e is not None:
                 f_pre = self.coupling.pre_tension(AT, e, float(self.z_t @ F_d0), f_d, f_min, f_max)
+            if (state in (CONTACT, RELEASE) and self.coupling.paused and e is not None and self.cfc.enabled
+                    and self.coupling.hold is not None):
+                f_post = post_contact_forces(AT, e, float(self.z_t @ F_d0), self.coupling.hold, f_min, f_max)
         if state != APPROACH:
             self.coupling.pre_from = None                # the next A starts from its own f_d
         e_F = None
@@ -1109,7 +1170,7 @@ class ContactCableForceControl:
             F_vec = np.asarray(F_vec, dtype=float)
             e_F = float(self.z_t @ (F_d0 - F_vec)) if F_vec.shape == (3,) and np.all(np.isfinite(F_vec)) else None
         cfc = self.cfc
-        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e)
+        f_set, f_ff, paused, F_a = self.coupling.run(state, f_d, a, cfc.controller, f, e_F, f_pre, e, f_post)
         if self.needs_setpoint(state):
             # no set-point above f_max (2.39) reaches the drives: where the wrench with the expected
             # contact has no solution within the limits the distribution returns its least-violating
