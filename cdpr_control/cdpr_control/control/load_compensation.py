@@ -71,6 +71,16 @@ VELOCITY_BASE = 0.2
 SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
 SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
 SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
+# A window over a swing must not reach back across a load change (docs/load_compensation.md, "The
+# swing window over a load step"). The thesis' own estimate, (4.4) over T_filter, is compared at the
+# window's end and at its start (the window's first T_filter): over a swing the two differ by at
+# most twice the share of the swing's acceleration that the forward kinematics misses (under half
+# of it: it sees 66-110 % of the swing, "The window matched to the swing"), i.e. by less than
+# m̂ a / |g| with a the swing's acceleration amplitude; a load change within the window moves the
+# later one by the change. Where they differ by more than m̂ (LOAD_CHANGE + a / |g|) the window is
+# T_filter, the thesis' own (LOAD_CHANGE: the noise of a T_filter estimate at rest and a share of the
+# estimate's band that a change below it may cost).
+LOAD_CHANGE = 0.02
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -436,6 +446,8 @@ class LoadCompensation:
         self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
         self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
         self.window_n: int | None = None                       # samples of the last window of (4.4)
+        self.m_short: list[float] = []                         # (4.4) over T_filter per sample (the longest window + 1)
+        self.load_change = 0.0                                 # kg, the last same-phase difference of m_short (see LOAD_CHANGE)
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
@@ -540,8 +552,26 @@ class LoadCompensation:
         e = self.extremes
         if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
                 and self.samples_seen - e[2][0] <= self._n_max):
-            n = max(n, min(2 * (e[2][0] - e[1][0]), self._n_max))
+            n_swing = min(2 * (e[2][0] - e[1][0]), self._n_max)
+            # the swing's acceleration amplitude: half the last half swing's z change times (2 pi / T)^2
+            omega = math.pi / (max(e[2][0] - e[1][0], 1) * self.dt)
+            if n_swing > n and not self._load_changed(n_swing, 0.5 * abs(e[2][1] - e[1][1]) * omega ** 2):
+                n = n_swing
         return n
+
+    def _load_changed(self, n: int, acceleration: float) -> bool:
+        """Whether the load changed within the last n samples, so that a window of n would reach back
+        across it: (4.4) over T_filter at the window's end and over its first T_filter differ by more
+        than the estimated mass times LOAD_CHANGE + acceleration / |g| (acceleration [m/s²]: the
+        swing's amplitude; see LOAD_CHANGE). True while the history does not reach back that far or
+        either is not finite."""
+        m, back = self.m_short, n - self.wrench_filter.n
+        if len(m) <= back:
+            return True
+        self.load_change = m[-1] - m[-1 - back]
+        scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
+        limit = scale * (LOAD_CHANGE + 2.0 * acceleration / abs(float(self.robot.gravity[2])))
+        return not (math.isfinite(self.load_change) and abs(self.load_change) <= limit)
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
@@ -561,13 +591,30 @@ class LoadCompensation:
         previous = self.d_history[-1] if self.d_history else 0.0
         self.d_history.append(previous + self.w_cumulative - self.c_history.pop(0))
         del self.d_history[:-(n_max + 1)]
+        self.m_short.append(self._window_mass(self.wrench_filter.n))
+        del self.m_short[:-(n_max + 1)]
         n = self._swing_periods()
-        if len(self.z_history) < n + h + 1:
+        window = self._window_means(n)
+        if window is not None:
+            self.window_n = n
+        return window
+
+    def _window_means(self, n: int) -> tuple[float, float] | None:
+        """(w_z, ẍ_z) over the last n samples (see :meth:`_estimated_acceleration`), None until the
+        history spans n and h."""
+        h, zh, d = self._velocity_base, self.z_history, self.d_history
+        if len(zh) < n + h + 1 or len(d) < n + 1:
             return None
-        self.window_n = n
-        zh, d = self.z_history, self.d_history
         a = ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
         return (d[-1] - d[-1 - n]) / (h * n), a
+
+    def _window_mass(self, n: int) -> float:
+        """(4.4) over the last n samples with the estimated pose's acceleration, untared [kg]; NaN
+        until the history spans n and h or near (4.4)'s singularity."""
+        window = self._window_means(n)
+        estimate = None if window is None else mass_estimate(*window, float(self.robot.gravity[2]),
+                                                             self.params.accel_guard)
+        return float("nan") if estimate is None else float(estimate)
 
     def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
