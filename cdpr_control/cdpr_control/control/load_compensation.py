@@ -72,14 +72,15 @@ SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
 SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
 SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
 # A window over a swing must not reach back across a load change (docs/load_compensation.md, "The
-# swing window over a load step"). The thesis' own estimate, (4.4) over T_filter, is compared at the
-# window's end and at its start (the window's first T_filter): over a swing the two differ by at
-# most twice the share of the swing's acceleration that the forward kinematics misses (under half
-# of it: it sees 66-110 % of the swing, "The window matched to the swing"), i.e. by less than
-# m̂ a / |g| with a the swing's acceleration amplitude; a load change within the window moves the
-# later one by the change. Where they differ by more than m̂ (LOAD_CHANGE + a / |g|) the window is
-# T_filter, the thesis' own (LOAD_CHANGE: the noise of a T_filter estimate at rest and a share of the
-# estimate's band that a change below it may cost).
+# swing window over a load step (session 14)"). The thesis' own estimate, (4.4) over T_filter, is
+# compared at the window's end and at its start (the window's first T_filter): over a swing each
+# reads the share of the swing's acceleration a that the forward kinematics misses as mass, at most
+# m̂ a / |g| (where it misses all of it), so the two differ by at most 2 m̂ a / |g|, which is the
+# swing's own force swing: the range of the measured w_z over the last half swing over |g|. The force sensors see the true acceleration, so the bound holds however little of
+# the swing the forward kinematics sees. A load change within the window moves the later one by the
+# change. Where they differ by more than LOAD_CHANGE m̂ + that range / |g| the window is T_filter,
+# the thesis' own (LOAD_CHANGE: the noise of a T_filter estimate at rest, and the share of the
+# estimate's 5 % band a change below it may cost).
 LOAD_CHANGE = 0.02
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
@@ -446,6 +447,7 @@ class LoadCompensation:
         self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
         self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
         self.window_n: int | None = None                       # samples of the last window of (4.4)
+        self.w_history: list[float] = []                       # w_z per sample (the longest window + 1)
         self.m_short: list[float] = []                         # (4.4) over T_filter per sample (the longest window + 1)
         self.load_change = 0.0                                 # kg, the last same-phase difference of m_short (see LOAD_CHANGE)
         self.samples_seen = 0                                  # samples of the estimated pose
@@ -553,24 +555,29 @@ class LoadCompensation:
         if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
                 and self.samples_seen - e[2][0] <= self._n_max):
             n_swing = min(2 * (e[2][0] - e[1][0]), self._n_max)
-            # the swing's acceleration amplitude: half the last half swing's z change times (2 pi / T)^2
-            omega = math.pi / (max(e[2][0] - e[1][0], 1) * self.dt)
-            if n_swing > n and not self._load_changed(n_swing, 0.5 * abs(e[2][1] - e[1][1]) * omega ** 2):
+            if n_swing > n and not self._load_changed(n_swing, self._force_swing(e[1][0], e[2][0])):
                 n = n_swing
         return n
 
-    def _load_changed(self, n: int, acceleration: float) -> bool:
+    def _force_swing(self, first: int, last: int) -> float:
+        """The range [N] of the measured w_z from sample ``first`` to ``last`` (a half swing: the
+        acceleration from one extreme to the other, so 2 m a), over what the history holds."""
+        w, end = self.w_history, self.samples_seen - 1                              # w[-1]: sample end
+        lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
+        return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
+
+    def _load_changed(self, n: int, force_swing: float) -> bool:
         """Whether the load changed within the last n samples, so that a window of n would reach back
         across it: (4.4) over T_filter at the window's end and over its first T_filter differ by more
-        than the estimated mass times LOAD_CHANGE + acceleration / |g| (acceleration [m/s²]: the
-        swing's amplitude; see LOAD_CHANGE). True while the history does not reach back that far or
-        either is not finite."""
+        than LOAD_CHANGE of the estimated mass plus force_swing / |g| (force_swing [N]: the range of
+        w_z over the swing's last half, see LOAD_CHANGE). True while the history does not reach back
+        that far or either is not finite."""
         m, back = self.m_short, n - self.wrench_filter.n
         if len(m) <= back:
             return True
         self.load_change = m[-1] - m[-1 - back]
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
-        limit = scale * (LOAD_CHANGE + 2.0 * acceleration / abs(float(self.robot.gravity[2])))
+        limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
         return not (math.isfinite(self.load_change) and abs(self.load_change) <= limit)
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
@@ -586,6 +593,8 @@ class LoadCompensation:
         del self.z_history[:-(n_max + h + 1)]
         # D(k) = sum over the last h of C, the cumulative sum of w_z: (D(k) - D(k - n)) / (h n) is
         # the mean over h of the n-window means of w_z, for any n
+        self.w_history.append(w_z)
+        del self.w_history[:-(n_max + 1)]
         self.w_cumulative += w_z
         self.c_history.append(self.w_cumulative)
         previous = self.d_history[-1] if self.d_history else 0.0
