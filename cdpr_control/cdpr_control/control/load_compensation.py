@@ -76,12 +76,20 @@ SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the directio
 # compared at the window's end and at its start (the window's first T_filter): over a swing each
 # reads the share of the swing's acceleration a that the forward kinematics misses as mass, at most
 # m̂ a / |g| (where it misses all of it), so the two differ by at most 2 m̂ a / |g|, which is the
-# swing's own force swing: the range of the measured w_z over the last half swing over |g|. The force sensors see the true acceleration, so the bound holds however little of
-# the swing the forward kinematics sees. A load change within the window moves the later one by the
-# change. Where they differ by more than LOAD_CHANGE m̂ + that range / |g| the window is T_filter,
-# the thesis' own (LOAD_CHANGE: the noise of a T_filter estimate at rest, and the share of the
-# estimate's 5 % band a change below it may cost).
+# swing's own force swing over |g|: the range of the measured w_z over a half swing (the acceleration
+# from one extreme to the other). The force sensors see the true acceleration, so the bound holds
+# however little of the swing the forward kinematics sees. A load change moves w_z one way, so it
+# is in at most one of the last two half swings, and the smaller of their two ranges is the swing's.
+# A load change within the window moves the later estimate by the change. Where the two differ by
+# more than LOAD_CHANGE m̂ + that range / |g| the window is T_filter, the thesis' own (LOAD_CHANGE:
+# the noise of a T_filter estimate at rest, and the share of the estimate's 5 % band a change below
+# it may cost). Where a load change is put down across both half swings it is in both ranges; the
+# bound is then also at most the forward kinematics' view of the swing, 2 m̂ a_seen / SWING_SEEN_MIN
+# (a_seen the acceleration amplitude of its last half swing): the least share of a swing it was
+# found to see is 66 % (ipanema3 #38, force control); SWING_SEEN_MIN 0.2 keeps the slow swing the
+# forward kinematics sees a fifth of (tests/control/test_load_comp_estimate.py) a swing.
 LOAD_CHANGE = 0.02
+SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -555,8 +563,17 @@ class LoadCompensation:
         if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
                 and self.samples_seen - e[2][0] <= self._n_max):
             n_swing = min(2 * (e[2][0] - e[1][0]), self._n_max)
-            if n_swing > n and not self._load_changed(n_swing, self._force_swing(e[1][0], e[2][0])):
-                n = n_swing
+            # the swing's force swing: the smaller of its last two half swings' (a load change, one
+            # way, is in at most one of them; a swing goes both ways)
+            force_swing = min(self._force_swing(e[0][0], e[1][0]), self._force_swing(e[1][0], e[2][0]))
+            # ... and at most what the seen swing's acceleration allows where the forward kinematics
+            # sees SWING_SEEN_MIN of it (a load change split over both half swings is in both ranges)
+            half = max(e[2][0] - e[1][0], 1) * self.dt
+            seen = 0.5 * abs(e[2][1] - e[1][1]) * (math.pi / half) ** 2          # m/s², amplitude
+            m_hat = abs(self.m_hat) if self.m_hat is not None else self.m_p
+            force_swing = min(force_swing, 2.0 * m_hat * seen / SWING_SEEN_MIN)
+            if n_swing > n:
+                n = max(n, self._since_load_change(n_swing, force_swing))
         return n
 
     def _force_swing(self, first: int, last: int) -> float:
@@ -566,19 +583,23 @@ class LoadCompensation:
         lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
         return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
 
-    def _load_changed(self, n: int, force_swing: float) -> bool:
-        """Whether the load changed within the last n samples, so that a window of n would reach back
-        across it: (4.4) over T_filter at the window's end and over its first T_filter differ by more
-        than LOAD_CHANGE of the estimated mass plus force_swing / |g| (force_swing [N]: the range of
-        w_z over the swing's last half, see LOAD_CHANGE). True while the history does not reach back
-        that far or either is not finite."""
+    def _since_load_change(self, n: int, force_swing: float) -> int:
+        """The longest window up to n samples that does not reach back across a load change: (4.4)
+        over T_filter at every sample of the window against the latest; the window starts after the
+        latest sample whose estimate differs from the latest by more than LOAD_CHANGE of the estimated
+        mass plus force_swing / |g| (force_swing [N]: the swing's own, see LOAD_CHANGE), as (4.4) over
+        T_filter then still saw the load before the change. n where none differs; 0 while the history
+        does not reach back that far (the caller keeps T_filter)."""
         m, back = self.m_short, n - self.wrench_filter.n
         if len(m) <= back:
-            return True
-        self.load_change = m[-1] - m[-1 - back]
+            return 0
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
         limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
-        return not (math.isfinite(self.load_change) and abs(self.load_change) <= limit)
+        differs = ~(np.abs(np.asarray(m[-1 - back:]) - m[-1]) <= limit)       # NaN differs too
+        self.load_change = float(m[-1] - m[-1 - back])
+        if not differs.any():
+            return n
+        return back - int(np.flatnonzero(differs)[-1])          # samples since the latest that differs
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
