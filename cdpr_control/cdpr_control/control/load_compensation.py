@@ -72,22 +72,23 @@ SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
 SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
 SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
 # A window over a swing must not reach back across a load change (docs/load_compensation.md, "The
-# swing window over a load step (session 14)"). The thesis' own estimate, (4.4) over T_filter, is
-# compared at the window's end and at its start (the window's first T_filter): over a swing each
+# swing window over a load step (session 14)"); the thesis has no step detection, its means against
+# changing loads is the short window itself (4.1.2). So the thesis' own estimate, (4.4) over T_filter,
+# is kept per sample and each one within the window is compared with the latest: over a swing each
 # reads the share of the swing's acceleration a that the forward kinematics misses as mass, at most
-# m̂ a / |g| (where it misses all of it), so the two differ by at most 2 m̂ a / |g|, which is the
-# swing's own force swing over |g|: the range of the measured w_z over a half swing (the acceleration
-# from one extreme to the other). The force sensors see the true acceleration, so the bound holds
-# however little of the swing the forward kinematics sees. A load change moves w_z one way, so it
-# is in at most one of the last two half swings, and the smaller of their two ranges is the swing's.
-# A load change within the window moves the later estimate by the change. Where the two differ by
-# more than LOAD_CHANGE m̂ + that range / |g| the window is T_filter, the thesis' own (LOAD_CHANGE:
-# the noise of a T_filter estimate at rest, and the share of the estimate's 5 % band a change below
-# it may cost). Where a load change is put down across both half swings it is in both ranges; the
-# bound is then also at most the forward kinematics' view of the swing, 2 m̂ a_seen / SWING_SEEN_MIN
-# (a_seen the acceleration amplitude of its last half swing): the least share of a swing it was
-# found to see is 66 % (ipanema3 #38, force control); SWING_SEEN_MIN 0.2 keeps the slow swing the
-# forward kinematics sees a fifth of (tests/control/test_load_comp_estimate.py) a swing.
+# m̂ a / |g| (where it misses all of it), so two differ by at most 2 m̂ a / |g|, the swing's own force
+# swing over |g|: the range of the measured w_z over a half swing (the acceleration from one extreme
+# to the other; the force sensors see the true acceleration, however little of the swing the forward
+# kinematics sees). A load change moves w_z one way, so it is in at most one of the last two half
+# swings, and the smaller of their two ranges is the swing's; where the change was put down across
+# both it is in both, so the bound is also at most the forward kinematics' view of the swing,
+# 2 m̂ a_seen / SWING_SEEN_MIN (a_seen the acceleration amplitude of its last half swing; the least
+# share of a swing it was measured to see is 66 %, ipanema3 #38 under force control; 0.2 keeps the
+# slow swing of tests/control/test_load_comp_estimate.py, seen a fifth, a swing). A load change
+# moves the later estimates by the change: the window starts after the latest T_filter estimate that
+# differs from the latest by more than LOAD_CHANGE m̂ + that bound / |g| (at least T_filter, the
+# thesis' window). LOAD_CHANGE: the noise of a T_filter estimate at rest and the share of the mass a
+# change below it may cost.
 LOAD_CHANGE = 0.02
 SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
@@ -457,7 +458,7 @@ class LoadCompensation:
         self.window_n: int | None = None                       # samples of the last window of (4.4)
         self.w_history: list[float] = []                       # w_z per sample (the longest window + 1)
         self.m_short: list[float] = []                         # (4.4) over T_filter per sample (the longest window + 1)
-        self.load_change = 0.0                                 # kg, the last same-phase difference of m_short (see LOAD_CHANGE)
+        self.load_change = 0.0                                 # kg, m_short's latest less its first in the last swing window
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
