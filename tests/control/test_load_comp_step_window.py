@@ -3,8 +3,7 @@ step (session 14)"): a window matched to a swing must not reach back across the 
 swing the step excites is still matched once the window no longer reaches the change."""
 import numpy as np
 
-from cdpr_control.control.load_compensation import (LOAD_CHANGE, LoadCompensation, LoadCompensationParams,
-    payload_wrench)
+from cdpr_control.control.load_compensation import LoadCompensation, LoadCompensationParams, payload_wrench
 from cdpr_control.model.dynamics import platform_wrench
 from cdpr_control.model.kinematics import inverse_kinematics
 from cdpr_control.model.robot import load_robot
@@ -66,7 +65,7 @@ def _sag_and_return(t):
 def test_a_window_does_not_reach_back_across_a_load_step():
     """The sag and the return turn twice by more than 2 mm after the wobble's turning point: a swing
     of 0.98 s to the turning points alone, whose window (1 s from 0.6 s) reached back across the
-    payload's ramp and read 35.7 kg 19 % low 1 s after the step (the session-13 window; 24.9 % at
+    payload's ramp and read 35.7 kg 22.8 % off from 1 s after the step on (the session-13 window; 24.9 % at
     ipanema3 #8 in the closed loop). The thesis' T_filter estimate at the window's start differs
     from the one at its end by the payload: the window stays T_filter until the start's estimate has
     the payload but for what the sag's acceleration share allows (LOAD_CHANGE), and the estimate is
@@ -97,8 +96,3 @@ def test_a_swing_after_a_step_is_still_matched():
     assert error[t >= REST + 1.0].max() < 0.05
     assert error[t >= 2.0].max() < 0.02
     assert 0.55 <= windows[-1] <= 0.7
-
-
-def test_a_small_change_is_below_the_limit():
-    """LOAD_CHANGE: the noise and the band's share; a load change smaller than it costs less than it."""
-    assert 0.0 < LOAD_CHANGE <= 0.05
