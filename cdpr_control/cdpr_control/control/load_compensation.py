@@ -71,6 +71,26 @@ VELOCITY_BASE = 0.2
 SWING_WINDOW_MAX = 1.0      # s, longest window (a slower swing keeps this one)
 SWING_AMPLITUDE = 1e-3      # m, half the z change between the last two extremes: below it no swing
 SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the direction of motion (noise: 0.1 mm)
+# A window over a swing must not reach back across a load change (docs/load_compensation.md, "The
+# swing window over a load step (session 14)"); the thesis has no step detection, its means against
+# changing loads is the short window itself (4.1.2). So the thesis' own estimate, (4.4) over T_filter,
+# is kept per sample and each one within the window is compared with the latest: over a swing each
+# reads the share of the swing's acceleration a that the forward kinematics misses as mass, at most
+# m̂ a / |g| (where it misses all of it), so two differ by at most 2 m̂ a / |g|, the swing's own force
+# swing over |g|: the range of the measured w_z over a half swing (the acceleration from one extreme
+# to the other; the force sensors see the true acceleration, however little of the swing the forward
+# kinematics sees). A load change moves w_z one way, so it is in at most one of the last two half
+# swings, and the smaller of their two ranges is the swing's; where the change was put down across
+# both it is in both, so the bound is also at most the forward kinematics' view of the swing,
+# 2 m̂ a_seen / SWING_SEEN_MIN (a_seen the acceleration amplitude of its last half swing; the least
+# share of a swing it was measured to see is 66 %, ipanema3 #38 under force control; 0.2 keeps the
+# slow swing of tests/control/test_load_comp_estimate.py, seen a fifth, a swing). A load change
+# moves the later estimates by the change: the window starts after the latest T_filter estimate that
+# differs from the latest by more than LOAD_CHANGE m̂ + that bound / |g| (at least T_filter, the
+# thesis' window). LOAD_CHANGE: the noise of a T_filter estimate at rest and the share of the mass a
+# change below it may cost.
+LOAD_CHANGE = 0.02
+SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
 KC_RCOND = 1e-9      # singular values of K_c below this share of the largest: directions no tensed cable stiffens
 REFERENCE_FRACTION = 0.05   # |m_c| below this share of m_p: an unloaded state, its forces the reference
@@ -436,6 +456,9 @@ class LoadCompensation:
         self.direction = 0                                     # z rising (+1) or falling (-1) by SWING_HYSTERESIS
         self.extremes: list[tuple[int, float]] = []            # (sample, z) of the last three turning points
         self.window_n: int | None = None                       # samples of the last window of (4.4)
+        self.w_history: list[float] = []                       # w_z per sample (the longest window + 1)
+        self.m_short: list[float] = []                         # (4.4) over T_filter per sample (the longest window + 1)
+        self.load_change = 0.0                                 # kg, m_short's latest less its first in the last swing window
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
@@ -540,8 +563,44 @@ class LoadCompensation:
         e = self.extremes
         if (len(e) == 3 and min(abs(e[2][1] - e[1][1]), abs(e[1][1] - e[0][1])) >= 2.0 * SWING_AMPLITUDE
                 and self.samples_seen - e[2][0] <= self._n_max):
-            n = max(n, min(2 * (e[2][0] - e[1][0]), self._n_max))
+            n_swing = min(2 * (e[2][0] - e[1][0]), self._n_max)
+            # the swing's force swing: the smaller of its last two half swings' (a load change, one
+            # way, is in at most one of them; a swing goes both ways)
+            force_swing = min(self._force_swing(e[0][0], e[1][0]), self._force_swing(e[1][0], e[2][0]))
+            # ... and at most what the seen swing's acceleration allows where the forward kinematics
+            # sees SWING_SEEN_MIN of it (a load change split over both half swings is in both ranges)
+            half = max(e[2][0] - e[1][0], 1) * self.dt
+            seen = 0.5 * abs(e[2][1] - e[1][1]) * (math.pi / half) ** 2          # m/s², amplitude
+            m_hat = abs(self.m_hat) if self.m_hat is not None else self.m_p
+            force_swing = min(force_swing, 2.0 * m_hat * seen / SWING_SEEN_MIN)
+            if n_swing > n:
+                n = max(n, self._since_load_change(n_swing, force_swing))
         return n
+
+    def _force_swing(self, first: int, last: int) -> float:
+        """The range [N] of the measured w_z from sample ``first`` to ``last`` (a half swing: the
+        acceleration from one extreme to the other, so 2 m a), over what the history holds."""
+        w, end = self.w_history, self.samples_seen - 1                              # w[-1]: sample end
+        lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
+        return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
+
+    def _since_load_change(self, n: int, force_swing: float) -> int:
+        """The longest window up to n samples that does not reach back across a load change: (4.4)
+        over T_filter at every sample of the window against the latest; the window starts after the
+        latest sample whose estimate differs from the latest by more than LOAD_CHANGE of the estimated
+        mass plus force_swing / |g| (force_swing [N]: the swing's own, see LOAD_CHANGE), as (4.4) over
+        T_filter then still saw the load before the change. n where none differs; 0 while the history
+        does not reach back that far (the caller keeps T_filter)."""
+        m, back = self.m_short, n - self.wrench_filter.n
+        if len(m) <= back:
+            return 0
+        scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
+        limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
+        differs = ~(np.abs(np.asarray(m[-1 - back:]) - m[-1]) <= limit)       # NaN differs too
+        self.load_change = float(m[-1] - m[-1 - back])
+        if not differs.any():
+            return n
+        return back - int(np.flatnonzero(differs)[-1])          # samples since the latest that differs
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
@@ -556,18 +615,37 @@ class LoadCompensation:
         del self.z_history[:-(n_max + h + 1)]
         # D(k) = sum over the last h of C, the cumulative sum of w_z: (D(k) - D(k - n)) / (h n) is
         # the mean over h of the n-window means of w_z, for any n
+        self.w_history.append(w_z)
+        del self.w_history[:-(n_max + 1)]
         self.w_cumulative += w_z
         self.c_history.append(self.w_cumulative)
         previous = self.d_history[-1] if self.d_history else 0.0
         self.d_history.append(previous + self.w_cumulative - self.c_history.pop(0))
         del self.d_history[:-(n_max + 1)]
+        self.m_short.append(self._window_mass(self.wrench_filter.n))
+        del self.m_short[:-(n_max + 1)]
         n = self._swing_periods()
-        if len(self.z_history) < n + h + 1:
+        window = self._window_means(n)
+        if window is not None:
+            self.window_n = n
+        return window
+
+    def _window_means(self, n: int) -> tuple[float, float] | None:
+        """(w_z, ẍ_z) over the last n samples (see :meth:`_estimated_acceleration`), None until the
+        history spans n and h."""
+        h, zh, d = self._velocity_base, self.z_history, self.d_history
+        if len(zh) < n + h + 1 or len(d) < n + 1:
             return None
-        self.window_n = n
-        zh, d = self.z_history, self.d_history
         a = ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
         return (d[-1] - d[-1 - n]) / (h * n), a
+
+    def _window_mass(self, n: int) -> float:
+        """(4.4) over the last n samples with the estimated pose's acceleration, untared [kg]; NaN
+        until the history spans n and h or near (4.4)'s singularity."""
+        window = self._window_means(n)
+        estimate = None if window is None else mass_estimate(*window, float(self.robot.gravity[2]),
+                                                             self.params.accel_guard)
+        return float("nan") if estimate is None else float(estimate)
 
     def identify(self, x_d, xdot_d, xddot_d, f, AT, x=None) -> None:
         """One sample of (4.4) and of the cog's normal equations into the moving averages.
