@@ -1,0 +1,239 @@
+"""Gain and phase margins of the contact force loop in state D (thesis section 5.1, (5.3)), as
+:class:`cdpr_control.control.hybrid_force_control.HybridForceControl` runs it: discrete, period dt.
+
+The loop, from the offset x_t the PID commands in period k back to it (negative feedback: the
+contact force F rises with x_t and e_F = F_d - F):
+
+    L(z) = k_met * G_a(z) * H_F(z) * C(z)
+
+* G_a(z): the drive (3.10) e^{-T_d s} / (1 + T_1 s) or (5.11) e^{-T_d s} / (1 + 2 zeta T_w s + (T_w s)^2)
+  behind a zero-order hold of one period, discretised exactly, the dead time included (its whole
+  periods as z^-N, the fraction by splitting the hold interval). Its one-period delay is the loop's:
+  the force measured in period k + 1 is the plant's answer to the command of period k.
+* H_F(z) = alpha / (1 - (1 - alpha) z^-1), alpha = 1 - e^{-dt / T_F}: the PT1 on the contact force
+  (:class:`cdpr_control.control.filters.LowPass`).
+* C(z) = (1 + T_d,PID (1 - z^-1) / dt) / k_pid + dt / (K_p T_i) / (1 - z^-1): (5.3)'s P part over the
+  stiffness it divides by in D (``HybridForceControl.k_pid``), its D part on the filtered measurement
+  (the same sign as the P part in the loop; a step of F_d does not pass it), the I part with gain
+  1 / (K_p T_i) as ``HybridForceControl._pid`` integrates it (forward, x_t = P + the new integral).
+* k_met: the stiffness the force meets, robot and surface in series along z_t, as B measures it
+  (``HybridForceControl.k_contact``; the controller knows nothing else of the surface). The model
+  takes it as static: the platform's own modes are not in it (see docs/hybrid_force_control.md,
+  "Contact margin (session 14)", for what that leaves out).
+
+The gain margin is the factor by which the whole loop gain may grow before the loop is unstable
+(the phase crossings of -180 deg, the worst one); the phase margin is 180 deg plus the phase at the
+gain crossover(s), the worst one. :func:`closed_loop_response` runs the same loop as difference
+equations (the brute-force check of the margins, tests/control/test_contact_margin.py).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+N_GRID = 6000               # frequencies of the Nyquist grid, log-spaced from W_MIN to pi / dt
+W_MIN = 1e-2                # rad/s
+
+
+@dataclass(frozen=True)
+class DriveModel:
+    """The drive's position transfer function (3.10) / (5.11): model "pt1_deadtime" (T_1) or
+    "second_order" (T_w, zeta), dead time T_d [s]."""
+
+    model: str = "pt1_deadtime"
+    T_d: float = 0.0
+    T_1: float = 0.0
+    T_w: float = 0.0
+    zeta: float = 1.0
+
+    @classmethod
+    def of(cls, drive) -> "DriveModel":
+        """From a robot's drive section (``robot.drive``)."""
+        return cls(str(drive.model), float(drive.T_d), float(getattr(drive, "T_1", 0.0) or 0.0),
+                   float(getattr(drive, "T_w", 0.0) or 0.0), float(getattr(drive, "zeta", 1.0)))
+
+    def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A, B, C) of the rational part (unit static gain); empty for a pure dead time."""
+        if self.model == "second_order" and self.T_w > 0.0:
+            w = 1.0 / self.T_w
+            return (np.array([[0.0, 1.0], [-w * w, -2.0 * self.zeta * w]]), np.array([0.0, w * w]),
+                    np.array([1.0, 0.0]))
+        if self.model != "second_order" and self.T_1 > 0.0:
+            return np.array([[-1.0 / self.T_1]]), np.array([1.0 / self.T_1]), np.array([1.0])
+        return np.zeros((0, 0)), np.zeros(0), np.zeros(0)
+
+
+@dataclass(frozen=True)
+class DiscreteDrive:
+    """x[k+1] = Phi x[k] + Gb u[k-N] + Ga u[k-N-1], y[k] = C x[k] (no state: y[k] = u[k-N-1] over
+    the fraction, see :func:`discretise`)."""
+
+    Phi: np.ndarray
+    Gb: np.ndarray
+    Ga: np.ndarray
+    C: np.ndarray
+    N: int
+    frac: float                 # the dead time's fraction of a period, delta / dt
+
+    def response(self, z: np.ndarray) -> np.ndarray:
+        zi = 1.0 / z
+        if self.Phi.size == 0:  # a pure dead time behind the hold: y[k] = u[k - N - 1] (delta = 0)
+            return zi ** (self.N + 1) * ((1.0 - self.frac) + self.frac * zi)
+        n = self.Phi.shape[0]
+        out = np.empty(z.shape, dtype=complex)
+        for i, (zz, zzi) in enumerate(zip(z, zi)):
+            out[i] = self.C @ np.linalg.solve(zz * np.eye(n) - self.Phi, self.Gb + self.Ga * zzi) * zzi ** self.N
+        return out
+
+
+def discretise(drive: DriveModel, dt: float) -> DiscreteDrive:
+    """The drive behind a zero-order hold of period dt, exactly (dead time T_d = N dt + delta: over
+    a period the held input is u[k-N-1] for delta, then u[k-N])."""
+    N = int(math.floor(drive.T_d / dt + 1e-9))
+    delta = max(0.0, drive.T_d - N * dt)
+    A, B, C = drive.state_space()
+    n = A.shape[0]
+    if n == 0:
+        return DiscreteDrive(np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0), N, delta / dt)
+
+    def phi_gamma(h: float) -> tuple[np.ndarray, np.ndarray]:
+        M = np.zeros((n + 1, n + 1))
+        M[:n, :n], M[:n, n] = A * h, B * h
+        E = expm(M)
+        return E[:n, :n], E[:n, n]
+
+    Phi, _ = phi_gamma(dt)
+    Phi_rest, Gb = phi_gamma(dt - delta)
+    _, G_delta = phi_gamma(delta)
+    return DiscreteDrive(Phi, Gb, Phi_rest @ G_delta, C, N, delta / dt)
+
+
+@dataclass(frozen=True)
+class ContactLoop:
+    """The quantities of the loop (SI): period dt, the PID (5.3) K_p [N/m], T_i, T_d [s], the
+    stiffness its P part divides by k_pid [N/m], the force filter T_F [s], the drive, and the
+    stiffness the force meets k_met [N/m]."""
+
+    dt: float
+    K_p: float
+    T_i: float
+    T_d: float
+    T_F: float
+    k_pid: float
+    k_met: float
+    drive: DriveModel
+
+    def alpha(self) -> float:
+        return 1.0 if self.T_F <= 0.0 else 1.0 - math.exp(-self.dt / self.T_F)
+
+    def response(self, w) -> np.ndarray:
+        """L(e^{j w dt}) at the angular frequencies w [rad/s]."""
+        w = np.atleast_1d(np.asarray(w, dtype=float))
+        z = np.exp(1j * w * self.dt)
+        zi = 1.0 / z
+        a = self.alpha()
+        H_F = a / (1.0 - (1.0 - a) * zi)
+        C = (1.0 + self.T_d * (1.0 - zi) / self.dt) / self.k_pid + self.dt / (self.K_p * self.T_i) / (1.0 - zi)
+        return self.k_met * discretise(self.drive, self.dt).response(z) * H_F * C
+
+
+@dataclass(frozen=True)
+class Margins:
+    gain: float                  # factor (inf: no phase crossing)
+    phase_deg: float             # deg (inf: no gain crossover)
+    w_phase: float               # rad/s, the phase crossover of the gain margin (nan: none)
+    w_gain: float                # rad/s, the gain crossover of the phase margin (nan: none)
+
+    @property
+    def gain_dB(self) -> float:
+        return 20.0 * math.log10(self.gain) if self.gain > 0.0 else -math.inf
+
+    @property
+    def f_phase(self) -> float:
+        return self.w_phase / (2.0 * math.pi)
+
+    def meets(self, gain_dB: float = 6.0, phase_deg: float = 45.0) -> bool:
+        return self.gain_dB >= gain_dB and self.phase_deg >= phase_deg
+
+
+def _refine(f, lo: float, hi: float, n: int = 60) -> float:
+    """A sign change of f in [lo, hi], by bisection."""
+    f_lo = f(lo)
+    for _ in range(n):
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid)
+        if (f_mid > 0.0) == (f_lo > 0.0):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def margins(loop: ContactLoop) -> Margins:
+    """Gain and phase margins of L over (0, pi / dt) (the worst phase crossing and gain crossover)."""
+    w = np.geomspace(W_MIN, math.pi / loop.dt * (1.0 - 1e-9), N_GRID)
+    L = loop.response(w)
+    one = lambda v: complex(loop.response(v)[0])     # noqa: E731
+    gain, w_pc = math.inf, math.nan
+    im = L.imag
+    for i in np.flatnonzero(np.sign(im[:-1]) != np.sign(im[1:])):
+        wc = _refine(lambda v: one(v).imag, w[i], w[i + 1])
+        Lc = one(wc)
+        if Lc.real < 0.0 and 1.0 / abs(Lc) < gain:
+            gain, w_pc = 1.0 / abs(Lc), wc
+    # at Nyquist L is real: a negative real L there is a phase crossing too
+    L_ny = complex(loop.response(math.pi / loop.dt)[0])
+    if L_ny.real < 0.0 and abs(L_ny.imag) < 1e-9 * abs(L_ny) and 1.0 / abs(L_ny) < gain:
+        gain, w_pc = 1.0 / abs(L_ny), math.pi / loop.dt
+    phase, w_gc = math.inf, math.nan
+    mag = np.abs(L) - 1.0
+    for i in np.flatnonzero(np.sign(mag[:-1]) != np.sign(mag[1:])):
+        wc = _refine(lambda v: abs(one(v)) - 1.0, w[i], w[i + 1])
+        pm = 180.0 + math.degrees(math.atan2(one(wc).imag, one(wc).real))
+        pm = (pm + 180.0) % 360.0 - 180.0
+        if pm < phase:
+            phase, w_gc = pm, wc
+    return Margins(gain, phase, w_pc, w_gc)
+
+
+def closed_loop_response(loop: ContactLoop, periods: int, scale: float = 1.0) -> np.ndarray:
+    """The force F [N, per N of a step of F_d] of the closed loop, the loop gain scaled by ``scale``
+    (k_met scale times), run as difference equations period by period, the PID as
+    ``HybridForceControl._pid`` computes it (no saturation): the brute-force check of
+    :func:`margins` (stable below the gain margin, growing above it)."""
+    dd = discretise(loop.drive, loop.dt)
+    a, dt = loop.alpha(), loop.dt
+    n = dd.Phi.shape[0]
+    xs = np.zeros(n)
+    hist = [0.0] * (dd.N + 2)          # hist[j] = u[k - j]
+    Ff, F_prev, integ = 0.0, 0.0, 0.0
+    out = np.empty(periods)
+    k_met = scale * loop.k_met
+    for k in range(periods):
+        # the plant's position of this period (the drive's answer to the commands before it)
+        y = float(dd.C @ xs) if n else (1.0 - dd.frac) * hist[dd.N] + dd.frac * hist[dd.N + 1]   # hist[0]: u[k-1]
+        F_true = k_met * y
+        Ff = F_true if a == 1.0 else Ff + a * (F_true - Ff)
+        e_F = 1.0 - Ff
+        dF = (Ff - F_prev) / dt if k else 0.0
+        F_prev = Ff
+        integ = integ + dt / (loop.K_p * loop.T_i) * e_F
+        u = (e_F - loop.T_d * dF) / loop.k_pid + integ
+        out[k] = F_true
+        hist = [u] + hist[:-1]
+        if n:
+            xs = dd.Phi @ xs + dd.Gb * hist[dd.N] + dd.Ga * hist[dd.N + 1]
+    return out
+
+
+def loop_of(hpfc_params, drive, dt: float, k_met: float, k_pid: float | None = None) -> ContactLoop:
+    """The loop of a controller with parameters ``hpfc_params`` (HPFCParams), the robot's drive
+    section, dt, the stiffness met k_met (B's measurement) and the stiffness its P part divides by
+    (default: session 14's max(K_p, k_met))."""
+    p = hpfc_params
+    if k_pid is None:
+        k_pid = max(p.K_p, k_met)
+    return ContactLoop(dt, p.K_p, p.T_i, p.T_d, p.T_F, k_pid, k_met, DriveModel.of(drive))
