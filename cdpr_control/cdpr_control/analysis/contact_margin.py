@@ -67,9 +67,103 @@ class DriveModel:
 
 
 @dataclass(frozen=True)
+class PlatformPlant:
+    """The platform in contact, linearised at a pose (the thesis's (2.18)-(2.22), (2.33)): what the
+    contact force measured from the cable forces does when the winches move by y along z_t.
+
+        M xddot + (D_c + d_env j j^T) xdot + (K_x + k_env j j^T) x = K_c zz y + D_c zz ydot
+        F = z_t . (K_c zz y + D_c zz ydot - K_x x - D_c xdot)_F
+
+    x = [dr; dtheta] the platform's small motion, M (2.33), K_x = K_g + K_c (2.22) at the cable
+    forces f, D_c = tau_c K_c the cables' Kelvin-Voigt damping, zz = [z_t; 0] (x_t moves the set-point
+    along z_t, the winches follow by A zz y), j = [z_t; r_c x z_t] the contact point r_c's direction,
+    k_env and d_env the surface. F is the contact force the controller computes, the cable wrench's
+    force along z_t (the weight taken out): above the platform's modes the platform stands and F
+    follows the winches with the cables' stiffness, not with the stiffness met (k_met, the series of
+    the robot's and the surface's): at IPAnema 3 sweep pose #33 eleven times k_met at 52 Hz."""
+
+    M: np.ndarray
+    K_x: np.ndarray
+    K_c: np.ndarray
+    z_t: np.ndarray
+    j: np.ndarray
+    k_env: float
+    d_env: float
+    tau_c: float
+
+    def robot_stiffness(self) -> float:
+        """The robot's stiffness [N/m] at the contact point along z_t: 1 / (j^T K_x^-1 j)."""
+        return 1.0 / float(self.j @ np.linalg.solve(self.K_x, self.j))
+
+    def static_gain(self) -> float:
+        """F / y at rest [N/m]: the robot's and the surface's stiffness in series (k_met)."""
+        k_r = self.robot_stiffness()
+        return k_r * self.k_env / (k_r + self.k_env)
+
+    def with_drive(self, A_d, B_d, C_d) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(A, B, C_k, C_r) of drive and platform: state X = [drive; x; xdot], input the drive's
+        command, output F = C_k X + C_r Xdot: the cables' elastic force C_k X and their damping force,
+        tau_c times the elastic force's rate (:func:`discretise` samples it as the rate over the
+        period before the sample, as the simulator's implicit cable damper computes it)."""
+        nd = A_d.shape[0]
+        M_inv = np.linalg.inv(self.M)
+        zz = np.r_[self.z_t, 0.0, 0.0, 0.0]
+        P = np.r_[self.z_t, 0.0, 0.0, 0.0]
+        jj = np.outer(self.j, self.j)
+        D_c = self.tau_c * self.K_c
+        K_tot, D_tot = self.K_x + self.k_env * jj, D_c + self.d_env * jj
+        Kzz, Dzz = self.K_c @ zz, D_c @ zz
+        n = nd + 12
+        A, B, C_k, C_r = np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n)
+        A[nd:nd + 6, nd + 6:] = np.eye(6)
+        A[nd + 6:, nd:nd + 6] = -M_inv @ K_tot
+        A[nd + 6:, nd + 6:] = -M_inv @ D_tot
+        C_k[nd:nd + 6], C_r[nd:nd + 6] = -P @ self.K_x, -P @ D_c
+        if nd:
+            A[:nd, :nd], B[:nd] = A_d, B_d
+            A[nd + 6:, :nd] = M_inv @ (np.outer(Kzz, C_d) + np.outer(Dzz, C_d @ A_d))
+            B[nd + 6:] = M_inv @ Dzz * float(C_d @ B_d)
+            C_k[:nd], C_r[:nd] = (P @ Kzz) * C_d, (P @ Dzz) * C_d
+        else:
+            raise ValueError("the platform model needs a drive with a rational part (T_1 or T_w > 0)")
+        return A, B, C_k, C_r
+
+
+def platform_plant(robot, x, f, z_t, r_c, k_met: float, tau_c: float = 0.002,
+                   damping_time_env: float = 0.01) -> PlatformPlant:
+    """:class:`PlatformPlant` at pose x with cable forces f [N], the task axis z_t and the contact
+    point r_c [m, base-frame offset from the platform's origin], from quantities the controller
+    knows: the robot's geometry, cables and mass, and the stiffness met k_met [N/m] measured in B,
+    from which the surface's k_env follows (series with the robot's stiffness at r_c; a k_met at
+    or above the robot's own is taken as a surface 1,000 times stiffer than the robot). The
+    cables' damping time tau_c (ASSUMPTION: 2 ms, the simulator's, a platform damping ratio of about
+    5 %, section 3.3.2) and the surface's d_env = damping_time_env k_env (ASSUMPTION, as
+    ``HPFCParams.d_env`` of the shipped files: 0.01 s) are not measured in B."""
+    from cdpr_control.model import cable
+    from cdpr_control.model.dynamics import mass_matrix
+    from cdpr_control.model.kinematics import inverse_kinematics
+    from cdpr_control.model.stiffness import cable_stiffness, geometric_stiffness
+
+    x = np.asarray(x, dtype=float)
+    f = np.asarray(f, dtype=float)
+    z_t = np.asarray(z_t, dtype=float) / np.linalg.norm(z_t)
+    ik = inverse_kinematics(robot, x)
+    k_l = cable.tangent_stiffness(robot, f, cable.total_free_length(robot, ik.q))
+    K_c = cable_stiffness(ik, k_l)
+    K_x = K_c + geometric_stiffness(ik, f)
+    K_x = 0.5 * (K_x + K_x.T)
+    j = np.r_[z_t, np.cross(np.asarray(r_c, dtype=float), z_t)]
+    k_r = 1.0 / float(j @ np.linalg.solve(K_x, j))
+    k_env = 1000.0 * k_r if k_met >= k_r else k_met * k_r / (k_r - k_met)
+    return PlatformPlant(mass_matrix(robot, x), K_x, K_c, z_t, j, k_env, damping_time_env * k_env, tau_c)
+
+
+@dataclass(frozen=True)
 class DiscreteDrive:
-    """x[k+1] = Phi x[k] + Gb u[k-N] + Ga u[k-N-1], y[k] = C x[k] (no state: y[k] = u[k-N-1] over
-    the fraction, see :func:`discretise`)."""
+    """The sampled loop's plant (the drive, and the platform where given) behind the hold:
+    x[k+1] = Phi x[k] + Gb u[k-N] + Ga u[k-N-1], y[k] = C x[k] + Cr (x[k] - x[k-1]) / dt (the
+    platform's damping force as the rate over the period before the sample; a pure dead time
+    without platform: y[k] = (1 - frac) u[k-N-1] + frac u[k-N-2]); :func:`discretise`."""
 
     Phi: np.ndarray
     Gb: np.ndarray
@@ -77,45 +171,53 @@ class DiscreteDrive:
     C: np.ndarray
     N: int
     frac: float                 # the dead time's fraction of a period, delta / dt
+    Cr: np.ndarray | None = None
+    dt: float = 1.0
 
     def response(self, z: np.ndarray) -> np.ndarray:
         zi = 1.0 / z
-        if self.Phi.size == 0:  # a pure dead time behind the hold: y[k] = u[k - N - 1] (delta = 0)
+        if self.Phi.size == 0:  # a pure dead time behind the hold
             return zi ** (self.N + 1) * ((1.0 - self.frac) + self.frac * zi)
         n = self.Phi.shape[0]
         out = np.empty(z.shape, dtype=complex)
         for i, (zz, zzi) in enumerate(zip(z, zi)):
-            out[i] = self.C @ np.linalg.solve(zz * np.eye(n) - self.Phi, self.Gb + self.Ga * zzi) * zzi ** self.N
+            X = np.linalg.solve(zz * np.eye(n) - self.Phi, self.Gb + self.Ga * zzi) * zzi ** self.N
+            out[i] = self.C @ X + (0.0 if self.Cr is None else (self.Cr @ X) * (1.0 - zzi) / self.dt)
         return out
 
 
-def discretise(drive: DriveModel, dt: float) -> DiscreteDrive:
-    """The drive behind a zero-order hold of period dt, exactly (dead time T_d = N dt + delta: over
-    a period the held input is u[k-N-1] for delta, then u[k-N])."""
+def discretise(drive: DriveModel, dt: float, plant: PlatformPlant | None = None) -> DiscreteDrive:
+    """The drive (and the platform, where given) behind a zero-order hold of period dt, exactly
+    (dead time T_d = N dt + delta: over a period the held input is u[k-N-1] for delta, then u[k-N];
+    the platform's damping force sampled as its rate over the period before the sample)."""
     N = int(math.floor(drive.T_d / dt + 1e-9))
     delta = max(0.0, drive.T_d - N * dt)
     A, B, C = drive.state_space()
+    Cr = None
+    if plant is not None:
+        A, B, C, Cr = plant.with_drive(A, B, C)
     n = A.shape[0]
     if n == 0:
         return DiscreteDrive(np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0), N, delta / dt)
 
     def phi_gamma(h: float) -> tuple[np.ndarray, np.ndarray]:
-        M = np.zeros((n + 1, n + 1))
-        M[:n, :n], M[:n, n] = A * h, B * h
-        E = expm(M)
+        Mx = np.zeros((n + 1, n + 1))
+        Mx[:n, :n], Mx[:n, n] = A * h, B * h
+        E = expm(Mx)
         return E[:n, :n], E[:n, n]
 
     Phi, _ = phi_gamma(dt)
     Phi_rest, Gb = phi_gamma(dt - delta)
     _, G_delta = phi_gamma(delta)
-    return DiscreteDrive(Phi, Gb, Phi_rest @ G_delta, C, N, delta / dt)
+    return DiscreteDrive(Phi, Gb, Phi_rest @ G_delta, C, N, delta / dt, Cr, dt)
 
 
 @dataclass(frozen=True)
 class ContactLoop:
     """The quantities of the loop (SI): period dt, the PID (5.3) K_p [N/m], T_i, T_d [s], the
-    stiffness its P part divides by k_pid [N/m], the force filter T_F [s], the drive, and the
-    stiffness the force meets k_met [N/m]."""
+    stiffness its P part divides by k_pid [N/m], the force filter T_F [s], the drive, the stiffness
+    the force meets k_met [N/m], and the platform (:class:`PlatformPlant`; None: the force follows
+    the drive statically with k_met)."""
 
     dt: float
     K_p: float
@@ -125,6 +227,20 @@ class ContactLoop:
     k_pid: float
     k_met: float
     drive: DriveModel
+    plant: PlatformPlant | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "_sampled", discretise(self.drive, self.dt, self.plant))
+
+    @property
+    def sampled(self) -> DiscreteDrive:
+        """The plant behind the hold, x_t [m] -> the drive's position [m] (static: times k_met) or the
+        measured contact force [N] (platform)."""
+        return self._sampled
+
+    def plant_gain(self) -> float:
+        """The factor from the sampled plant's output to the force [N]: k_met without platform."""
+        return 1.0 if self.plant is not None else self.k_met
 
     def alpha(self) -> float:
         return 1.0 if self.T_F <= 0.0 else 1.0 - math.exp(-self.dt / self.T_F)
@@ -137,7 +253,7 @@ class ContactLoop:
         a = self.alpha()
         H_F = a / (1.0 - (1.0 - a) * zi)
         C = (1.0 + self.T_d * (1.0 - zi) / self.dt) / self.k_pid + self.dt / (self.K_p * self.T_i) / (1.0 - zi)
-        return self.k_met * discretise(self.drive, self.dt).response(z) * H_F * C
+        return self.plant_gain() * self.sampled.response(z) * H_F * C
 
 
 @dataclass(frozen=True)
@@ -204,18 +320,22 @@ def closed_loop_response(loop: ContactLoop, periods: int, scale: float = 1.0) ->
     (k_met scale times), run as difference equations period by period, the PID as
     ``HybridForceControl._pid`` computes it (no saturation): the brute-force check of
     :func:`margins` (stable below the gain margin, growing above it)."""
-    dd = discretise(loop.drive, loop.dt)
+    dd = loop.sampled
     a, dt = loop.alpha(), loop.dt
     n = dd.Phi.shape[0]
     xs = np.zeros(n)
-    hist = [0.0] * (dd.N + 2)          # hist[j] = u[k - j]
+    xs_prev = np.zeros(n)
+    hist = [0.0] * (dd.N + 2)          # before period k's command: hist[j] = u[k - 1 - j]
     Ff, F_prev, integ = 0.0, 0.0, 0.0
     out = np.empty(periods)
-    k_met = scale * loop.k_met
+    gain = scale * loop.plant_gain()
     for k in range(periods):
-        # the plant's position of this period (the drive's answer to the commands before it)
-        y = float(dd.C @ xs) if n else (1.0 - dd.frac) * hist[dd.N] + dd.frac * hist[dd.N + 1]   # hist[0]: u[k-1]
-        F_true = k_met * y
+        # the plant's answer in this period to the commands before it
+        if n:
+            y = float(dd.C @ xs) + (0.0 if dd.Cr is None else float(dd.Cr @ (xs - xs_prev)) / dt)
+        else:
+            y = (1.0 - dd.frac) * hist[dd.N] + dd.frac * hist[dd.N + 1]       # u[k-N-1], u[k-N-2]
+        F_true = gain * y
         Ff = F_true if a == 1.0 else Ff + a * (F_true - Ff)
         e_F = 1.0 - Ff
         dF = (Ff - F_prev) / dt if k else 0.0
@@ -225,15 +345,16 @@ def closed_loop_response(loop: ContactLoop, periods: int, scale: float = 1.0) ->
         out[k] = F_true
         hist = [u] + hist[:-1]
         if n:
-            xs = dd.Phi @ xs + dd.Gb * hist[dd.N] + dd.Ga * hist[dd.N + 1]
+            xs, xs_prev = dd.Phi @ xs + dd.Gb * hist[dd.N] + dd.Ga * hist[dd.N + 1], xs
     return out
 
 
-def loop_of(hpfc_params, drive, dt: float, k_met: float, k_pid: float | None = None) -> ContactLoop:
+def loop_of(hpfc_params, drive, dt: float, k_met: float, k_pid: float | None = None,
+            plant: PlatformPlant | None = None) -> ContactLoop:
     """The loop of a controller with parameters ``hpfc_params`` (HPFCParams), the robot's drive
-    section, dt, the stiffness met k_met (B's measurement) and the stiffness its P part divides by
-    (default: session 14's max(K_p, k_met))."""
+    section, dt, the stiffness met k_met (B's measurement), the stiffness its P part divides by
+    (default: session 14's max(K_p, k_met)) and the platform (None: static)."""
     p = hpfc_params
     if k_pid is None:
         k_pid = max(p.K_p, k_met)
-    return ContactLoop(dt, p.K_p, p.T_i, p.T_d, p.T_F, k_pid, k_met, DriveModel.of(drive))
+    return ContactLoop(dt, p.K_p, p.T_i, p.T_d, p.T_F, k_pid, k_met, DriveModel.of(drive), plant)

@@ -241,6 +241,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     n_settle = int(round(SETTLE_TIME / DT))
 
     cfc_setpoint = []                          # per period: the CFC's set-point and feed-forward, the larger
+    stiffness = {}                             # the stiffness met in B and the P part's in D (contact_margin)
 
     def settle_then_press(k_, loop, sim):
         if k_ == n_settle:                     # the floor in place, then M103
@@ -250,6 +251,8 @@ def contact_case(spec: CaseSpec) -> CaseResult:
             held.setdefault("reason", loop.failure)
         if k_ > 0 and loop.contact is not None and hasattr(loop.contact, "f_set"):
             cfc_setpoint.append(np.maximum(loop.contact.f_set, loop.contact.f_ff))   # (of period k_ - 1, as rec's rows)
+        if loop.hpfc is not None and loop.hpfc.control.k_contact is not None and "k_met" not in stiffness:
+            stiffness.update(k_met=float(loop.hpfc.control.k_contact), k_pid=float(loop.hpfc.control.k_pid))
     rec.hooks += [settle_then_press, _settled_watch(rec, F_d)]
     params = control_loop_params(robot, hpfc=hpfc, hpfc_enabled=False)
     v_approach = HybridForceControl(robot, DT, hpfc).approach_speed(F_d)      # (below v_max on stiff floors)
@@ -276,6 +279,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     # decision of session 12): the case is judged on it, with the same bands
     F_d_run = regulated_force(rec, F_d)
     metrics["F_d_regulated_N"] = F_d_run
+    metrics.update(contact_loop_margins(robot, hpfc, stiffness))
     if len(touched) and ok:
         i, n = touched[0], int(STEADY_WINDOW / DT)
         # overshoot and slack on the simulator's true forces; settling and steady error on the
@@ -303,6 +307,20 @@ def contact_case(spec: CaseSpec) -> CaseResult:
                                            f"{_controller_capacity(rec):.4g} N), judged on that") if n)
     held_text = rec.held or (f"held by the force watch: {held['reason']}" if "reason" in held else None)
     return judge(spec, metrics, not ok, note or (f"diverged at {rec.diverged_at:.3f} s" if not ok else ""), held_text)
+
+
+def contact_loop_margins(robot, hpfc: HPFCParams, stiffness: dict) -> dict:
+    """The contact force loop's margins in D (:mod:`cdpr_control.analysis.contact_margin`) with the
+    stiffness B measured (k_met) and the one the P part divided by (k_pid): reported, not judged
+    (NaN where D was not reached)."""
+    from cdpr_control.analysis.contact_margin import loop_of, margins
+    out = dict.fromkeys(("k_met_N_per_m", "k_pid_N_per_m", "contact_gain_margin_dB", "contact_phase_margin_deg",
+                         "contact_phase_crossover_Hz"), float("nan"))
+    if "k_met" in stiffness and stiffness["k_met"] > 0.0:
+        m = margins(loop_of(hpfc, robot.drive, DT, stiffness["k_met"], stiffness["k_pid"] or hpfc.K_p))
+        out.update(k_met_N_per_m=stiffness["k_met"], k_pid_N_per_m=stiffness["k_pid"], contact_gain_margin_dB=m.gain_dB,
+                   contact_phase_margin_deg=m.phase_deg, contact_phase_crossover_Hz=m.f_phase)
+    return out
 
 
 def regulated_force(rec: Recorder, F_d: float) -> float:
