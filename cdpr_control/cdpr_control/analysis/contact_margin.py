@@ -358,3 +358,28 @@ def loop_of(hpfc_params, drive, dt: float, k_met: float, k_pid: float | None = N
     if k_pid is None:
         k_pid = max(p.K_p, k_met)
     return ContactLoop(dt, p.K_p, p.T_i, p.T_d, p.T_F, k_pid, k_met, DriveModel.of(drive), plant)
+
+
+def pressing_forces(robot, x, z_t, F_d: float, r_c, f_min, f_max) -> np.ndarray:
+    """The cable forces [N] (m,) pressing F_d [N] along z_t at the contact point r_c [m, base-frame
+    offset from the platform's origin] at pose x: the force distribution's QP (3.27)-(3.28) for the
+    platform's weight plus the surface's push back, -F_d [z_t; r_c x z_t]."""
+    from cdpr_control.force_distribution.methods import distribute
+    from cdpr_control.model.dynamics import gravity_wrench
+    from cdpr_control.model.kinematics import inverse_kinematics
+
+    x = np.asarray(x, dtype=float)
+    z_t = np.asarray(z_t, dtype=float) / np.linalg.norm(z_t)
+    j = np.r_[z_t, np.cross(np.asarray(r_c, dtype=float), z_t)]
+    ik = inverse_kinematics(robot, x)
+    return distribute(ik.AT, gravity_wrench(robot, x) - F_d * j, f_min, f_max).f
+
+
+def case_margins(robot, hpfc_params, dt: float, x, z_t, F_d: float, r_c, k_met: float, k_pid: float,
+                 f_min, f_max, drive=None) -> Margins:
+    """The margins of the contact loop at a contact case: pose x, task axis z_t, force F_d, contact
+    point r_c, the stiffness met k_met and the P part's k_pid; the platform at the distribution's
+    pressing forces (:func:`pressing_forces`); ``drive`` (default the robot's) e.g. a plant's own."""
+    f = pressing_forces(robot, x, z_t, F_d, r_c, f_min, f_max)
+    plant = platform_plant(robot, x, f, z_t, r_c, k_met)
+    return margins(loop_of(hpfc_params, robot.drive if drive is None else drive, dt, k_met, k_pid, plant))
