@@ -29,13 +29,15 @@ equations (the brute-force check of the margins, tests/control/test_contact_marg
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import expm
 
 N_GRID = 6000               # frequencies of the Nyquist grid, log-spaced from W_MIN to pi / dt
 W_MIN = 1e-2                # rad/s
+STIFFEST_SURFACE = 1000.0   # a k_met at or above what the robot gives on a rigid surface: a surface this
+                            # many times the robot's own stiffness at the contact point
 
 
 @dataclass(frozen=True)
@@ -95,10 +97,15 @@ class PlatformPlant:
         """The robot's stiffness [N/m] at the contact point along z_t: 1 / (j^T K_x^-1 j)."""
         return 1.0 / float(self.j @ np.linalg.solve(self.K_x, self.j))
 
-    def static_gain(self) -> float:
-        """F / y at rest [N/m]: the robot's and the surface's stiffness in series (k_met)."""
-        k_r = self.robot_stiffness()
-        return k_r * self.k_env / (k_r + self.k_env)
+    def static_gain(self, k_env: float | None = None) -> float:
+        """F / y at rest [N/m] (with the surface k_env, default this plant's): about the robot's and
+        the surface's stiffness in series, k_met (not exactly: x_t moves the platform's origin, the
+        surface holds the contact point, and K_x holds the geometric stiffness that K_c lacks)."""
+        k_env = self.k_env if k_env is None else k_env
+        zz = np.r_[self.z_t, 0.0, 0.0, 0.0]
+        Kzz = self.K_c @ zz
+        x = np.linalg.solve(self.K_x + k_env * np.outer(self.j, self.j), Kzz)
+        return float(zz @ (Kzz - self.K_x @ x))
 
     def with_drive(self, A_d, B_d, C_d) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(A, B, C_k, C_r) of drive and platform: state X = [drive; x; xdot], input the drive's
@@ -134,8 +141,8 @@ def platform_plant(robot, x, f, z_t, r_c, k_met: float, tau_c: float = 0.002,
     """:class:`PlatformPlant` at pose x with cable forces f [N], the task axis z_t and the contact
     point r_c [m, base-frame offset from the platform's origin], from quantities the controller
     knows: the robot's geometry, cables and mass, and the stiffness met k_met [N/m] measured in B,
-    from which the surface's k_env follows (series with the robot's stiffness at r_c; a k_met at
-    or above the robot's own is taken as a surface 1,000 times stiffer than the robot). The
+    from which the surface's k_env follows (the one whose static gain is k_met; a k_met at or above
+    what a rigid surface gives: :data:`STIFFEST_SURFACE` times the robot's own stiffness). The
     cables' damping time tau_c (ASSUMPTION: 2 ms, the simulator's, a platform damping ratio of about
     5 %, section 3.3.2) and the surface's d_env = damping_time_env k_env (ASSUMPTION, as
     ``HPFCParams.d_env`` of the shipped files: 0.01 s) are not measured in B."""
@@ -153,9 +160,18 @@ def platform_plant(robot, x, f, z_t, r_c, k_met: float, tau_c: float = 0.002,
     K_x = K_c + geometric_stiffness(ik, f)
     K_x = 0.5 * (K_x + K_x.T)
     j = np.r_[z_t, np.cross(np.asarray(r_c, dtype=float), z_t)]
-    k_r = 1.0 / float(j @ np.linalg.solve(K_x, j))
-    k_env = 1000.0 * k_r if k_met >= k_r else k_met * k_r / (k_r - k_met)
-    return PlatformPlant(mass_matrix(robot, x), K_x, K_c, z_t, j, k_env, damping_time_env * k_env, tau_c)
+    plant = PlatformPlant(mass_matrix(robot, x), K_x, K_c, z_t, j, 0.0, 0.0, tau_c)
+    # the surface whose static gain is k_met (rising with k_env): bisection on log k_env
+    k_r = plant.robot_stiffness()
+    lo, hi = math.log(1e-4 * k_r), math.log(STIFFEST_SURFACE * k_r)
+    if plant.static_gain(math.exp(hi)) <= k_met:
+        k_env = math.exp(hi)
+    else:
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if plant.static_gain(math.exp(mid)) < k_met else (lo, mid)
+        k_env = math.exp(0.5 * (lo + hi))
+    return replace(plant, k_env=k_env, d_env=damping_time_env * k_env)
 
 
 @dataclass(frozen=True)
