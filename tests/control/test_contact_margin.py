@@ -133,3 +133,16 @@ def test_case_margins_is_the_platform_loop_at_the_pressing_forces():
     m = case_margins(robot, p, DT, POSE_33, DOWN, 500.0, tool_point(robot), K_MET_33, K_MET_33, 150.0,
                      robot.cable.f_max)
     assert m.gain == pytest.approx(margins(_platform_33()[0]).gain, rel=1e-9)
+
+
+def test_the_p_margin_factor_keeps_6_db_at_pose_33_with_the_mismatched_plants_largest_dead_time():
+    """The controller's P part over P_MARGIN_FACTOR k_met: 6 dB and 45 deg at #33 (the sweep's worst
+    case) on the robot file's drive, on seed 2's own drive and with the mismatch file's 1.5 ms of extra
+    dead time; over k_met alone (session 14) not with the latter two."""
+    from cdpr_control.control.hybrid_force_control import P_MARGIN_FACTOR
+    robot = load_robot("ipanema3")
+    drives = [DriveModel.of(robot.drive), replace(DriveModel.of(robot.drive), T_d=0.00758, T_1=0.000672),
+              replace(DriveModel.of(robot.drive), T_d=robot.drive.T_d + 0.0015)]
+    for drive in drives:
+        assert margins(_platform_33(drive, P_MARGIN_FACTOR * K_MET_33)[0]).meets(6.0, 45.0)
+    assert not margins(_platform_33(drives[2], K_MET_33)[0]).meets(6.0, 45.0)
