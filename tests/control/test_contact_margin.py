@@ -135,14 +135,14 @@ def test_case_margins_is_the_platform_loop_at_the_pressing_forces():
     assert m.gain == pytest.approx(margins(_platform_33()[0]).gain, rel=1e-9)
 
 
-def test_the_p_margin_factor_keeps_6_db_at_pose_33_with_the_mismatched_plants_largest_dead_time():
-    """The controller's P part over P_MARGIN_FACTOR k_met: 6 dB and 45 deg at #33 (the sweep's worst
-    case) on the robot file's drive, on seed 2's own drive and with the mismatch file's 1.5 ms of extra
-    dead time; over k_met alone (session 14) not with the latter two."""
+def test_the_p_part_over_k_met_keeps_6_db_at_pose_33_on_the_robot_files_drive_and_1_15_k_met_with_1_5_ms_more():
+    """The controller's P part over P_MARGIN_FACTOR k_met (1, session 14's): 6 dB and 45 deg at #33
+    (the sweep's worst case) on the robot file's drive, not with the mismatch file's 1.5 ms of extra
+    dead time, which over 1.15 k_met (tried, not kept: docs) keeps 6 dB."""
     from cdpr_control.control.hybrid_force_control import P_MARGIN_FACTOR
     robot = load_robot("ipanema3")
-    drives = [DriveModel.of(robot.drive), replace(DriveModel.of(robot.drive), T_d=0.00758, T_1=0.000672),
-              replace(DriveModel.of(robot.drive), T_d=robot.drive.T_d + 0.0015)]
-    for drive in drives:
-        assert margins(_platform_33(drive, P_MARGIN_FACTOR * K_MET_33)[0]).meets(6.0, 45.0)
-    assert not margins(_platform_33(drives[2], K_MET_33)[0]).meets(6.0, 45.0)
+    nominal = DriveModel.of(robot.drive)
+    slow = replace(nominal, T_d=robot.drive.T_d + 0.0015)
+    assert margins(_platform_33(nominal, P_MARGIN_FACTOR * K_MET_33)[0]).meets(6.0, 45.0)
+    assert not margins(_platform_33(slow, K_MET_33)[0]).meets(6.0, 45.0)
+    assert margins(_platform_33(slow, 1.15 * K_MET_33)[0]).meets(6.0, 45.0)
