@@ -4,7 +4,7 @@
 The loop, from the offset x_t the PID commands in period k back to it (negative feedback: the
 contact force F rises with x_t and e_F = F_d - F):
 
-    L(z) = k_met * G_a(z) * H_F(z) * C(z)
+    L(z) = G(z) * H_F(z) * C(z),   G(z) = k_met G_a(z) (static) or the platform's, G_a inside
 
 * G_a(z): the drive (3.10) e^{-T_d s} / (1 + T_1 s) or (5.11) e^{-T_d s} / (1 + 2 zeta T_w s + (T_w s)^2)
   behind a zero-order hold of one period, discretised exactly, the dead time included (its whole
@@ -16,10 +16,14 @@ contact force F rises with x_t and e_F = F_d - F):
   stiffness it divides by in D (``HybridForceControl.k_pid``), its D part on the filtered measurement
   (the same sign as the P part in the loop; a step of F_d does not pass it), the I part with gain
   1 / (K_p T_i) as ``HybridForceControl._pid`` integrates it (forward, x_t = P + the new integral).
-* k_met: the stiffness the force meets, robot and surface in series along z_t, as B measures it
-  (``HybridForceControl.k_contact``; the controller knows nothing else of the surface). The model
-  takes it as static: the platform's own modes are not in it (see docs/hybrid_force_control.md,
-  "Contact margin (session 14)", for what that leaves out).
+* G(z), the plant: the force follows the drive's position statically with k_met, the stiffness the
+  force meets (robot and surface in series along z_t, as B measures it: ``HybridForceControl.k_contact``),
+  or, with a :class:`PlatformPlant`, the platform in contact: the 6-DOF platform on its cables and
+  the surface, the output the contact force as the controller computes it from the cable forces.
+  Above the platform's modes that force follows the winches with the cables' stiffness, many times
+  k_met: the static model misses the 52 Hz oscillation of IPAnema 3 sweep pose #33 (15 dB of margin
+  where the simulation grew), the platform model finds it (docs/hybrid_force_control.md, "Contact
+  margin (session 14)").
 
 The gain margin is the factor by which the whole loop gain may grow before the loop is unstable
 (the phase crossings of -180 deg, the worst one); the phase margin is 180 deg plus the phase at the
@@ -333,7 +337,7 @@ def margins(loop: ContactLoop) -> Margins:
 
 def closed_loop_response(loop: ContactLoop, periods: int, scale: float = 1.0) -> np.ndarray:
     """The force F [N, per N of a step of F_d] of the closed loop, the loop gain scaled by ``scale``
-    (k_met scale times), run as difference equations period by period, the PID as
+    (the plant's output times scale), run as difference equations period by period, the PID as
     ``HybridForceControl._pid`` computes it (no saturation): the brute-force check of
     :func:`margins` (stable below the gain margin, growing above it)."""
     dd = loop.sampled
