@@ -14,7 +14,7 @@ from cdpr_control.control.params import control_loop_params
 from cdpr_control.control.filters import LowPass
 from cdpr_control.control.hybrid_force_control import (HAND_OVER_TIME, CFCCoupling, ContactHandOver,
     HPFCParams, HPFCState, HybridForceControl, MovingAverage, contact_force, expected_contact_wrench,
-    APPROACH_LAG_SHARE, drive_ramp_lag, format_state, parse_state, select_position_feedback, task_frame)
+    APPROACH_LAG_SHARE, P_MARGIN_FACTOR, drive_ramp_lag, format_state, parse_state, select_position_feedback, task_frame)
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import run
 from cdpr_sim.drive_models import DriveModel
@@ -675,7 +675,8 @@ def test_pid_p_part_divides_by_the_stiffness_met_where_it_is_stiffer_than_K_p(st
     assert _sequence(log) == ["A", "B", "D"]
     # measured in B (through the wall's lag: 10,764 and 75,063 N/m here), on the wall's side of K_p
     assert (hpfc.k_contact > 2.0 * p.K_p) if stiffness_ratio > 1.0 else (hpfc.k_contact < p.K_p)
-    k = max(p.K_p, hpfc.k_contact)
+    k = max(p.K_p, P_MARGIN_FACTOR * hpfc.k_contact)
+    assert (k > p.K_p) == (stiffness_ratio > 1.0)
     integrator, x_t = hpfc.integrator, hpfc.x_t
     w = np.r_[MINI.platform.mass * MINI.gravity + [0, 0, 6.0], 0, 0, 0]      # F = 6 N: e_F = 4 N
     s = hpfc.update([0, 0, -10.0], w)

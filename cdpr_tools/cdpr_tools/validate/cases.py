@@ -241,6 +241,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     n_settle = int(round(SETTLE_TIME / DT))
 
     cfc_setpoint = []                          # per period: the CFC's set-point and feed-forward, the larger
+    stiffness = {}                             # the stiffness met in B and the P part's in D (contact_margin)
 
     def settle_then_press(k_, loop, sim):
         if k_ == n_settle:                     # the floor in place, then M103
@@ -250,6 +251,9 @@ def contact_case(spec: CaseSpec) -> CaseResult:
             held.setdefault("reason", loop.failure)
         if k_ > 0 and loop.contact is not None and hasattr(loop.contact, "f_set"):
             cfc_setpoint.append(np.maximum(loop.contact.f_set, loop.contact.f_ff))   # (of period k_ - 1, as rec's rows)
+        if loop.hpfc is not None and loop.hpfc.control.k_contact is not None and "k_met" not in stiffness:
+            stiffness.update(k_met=float(loop.hpfc.control.k_contact), k_pid=float(loop.hpfc.control.k_pid),
+                             limits=loop._limits)      # (the distribution's f_min, f_max of that period)
     rec.hooks += [settle_then_press, _settled_watch(rec, F_d)]
     params = control_loop_params(robot, hpfc=hpfc, hpfc_enabled=False)
     v_approach = HybridForceControl(robot, DT, hpfc).approach_speed(F_d)      # (below v_max on stiff floors)
@@ -276,6 +280,10 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     # decision of session 12): the case is judged on it, with the same bands
     F_d_run = regulated_force(rec, F_d)
     metrics["F_d_regulated_N"] = F_d_run
+    r_c = rotation_matrix(x[3:]) @ np.asarray(centre) - np.array([0.0, 0.0, radius])    # the tool's lowest point
+    from cdpr_sim.plant import build_plant
+    plant_drive = build_plant(robot, spec.plant, spec.seed or 1).robot.drive
+    metrics.update(contact_loop_margins(robot, hpfc, stiffness, x, r_c, F_d_run, plant_drive))
     if len(touched) and ok:
         i, n = touched[0], int(STEADY_WINDOW / DT)
         # overshoot and slack on the simulator's true forces; settling and steady error on the
@@ -303,6 +311,28 @@ def contact_case(spec: CaseSpec) -> CaseResult:
                                            f"{_controller_capacity(rec):.4g} N), judged on that") if n)
     held_text = rec.held or (f"held by the force watch: {held['reason']}" if "reason" in held else None)
     return judge(spec, metrics, not ok, note or (f"diverged at {rec.diverged_at:.3f} s" if not ok else ""), held_text)
+
+
+def contact_loop_margins(robot, hpfc: HPFCParams, stiffness: dict, x, r_c, F_d: float, plant_drive=None) -> dict:
+    """The contact force loop's margins in D (:func:`cdpr_control.analysis.contact_margin.case_margins`:
+    the platform at x pressing F_d at r_c, the stiffness B measured (k_met), the one the P part
+    divided by (k_pid)) with the robot file's drive (what the controller knows), and the gain margin
+    with the plant's own drive (``plant_drive``, the mismatched plant's dead time and T_1):
+    reported, not judged (NaN where D was not reached). docs/validation.md, "Contact margin
+    (session 14)"."""
+    from cdpr_control.analysis.contact_margin import case_margins
+    out = dict.fromkeys(("k_met_N_per_m", "k_pid_N_per_m", "contact_gain_margin_dB", "contact_phase_margin_deg",
+                         "contact_phase_crossover_Hz", "contact_gain_margin_plant_dB"), float("nan"))
+    if stiffness.get("k_met", 0.0) > 0.0:
+        f_min, f_max = stiffness["limits"] if stiffness.get("limits") is not None else (robot.cable.f_min, robot.cable.f_max)
+        args = (robot, hpfc, DT, x, (0.0, 0.0, -1.0), F_d, r_c, stiffness["k_met"], stiffness["k_pid"] or hpfc.K_p,
+                f_min, f_max)
+        m = case_margins(*args)
+        out.update(k_met_N_per_m=stiffness["k_met"], k_pid_N_per_m=stiffness["k_pid"], contact_gain_margin_dB=m.gain_dB,
+                   contact_phase_margin_deg=m.phase_deg, contact_phase_crossover_Hz=float(m.f_phase))
+        if plant_drive is not None:
+            out["contact_gain_margin_plant_dB"] = case_margins(*args, drive=plant_drive).gain_dB
+    return out
 
 
 def regulated_force(rec: Recorder, F_d: float) -> float:
