@@ -207,6 +207,22 @@ def _pose_2():
     return sweep_poses(IPANEMA3)[2].x
 
 
+def _pose_2_press():
+    """At pose 2 with the distribution's limits 150..3000 N: A^T, the cable forces' response e to a
+    press along -z (contact_response), f_min, f_max and the free-space distribution f held there."""
+    from cdpr_control.control.hybrid_force_control import contact_response
+    from cdpr_control.force_distribution.methods import distribute
+    from cdpr_control.model.dynamics import gravity_wrench
+
+    x = _pose_2()
+    AT, = kernels.inverse_kinematics_fields(IPANEMA3, x, "AT")
+    theta = kernels.inverse_kinematics_fields(IPANEMA3, x, "q")[0]
+    f_min, f_max = np.full(IPANEMA3.m, 150.0), np.full(IPANEMA3.m, 3000.0)
+    f = distribute(AT, gravity_wrench(IPANEMA3, x), f_min, f_max, f_min).f
+    e = contact_response(AT, CableForceControl(IPANEMA3, 1e-3).stiffness(f, theta), np.array([0.0, 0.0, -1.0]))
+    return AT, e, f_min, f_max, f
+
+
 def test_contact_response_is_the_cables_elastic_answer_to_a_press_along_z_t():
     """e of (2.22)'s cable stiffness K_c = A^T K_l A: A^T e = [z_t; 0] (1 N along z_t, no other wrench),
     and e is the K_l^-1-weighted least-norm solution (the elastic one): orthogonal to every force
@@ -235,16 +251,9 @@ def test_pre_contact_forces_keep_every_cable_within_its_limits_once_the_contact_
     press added, f + 150 e, takes an upper cable below the planned f_min (150 N); the pre-contact
     forces have the same wrench, are within the limits, and stay there with the press. Where the
     forces given already do (no press; the pre-contact forces themselves), they are returned."""
-    from cdpr_control.control.hybrid_force_control import contact_response, pre_contact_forces
-    from cdpr_control.force_distribution.methods import distribute
-    from cdpr_control.model.dynamics import gravity_wrench
+    from cdpr_control.control.hybrid_force_control import pre_contact_forces
 
-    x = _pose_2()
-    AT, = kernels.inverse_kinematics_fields(IPANEMA3, x, "AT")
-    theta = kernels.inverse_kinematics_fields(IPANEMA3, x, "q")[0]
-    f_min, f_max = np.full(IPANEMA3.m, 150.0), np.full(IPANEMA3.m, 3000.0)
-    f_free = distribute(AT, gravity_wrench(IPANEMA3, x), f_min, f_max, f_min).f
-    e = contact_response(AT, CableForceControl(IPANEMA3, 1e-3).stiffness(f_free, theta), np.array([0.0, 0.0, -1.0]))
+    AT, e, f_min, f_max, f_free = _pose_2_press()
     assert (f_free + 150.0 * e).min() < 150.0 - 50.0          # held at the free set, B slackens a cable
     f_pre = pre_contact_forces(AT, e, 150.0, f_free, f_min, f_max)
     np.testing.assert_allclose(AT @ f_pre, AT @ f_free, atol=1e-6)
@@ -513,16 +522,9 @@ def test_post_contact_forces_move_the_held_set_point_in_the_nullspace_until_its_
     the held set plus the press is below f_min. post_contact_forces moves its internal tension only
     (the same wrench) until the press is within [f_min, f_max]; returns the held set where it
     already is, None where no tension holds the press."""
-    from cdpr_control.control.hybrid_force_control import contact_response, post_contact_forces
-    from cdpr_control.force_distribution.methods import distribute
-    from cdpr_control.model.dynamics import gravity_wrench
+    from cdpr_control.control.hybrid_force_control import post_contact_forces
 
-    x = _pose_2()
-    AT, = kernels.inverse_kinematics_fields(IPANEMA3, x, "AT")
-    theta = kernels.inverse_kinematics_fields(IPANEMA3, x, "q")[0]
-    f_min, f_max = np.full(IPANEMA3.m, 150.0), np.full(IPANEMA3.m, 3000.0)
-    f_hold = distribute(AT, gravity_wrench(IPANEMA3, x), f_min, f_max, f_min).f
-    e = contact_response(AT, CableForceControl(IPANEMA3, 1e-3).stiffness(f_hold, theta), np.array([0.0, 0.0, -1.0]))
+    AT, e, f_min, f_max, f_hold = _pose_2_press()
     assert (f_hold + 150.0 * e).min() < 150.0 - 50.0
     f_post = post_contact_forces(AT, e, 150.0, f_hold, f_min, f_max)
     np.testing.assert_allclose(AT @ f_post, AT @ f_hold, atol=1e-6)            # the internal tension only
