@@ -458,7 +458,6 @@ class LoadCompensation:
         self.window_n: int | None = None                       # samples of the last window of (4.4)
         self.w_history: list[float] = []                       # w_z per sample (the longest window + 1)
         self.m_short: list[float] = []                         # (4.4) over T_filter per sample (the longest window + 1)
-        self.load_change = 0.0                                 # kg, m_short's latest less its first in the last swing window
         self.samples_seen = 0                                  # samples of the estimated pose
         self.pose_acceleration = False                         # (4.4) took the estimated pose's ẍ_z
         self.m_hat: float | None = None
@@ -597,7 +596,6 @@ class LoadCompensation:
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
         limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
         differs = ~(np.abs(np.asarray(m[-1 - back:]) - m[-1]) <= limit)       # NaN differs too
-        self.load_change = float(m[-1] - m[-1 - back])
         if not differs.any():
             return n
         return back - int(np.flatnonzero(differs)[-1])          # samples since the latest that differs
@@ -622,10 +620,12 @@ class LoadCompensation:
         previous = self.d_history[-1] if self.d_history else 0.0
         self.d_history.append(previous + self.w_cumulative - self.c_history.pop(0))
         del self.d_history[:-(n_max + 1)]
-        self.m_short.append(self._window_mass(self.wrench_filter.n))
+        n_short = self.wrench_filter.n
+        short = self._window_means(n_short)                      # (4.4)'s window of the thesis
+        self.m_short.append(self._window_mass(short))
         del self.m_short[:-(n_max + 1)]
         n = self._swing_periods()
-        window = self._window_means(n)
+        window = short if n == n_short else self._window_means(n)
         if window is not None:
             self.window_n = n
         return window
@@ -639,10 +639,9 @@ class LoadCompensation:
         a = ((zh[-1] - zh[-1 - h]) - (zh[-1 - n] - zh[-1 - n - h])) / (h * self.dt * n * self.dt)
         return (d[-1] - d[-1 - n]) / (h * n), a
 
-    def _window_mass(self, n: int) -> float:
-        """(4.4) over the last n samples with the estimated pose's acceleration, untared [kg]; NaN
-        until the history spans n and h or near (4.4)'s singularity."""
-        window = self._window_means(n)
+    def _window_mass(self, window: tuple[float, float] | None) -> float:
+        """(4.4) of a window's means (:meth:`_window_means`) with the estimated pose's acceleration,
+        untared [kg]; NaN without a window or near (4.4)'s singularity."""
         estimate = None if window is None else mass_estimate(*window, float(self.robot.gravity[2]),
                                                              self.params.accel_guard)
         return float("nan") if estimate is None else float(estimate)

@@ -31,7 +31,7 @@ from cdpr_control.model.kinematics import rotation_matrix
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.closed_loop import hold, run
 from cdpr_sim.contacts import ContactMaterial, Plane, default_tool
-from cdpr_sim.simulator import SimConfig
+from cdpr_sim.simulator import SimConfig, plant_of
 
 from cdpr_tools.validate import criteria
 from cdpr_tools.validate.criteria import DIVERGENCE_FACTOR
@@ -258,7 +258,8 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     params = control_loop_params(robot, hpfc=hpfc, hpfc_enabled=False)
     v_approach = HybridForceControl(robot, DT, hpfc).approach_speed(F_d)      # (below v_max on stiff floors)
     duration = SETTLE_TIME + params.transfer_time + gap / v_approach + CONTACT_TIME
-    ok = recorded_run(robot, rec, source, duration, params, x0=x, config=sim_config(spec, obstacles=(floor,)))
+    config = sim_config(spec, obstacles=(floor,))
+    ok = recorded_run(robot, rec, source, duration, params, x0=x, config=config)
     refused = next((s.hpfc for s in rec.rows["state"] if s.hpfc is not None and s.hpfc.refused), None)
     if refused is not None:
         # the controller refuses contact where the pose's capacity leaves less than it can regulate
@@ -281,9 +282,7 @@ def contact_case(spec: CaseSpec) -> CaseResult:
     F_d_run = regulated_force(rec, F_d)
     metrics["F_d_regulated_N"] = F_d_run
     r_c = rotation_matrix(x[3:]) @ np.asarray(centre) - np.array([0.0, 0.0, radius])    # the tool's lowest point
-    from cdpr_sim.plant import build_plant
-    plant_drive = build_plant(robot, spec.plant, spec.seed or 1).robot.drive
-    metrics.update(contact_loop_margins(robot, hpfc, stiffness, x, r_c, F_d_run, plant_drive))
+    metrics.update(contact_loop_margins(robot, hpfc, stiffness, x, r_c, F_d_run, plant_of(robot, config).robot.drive))
     if len(touched) and ok:
         i, n = touched[0], int(STEADY_WINDOW / DT)
         # overshoot and slack on the simulator's true forces; settling and steady error on the
