@@ -101,3 +101,59 @@ def test_the_loop_hands_the_identified_settlement_to_its_pose_estimator(identifi
     else:
         assert all(given is None for given, _ in seen)
         assert seen[-1][1].max() > 1e-4       # the model runs (x_d,LC's), the pose does not take it
+
+
+@pytest.mark.parametrize("phi", [np.zeros(3), np.r_[0.05, -0.08, 0.3]])
+def test_the_settlement_offset_shortens_the_cables_by_s(phi):
+    """settlement_offset: for s = J dx0 (a settlement a rigid motion gives), IK(x + offset) = q - s to
+    second order; for any s the length error left is the least-squares residual, orthogonal to the
+    lengths every pose offset can change (finite differences of the full inverse kinematics)."""
+    from cdpr_control.control.load_compensation import settlement_offset
+
+    robot = IPANEMA3
+    x = np.r_[0.4, -0.3, 1.0, phi]
+    ik = inverse_kinematics(robot, x)
+    h = 1e-6
+    J = np.column_stack([(inverse_kinematics(robot, x + h * e).q - inverse_kinematics(robot, x - h * e).q) / (2 * h)
+                         for e in np.eye(6)])
+    s = J @ np.r_[0.001, -0.002, -0.004, 0.001, 0.0005, -0.002]
+    dq = inverse_kinematics(robot, x + settlement_offset(ik, s, x[3:])).q - ik.q
+    np.testing.assert_allclose(dq, -s, atol=2e-3 * np.abs(s).max())     # second-order rest of 4 mm
+    generic = np.linspace(0.5e-3, 3e-3, robot.m)                          # 8 cables, 6 DOF: not all of it
+    offset = settlement_offset(ik, generic, x[3:])
+    residual = generic + J @ offset
+    assert np.linalg.norm(J.T @ residual) < 1e-6 * np.linalg.norm(J.T @ generic)     # (J: differences)
+
+
+@pytest.mark.parametrize("enabled, identified", [(False, True), (False, False), (True, True)])
+def test_force_control_takes_out_an_identified_settlement(enabled, identified):
+    """With x_d,LC off (force control) the stage's output is settlement_offset of the model's s where
+    the ratio was identified, and active (the joint command adds it); not identified: zero and
+    inactive; with x_d,LC on the output is x_d,LC (which holds s through secant_offset)."""
+    from cdpr_control.control.load_compensation import settlement_offset
+    from cdpr_control.control.loop import LoopInputs
+
+    robot = IPANEMA3
+    stage = LoadCompensationStage(robot, 1e-3, LoadCompensationParams(enabled=enabled, settlement_ratio=0.3,
+                                                                      settlement_identified=identified))
+    lc = stage.compensation
+    x_d = robot.home.copy()
+    ik = inverse_kinematics(robot, x_d)
+    f0 = np.full(robot.m, 600.0)
+    zero = np.zeros(6)
+    out = None
+    for k in range(400):
+        f = f0 if k < 100 else f0 + 400.0                 # the cables load up: they settle
+        out = stage.offset(LoopInputs(1e-3 * k, x_d, zero, zero, ik.q, f, x_d, -ik.AT @ f))
+        if k == 99:
+            lc.settlement.reset(lc.force_filter.mean)     # settled to the unloaded forces
+    assert lc.settlement.s.max() > 1e-5
+    if enabled:
+        assert out.active
+        np.testing.assert_array_equal(out.x, lc.x_lc)
+    elif identified:
+        assert out.active
+        np.testing.assert_allclose(out.x, settlement_offset(ik, lc.settlement.s, x_d[3:]), atol=1e-12)
+        assert out.x[2] > 0.0                             # longer cables: the command lifts the platform
+    else:
+        assert not out.active and not out.x.any()

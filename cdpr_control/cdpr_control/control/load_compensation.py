@@ -327,6 +327,17 @@ class SettlementModel:
         return self.s
 
 
+def settlement_offset(ik, s, phi) -> np.ndarray:
+    """The pose offset (6,) [m, rad] that shortens the commanded cables by the settlement s (m,) [m]:
+    a twist dx changes the lengths by dq = -(A^T)^T dx (kinematics.cable_velocities), so
+    dx = ((A^T)^T)^+ s (least squares over the m cables) gives IK(x_d + dx) = q - s, and cables
+    that settled (longer by s_i at the same force, section 4.1.3) hold the platform where it was.
+    The part of s no rigid motion gives is a change of the internal forces, which the cable force
+    control takes."""
+    dx = np.linalg.lstsq(np.asarray(ik.AT, dtype=float).T, np.asarray(s, dtype=float), rcond=None)[0]
+    return twist_to_pose_offset(dx, phi)
+
+
 def twist_to_pose_offset(dx, phi) -> np.ndarray:
     """A small displacement in twist coordinates (dr, dθ) as a pose offset (dr, dφ) in Kardan angles
     at the orientation φ: dθ = H(φ) dφ (kinematics.kardan_rate_matrix)."""
@@ -403,7 +414,8 @@ class LoadCompensationParams:
     settlement_time: float = 2.0    # s, its time constant
     # the ratio was identified on this robot (`cdpr identify settlement -o` writes true): the model's
     # s then also lengthens the forward kinematics' cables (PoseEstimator.settlement, cause A of
-    # docs/load_compensation.md "The settlement in the pose estimator"); false (default): s acts in
+    # docs/load_compensation.md "The settlement in the pose estimator"), and with x_d,LC off (force
+    # control) the output is settlement_offset of s (docs/load_compensation.md, session 15); false (default): s acts in
     # x_d,LC only, as an assumed ratio over-compensates a plant that does not settle
     settlement_identified: bool = False
 
@@ -747,7 +759,10 @@ class LoadCompensation:
         was not finite or the stiffness singular)."""
         p = self.params
         if not p.enabled:
-            self.x_lc = np.zeros(6)
+            s = self.pose_settlement()
+            # x_d,LC off (force control): an identified settlement is still a known length error of
+            # the cables, taken out here rather than by the OSPC's integral chasing its creep
+            self.x_lc = np.zeros(6) if s is None else settlement_offset(ik, s, x_d[3:])
             self.output_filter.reset(np.zeros(6))
             self.rate_limited[:] = False
             return self.x_lc.copy()
@@ -771,6 +786,13 @@ class LoadCompensation:
         self.rate_limited = np.abs(change) > step
         self.x_lc = self.x_lc + np.clip(change, -step, step)
         return self.x_lc.copy()
+
+    @property
+    def active(self) -> bool:
+        """Whether the output offset acts: x_d,LC (4.6) is enabled, or the settlement is identified
+        (then the output is :func:`settlement_offset` of the model's s where x_d,LC is off; x_d,LC
+        holds s itself, :func:`secant_offset`)."""
+        return self.params.enabled or self.pose_settlement() is not None
 
     def pose_settlement(self) -> np.ndarray | None:
         """The settlement s (m,) [m] for the pose estimator (section 4.1.3: the settled cables are
@@ -815,7 +837,7 @@ class LoadCompensationStage:
         lc = self.compensation
         x = lc.update(inputs.x_d, inputs.xdot_d, inputs.xddot_d, inputs.f, inputs.x, inputs.ik_d)
         w = lc.payload_wrench(inputs.x_d, inputs.xdot_d, inputs.xddot_d) if self.feed_force_setpoint else None
-        return OffsetOutput(lc.params.enabled, x, w)
+        return OffsetOutput(lc.active, x, w)
 
     def pose_settlement(self) -> np.ndarray | None:
         """For the loop's pose estimator: :meth:`LoadCompensation.pose_settlement`."""

@@ -7,7 +7,9 @@ enabled or not:
 - ``load_compensation/state`` (cdpr_msgs/ControllerState): ``output`` = x_d,LC [m, m, m, rad, rad,
   rad], an offset input of the joint command (docs/control.md); ``feedforward`` = C_x w_c before
   the output filter and rate limit; ``reference`` = x_d; ``saturated`` = rate limit active per axis;
-  ``enabled`` = the ``enabled`` parameter (disabled: output zero, the joint command ramps it out).
+  ``enabled`` = the ``enabled`` parameter, or an identified settlement (``settlement_identified``):
+  with x_d,LC disabled the output is then the pose offset that shortens the cables by the
+  settlement model's s (``settlement_offset``); else zero, and the joint command ramps it out.
 - ``load_compensation/payload`` (geometry_msgs/InertiaStamped, frame ``platform``): ``m`` = the
   estimated payload m_c = m̂_p - m_p [kg]; ``com`` = its centre of gravity in the platform frame
   [m] once m_c exceeds ``cog_min_mass`` (before: zero, the platform origin); the inertia entries
@@ -78,7 +80,8 @@ PARAMS = [
     ParamSpec("settlement_time", D.settlement_time, "time constant of the cable settlement [s]", range=(1e-3, 1e3)),
     ParamSpec("settlement_identified", D.settlement_identified, "the settlement ratio was identified on this robot "
               "(`cdpr identify settlement -o` writes true): its s also lengthens the forward kinematics' cables "
-              "(published on load_compensation/settlement); false: x_d,LC only"),
+              "(published on load_compensation/settlement), and where x_d,LC is off the output shortens them by it; "
+              "false: x_d,LC only"),
 ]
 
 
@@ -134,8 +137,8 @@ class LoadCompensationNode(CdprNode):
         if valid:
             x_lc = lc.update(x_d, xdot_d, xddot_d, f, x)
         else:
-            x_lc = lc.x_lc.copy() if lc.params.enabled else np.zeros(6)     # hold: never NaN
-        enabled = lc.params.enabled
+            x_lc = lc.x_lc.copy() if lc.active else np.zeros(6)     # hold: never NaN
+        enabled = lc.active
         self.state_pub.publish(self.message_factory(ControllerState)(
             header=header, controller="load_compensation", enabled=enabled, names=list(AXES),
             reference=reference, feedforward=lc.x_target.tolist(), output=x_lc.tolist(),
@@ -154,8 +157,9 @@ class LoadCompensationNode(CdprNode):
         elif (problem := lc.slack_problem()) is not None:
             self.report(DiagnosticStatus.WARN, problem, stamp_ns=t_ns)
         else:
-            self.report(DiagnosticStatus.OK, "ok" if enabled else "identifying (compensation disabled)",
-                        stamp_ns=t_ns)
+            self.report(DiagnosticStatus.OK, "ok" if lc.params.enabled else (
+                "identifying; x_d,LC disabled, the identified cable settlement compensated" if enabled
+                else "identifying (compensation disabled)"), stamp_ns=t_ns)
 
 
 def main(args=None):
