@@ -584,8 +584,14 @@ class LoadCompensation:
             seen = 0.5 * abs(e[2][1] - e[1][1]) * (math.pi / half) ** 2          # m/s², amplitude
             m_hat = abs(self.m_hat) if self.m_hat is not None else self.m_p
             force_swing = min(force_swing, 2.0 * m_hat * seen / SWING_SEEN_MIN)
+            change, unknown = self._load_change(force_swing)
+            # turning points from before a load change are not the swing's: the sag and recovery of
+            # the step turn like one, and its "period" would reach back across the change (session 15)
+            if change is not None and change >= e[0][0]:
+                return n
             if n_swing > n:
-                n = max(n, self._since_load_change(n_swing, force_swing))
+                last = max(-1 if change is None else change, -1 if unknown is None else unknown)
+                n = max(n, min(n_swing, self.samples_seen - 1 - last))
         return n
 
     def _force_swing(self, first: int, last: int) -> float:
@@ -595,22 +601,25 @@ class LoadCompensation:
         lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
         return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
 
-    def _since_load_change(self, n: int, force_swing: float) -> int:
-        """The longest window up to n samples that does not reach back across a load change: (4.4)
-        over T_filter at every sample of the window against the latest; the window starts after the
-        latest sample whose estimate differs from the latest by more than LOAD_CHANGE of the estimated
-        mass plus force_swing / |g| (force_swing [N]: the swing's own, see LOAD_CHANGE), as (4.4) over
-        T_filter then still saw the load before the change. n where none differs; 0 while the history
-        does not reach back that far (the caller keeps T_filter)."""
-        m, back = self.m_short, n - self.wrench_filter.n
-        if len(m) <= back:
-            return 0
+    def _load_change(self, force_swing: float) -> tuple[int | None, int | None]:
+        """(the sample of the latest load change the history shows, that of the latest sample without
+        a T_filter estimate), each None where there is none. The load change: the latest (4.4) over
+        T_filter (m_short, over the longest window) that differs from the latest by more than
+        LOAD_CHANGE of the estimated mass plus force_swing / |g| (force_swing [N]: the swing's own,
+        see LOAD_CHANGE), as that estimate then still saw the load before the change. A window starts
+        after both (T_filter's estimate there has the new load but for the limit), and a turning
+        point before the change is not the swing's (one before the first estimate may be)."""
+        m = np.asarray(self.m_short)
+        if not len(m):
+            return None, None
+        first = self.samples_seen - len(m)                                    # the sample of m[0]
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
         limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
-        differs = ~(np.abs(np.asarray(m[-1 - back:]) - m[-1]) <= limit)       # NaN differs too
-        if not differs.any():
-            return n
-        return back - int(np.flatnonzero(differs)[-1])          # samples since the latest that differs
+        deviation = np.abs(m - m[-1])
+        changes = np.flatnonzero(deviation > limit)
+        unknown = np.flatnonzero(~np.isfinite(deviation))
+        return (first + int(changes[-1]) if len(changes) else None,
+                first + int(unknown[-1]) if len(unknown) else None)
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
