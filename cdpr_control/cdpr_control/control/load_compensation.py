@@ -88,7 +88,13 @@ SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the directio
 # moves the later estimates by the change: the window starts after the latest T_filter estimate that
 # differs from the latest by more than LOAD_CHANGE m̂ + that bound / |g| (at least T_filter, the
 # thesis' window). LOAD_CHANGE: the noise of a T_filter estimate at rest and the share of the mass a
-# change below it may cost.
+# change below it may cost. The sample of that estimate is the latest load change the history shows
+# (LoadCompensation._load_change, over the whole history, not only the estimates inside the window: a
+# window must not jump past a change once the change's estimate leaves its range), and turning points
+# before it make no swing (session 15: under force control with the CFC's internal integral the sag
+# and recovery of a small step turn twice by more than 2 mm, a "swing" whose period reached back into
+# the payload's ramp, ipanema3 #24 9.6 %; docs/load_compensation.md, "The window after the load step
+# with the internal integral (session 15)").
 LOAD_CHANGE = 0.02
 SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
@@ -552,7 +558,8 @@ class LoadCompensation:
         forward kinematics' noise at rest turns nothing); its period is twice the time between the
         last two (the latest half swing: a swing that decays or changes its frequency after a step
         is matched as soon as it turns), and it counts as a swing where the last two half swings
-        each move z by 2 SWING_AMPLITUDE or more."""
+        each move z by 2 SWING_AMPLITUDE or more and all three turning points come after the latest
+        load change (:meth:`_load_change`); the window starts after that change."""
         zh, h = self.z_history, self._velocity_base
         if len(zh) > h:
             v = zh[-1] - zh[-1 - h]
