@@ -90,11 +90,10 @@ SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the directio
 # thesis' window). LOAD_CHANGE: the noise of a T_filter estimate at rest and the share of the mass a
 # change below it may cost. The sample of that estimate is the latest load change the history shows
 # (LoadCompensation._load_change, over the whole history, not only the estimates inside the window: a
-# window must not jump past a change once the change's estimate leaves its range), and turning points
-# before it make no swing (session 15: under force control with the CFC's internal integral the sag
-# and recovery of a small step turn twice by more than 2 mm, a "swing" whose period reached back into
-# the payload's ramp, ipanema3 #24 9.6 %; docs/load_compensation.md, "The window after the load step
-# with the internal integral (session 15)").
+# window must not jump past a change once the change's estimate leaves its range: session 15, under
+# force control with the CFC's internal integral the sag and recovery of a small step turn twice by
+# more than 2 mm, a "swing" whose window then jumped back into the payload's ramp, ipanema3 #24 9.6 %;
+# docs/load_compensation.md, "The window after the load step with the internal integral (session 15)").
 LOAD_CHANGE = 0.02
 SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
@@ -558,8 +557,8 @@ class LoadCompensation:
         forward kinematics' noise at rest turns nothing); its period is twice the time between the
         last two (the latest half swing: a swing that decays or changes its frequency after a step
         is matched as soon as it turns), and it counts as a swing where the last two half swings
-        each move z by 2 SWING_AMPLITUDE or more and all three turning points come after the latest
-        load change (:meth:`_load_change`); the window starts after that change."""
+        each move z by 2 SWING_AMPLITUDE or more; the window starts after the latest load change
+        (:meth:`_load_change`)."""
         zh, h = self.z_history, self._velocity_base
         if len(zh) > h:
             v = zh[-1] - zh[-1 - h]
@@ -591,14 +590,11 @@ class LoadCompensation:
             seen = 0.5 * abs(e[2][1] - e[1][1]) * (math.pi / half) ** 2          # m/s², amplitude
             m_hat = abs(self.m_hat) if self.m_hat is not None else self.m_p
             force_swing = min(force_swing, 2.0 * m_hat * seen / SWING_SEEN_MIN)
-            change, unknown = self._load_change(force_swing)
-            # turning points from before a load change are not the swing's: the sag and recovery of
-            # the step turn like one, and its "period" would reach back across the change (session 15)
-            if change is not None and change >= e[0][0]:
-                return n
             if n_swing > n:
-                last = max(-1 if change is None else change, -1 if unknown is None else unknown)
-                n = max(n, min(n_swing, self.samples_seen - 1 - last))
+                # the window starts after the latest load change the whole history shows (session 15:
+                # not only the T_filter estimates inside the window, which let it jump past the change)
+                change = self._load_change(force_swing)
+                n = max(n, n_swing if change is None else min(n_swing, self.samples_seen - 1 - change))
         return n
 
     def _force_swing(self, first: int, last: int) -> float:
@@ -608,25 +604,20 @@ class LoadCompensation:
         lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
         return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
 
-    def _load_change(self, force_swing: float) -> tuple[int | None, int | None]:
-        """(the sample of the latest load change the history shows, that of the latest sample without
-        a T_filter estimate), each None where there is none. The load change: the latest (4.4) over
-        T_filter (m_short, over the longest window) that differs from the latest by more than
-        LOAD_CHANGE of the estimated mass plus force_swing / |g| (force_swing [N]: the swing's own,
-        see LOAD_CHANGE), as that estimate then still saw the load before the change. A window starts
-        after both (T_filter's estimate there has the new load but for the limit), and a turning
-        point before the change is not the swing's (one before the first estimate may be)."""
+    def _load_change(self, force_swing: float) -> int | None:
+        """The sample of the latest load change the history shows (None where it shows none): the
+        latest (4.4) over T_filter (m_short, over the whole history of the longest window, not only
+        the estimates inside a candidate window) that differs from the latest by more than LOAD_CHANGE
+        of the estimated mass plus force_swing / |g| (force_swing [N]: the swing's own, see
+        LOAD_CHANGE), as that estimate then still saw the load before the change; a sample without an
+        estimate (NaN) counts as one. A window starts after it."""
         m = np.asarray(self.m_short)
         if not len(m):
-            return None, None
-        first = self.samples_seen - len(m)                                    # the sample of m[0]
+            return None
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
         limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
-        deviation = np.abs(m - m[-1])
-        changes = np.flatnonzero(deviation > limit)
-        unknown = np.flatnonzero(~np.isfinite(deviation))
-        return (first + int(changes[-1]) if len(changes) else None,
-                first + int(unknown[-1]) if len(unknown) else None)
+        differs = np.flatnonzero(~(np.abs(m - m[-1]) <= limit))              # NaN differs too
+        return self.samples_seen - len(m) + int(differs[-1]) if len(differs) else None
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
