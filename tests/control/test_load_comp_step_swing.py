@@ -1,7 +1,7 @@
 """The window of (4.4) after a small load step under force control with the CFC's internal integral
 (docs/load_compensation.md, "The window after the load step with the internal integral (session
-15)"): the step's own sag and recovery turn like a swing, and turning points from before the load
-change do not make one; a swing window never reaches back past the latest load change."""
+15)"): the step's own sag and recovery turn like a swing, and the swing's window must never start
+before the latest load change the estimate's history shows."""
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
@@ -67,11 +67,12 @@ def _recorded_sag(t):
 
 def test_the_sag_and_return_of_a_small_step_is_no_swing():
     """The wobble's turning point, the sag's bottom and the return's top make two half swings of
-    more than 2 mm: a "swing" of 1.1 s whose window (SWING_WINDOW_MAX, from 0.87 s) reached back
-    into the payload's ramp and read 8.5 kg 8.75 % off from 1 s after the step on (session 14;
-    9.64 % in the closed loop). The wobble's and the bottom's turning points come before the latest
-    T_filter estimate that still differs by the load change, so they make no swing: the estimate is
-    the thesis' T_filter one, exact here, and no window reaches back before the ramp's end."""
+    more than 2 mm: a "swing" of 1.1 s. The session-14 rule started its window after the latest
+    T_filter estimate *inside the window* that differed by the load change; once that estimate
+    (at 1.1 s) left the window's range the window jumped to SWING_WINDOW_MAX (from 0.87 s, into the
+    payload's ramp) and read 8.5 kg 8.75 % off from 1 s after the step on (9.64 % in the closed
+    loop). The window now starts after the latest change the whole history shows: never before the
+    ramp's end, and the estimate within 1 %."""
     t, m_c, windows = _run(lambda t: _payload(t, 8.5), _recorded_sag, 3.0)
     judged = t >= REST + 1.0                         # the sweep's: from 1 s after the step began
     assert np.abs(m_c[judged] - 8.5).max() / 8.5 < 0.01
