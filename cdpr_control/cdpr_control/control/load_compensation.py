@@ -88,7 +88,12 @@ SWING_HYSTERESIS = 2e-4     # m, |z(t) - z(t - h)| beyond this sets the directio
 # moves the later estimates by the change: the window starts after the latest T_filter estimate that
 # differs from the latest by more than LOAD_CHANGE m̂ + that bound / |g| (at least T_filter, the
 # thesis' window). LOAD_CHANGE: the noise of a T_filter estimate at rest and the share of the mass a
-# change below it may cost.
+# change below it may cost. The sample of that estimate is the latest load change the history shows
+# (LoadCompensation._load_change, over the whole history, not only the estimates inside the window: a
+# window must not jump past a change once the change's estimate leaves its range: session 15, under
+# force control with the CFC's internal integral the sag and recovery of a small step turn twice by
+# more than 2 mm, a "swing" whose window then jumped back into the payload's ramp, ipanema3 #24 9.6 %;
+# docs/load_compensation.md, "The window after the load step with the internal integral (session 15)").
 LOAD_CHANGE = 0.02
 SWING_SEEN_MIN = 0.2
 SECANT_TOLERANCE = 1e-3    # relative residual |A^T (f_U - f) + w_c| / (|w_c| + 1 N) of secant_offset
@@ -552,7 +557,8 @@ class LoadCompensation:
         forward kinematics' noise at rest turns nothing); its period is twice the time between the
         last two (the latest half swing: a swing that decays or changes its frequency after a step
         is matched as soon as it turns), and it counts as a swing where the last two half swings
-        each move z by 2 SWING_AMPLITUDE or more."""
+        each move z by 2 SWING_AMPLITUDE or more; the window starts after the latest load change
+        (:meth:`_load_change`)."""
         zh, h = self.z_history, self._velocity_base
         if len(zh) > h:
             v = zh[-1] - zh[-1 - h]
@@ -585,7 +591,10 @@ class LoadCompensation:
             m_hat = abs(self.m_hat) if self.m_hat is not None else self.m_p
             force_swing = min(force_swing, 2.0 * m_hat * seen / SWING_SEEN_MIN)
             if n_swing > n:
-                n = max(n, self._since_load_change(n_swing, force_swing))
+                # the window starts after the latest load change the whole history shows (session 15:
+                # not only the T_filter estimates inside the window, which let it jump past the change)
+                change = self._load_change(force_swing)
+                n = max(n, n_swing if change is None else min(n_swing, self.samples_seen - 1 - change))
         return n
 
     def _force_swing(self, first: int, last: int) -> float:
@@ -595,22 +604,20 @@ class LoadCompensation:
         lo, hi = max(len(w) - 1 - (end - first), 0), len(w) - 1 - (end - last)
         return max(w[lo:hi + 1]) - min(w[lo:hi + 1]) if hi >= lo else 0.0
 
-    def _since_load_change(self, n: int, force_swing: float) -> int:
-        """The longest window up to n samples that does not reach back across a load change: (4.4)
-        over T_filter at every sample of the window against the latest; the window starts after the
-        latest sample whose estimate differs from the latest by more than LOAD_CHANGE of the estimated
-        mass plus force_swing / |g| (force_swing [N]: the swing's own, see LOAD_CHANGE), as (4.4) over
-        T_filter then still saw the load before the change. n where none differs; 0 while the history
-        does not reach back that far (the caller keeps T_filter)."""
-        m, back = self.m_short, n - self.wrench_filter.n
-        if len(m) <= back:
-            return 0
+    def _load_change(self, force_swing: float) -> int | None:
+        """The sample of the latest load change the history shows (None where it shows none): the
+        latest (4.4) over T_filter (m_short, over the whole history of the longest window, not only
+        the estimates inside a candidate window) that differs from the latest by more than LOAD_CHANGE
+        of the estimated mass plus force_swing / |g| (force_swing [N]: the swing's own, see
+        LOAD_CHANGE), as that estimate then still saw the load before the change; a sample without an
+        estimate (NaN) counts as one. A window starts after it."""
+        m = np.asarray(self.m_short)
+        if not len(m):
+            return None
         scale = abs(self.m_hat) if self.m_hat is not None else self.m_p
         limit = LOAD_CHANGE * scale + force_swing / abs(float(self.robot.gravity[2]))
-        differs = ~(np.abs(np.asarray(m[-1 - back:]) - m[-1]) <= limit)       # NaN differs too
-        if not differs.any():
-            return n
-        return back - int(np.flatnonzero(differs)[-1])          # samples since the latest that differs
+        differs = np.flatnonzero(~(np.abs(m - m[-1]) <= limit))              # NaN differs too
+        return self.samples_seen - len(m) + int(differs[-1]) if len(differs) else None
 
     def _estimated_acceleration(self, z: float, w_z: float) -> tuple[float, float] | None:
         """(w_z, ẍ_z) of (4.4) from the estimated pose: the mean vertical acceleration over the
