@@ -66,10 +66,12 @@ def test_shipped_settlement_record_leaves_the_parameter_file():
 def test_identified_settlement_takes_cause_a_out_of_the_force_control_sag(tmp_path):
     """ipanema3 #8 of the 40-pose grid on the mismatched plant seed 1, 100 % of its dynamic capacity
     (35.7 kg) under force control: with the parameter file's settlement model (not in the pose) the
-    forward kinematics misses about 2 mm of the sag (the plant's settlement: cause A) and the cut is
-    below the default plant's 85 % (session 12's sweep: 81.6 %); with the settlement identified on the
-    plant first (as a user does, `cdpr identify settlement`) the unseen part is below 0.5 mm and the
-    cut within the band."""
+    forward kinematics misses about 2 mm of the sag (the plant's settlement: cause A); with the
+    settlement identified on the plant first (as a user does, `cdpr identify settlement`) the unseen
+    part is below 0.5 mm and the case passes. (The shipped run's cut, 81.6 % in session 12's sweep,
+    is 90.7 % since the plant no longer settles from force control's start-up, cases.settle_plant;
+    the identified run's 86.7 %: with the printed (3.19) the integral's offset above the set-point
+    is what cause A had cancelled, docs/validation.md "Payload after session 13".)"""
     from cdpr_tools.validate.grid import sweep_poses
 
     robot = load_robot("ipanema3")
@@ -83,7 +85,7 @@ def test_identified_settlement_takes_cause_a_out_of_the_force_control_sag(tmp_pa
     assert not reused and 0.2 < record["settlement_ratio"] < 0.6      # the plant's 0.3 of its own k0
     shipped = cases._payload_result(spec, robot, mass, {}, None, "")
     identified = cases._payload_result(replace(spec, settlement=record), robot, mass, {}, None, "")
-    assert shipped.metrics["sag_unseen_mm"] < -1.5 and shipped.metrics["sag_cut_percent"] < 85.0
+    assert shipped.metrics["sag_unseen_mm"] < -1.5
     assert abs(identified.metrics["sag_unseen_mm"]) < 0.5
     assert identified.status == "passed", identified.note
     assert settlement.identified(tmp_path, "ipanema3", "mismatched", 1)[1]           # reused

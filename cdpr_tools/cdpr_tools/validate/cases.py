@@ -713,7 +713,8 @@ def _eigen_push(spec: CaseSpec, robot, overrides: dict, push: float) -> float:
 def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     """A payload step at the pose: REST tared empty, the step over PAYLOAD_RAMP (cosine, as a load
     put down by hand: an instantaneous step rings the lightly damped vertical mode), PAYLOAD_DWELL
-    after it -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
+    after it; the plant's cables settled to the rest's forces before the sag's unloaded reference
+    (:func:`settle_plant`) -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
     first hold (control.safety.ForceWatch, on by default) as (t [s], reason), else None: the
     figures of a held run are those of the held robot, not of the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
