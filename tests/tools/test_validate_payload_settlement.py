@@ -159,9 +159,9 @@ def test_settle_plant_leaves_a_plant_without_settlement():
 
 def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
     """Mini #1 of the 40-pose grid, mismatched plant seed 2, force control (shipped), no payload: the
-    plant's cables no longer settle after the sag's unloaded reference (they did by 0.05-0.32 mm under
-    force control's start-up pre-tension: docs/validation.md, "The Mini's sag after session 15"), and
-    the platform's drift over the dwell is within its static accuracy."""
+    plant's cables no longer settle (they did by 0.05-0.32 mm under force control's start-up
+    pre-tension after the sag's unloaded reference: docs/validation.md, "The Mini's sag after session
+    15"), and the platform's drift over the dwell is within its static accuracy."""
     from cdpr_tools.validate.grid import sweep_poses
 
     robot = load_robot("ipanema3_mini")
@@ -170,8 +170,6 @@ def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
                     {"fraction": 0.5, "controller": "force_control"})
     rec, _, ok, hold = cases._payload_run(spec, robot, "force_control", 0.0)
     assert ok and hold is None
-    t = np.asarray(rec.array("t"))
-    start = np.searchsorted(t, cases.PAYLOAD_REST - cases.SAG_WINDOW)
-    assert np.all(rec.settlement[start] > 5e-6)                   # it did settle during the start-up
-    np.testing.assert_allclose(rec.settlement[-1], rec.settlement[start], rtol=0.0, atol=1e-7)
+    # below 1 µm (the force rise of a period before the next call; without it 50-410 µm per cable)
+    np.testing.assert_allclose(rec.settlement, 0.0, rtol=0.0, atol=1e-6)
     assert abs(cases._sag(rec)) <= cases.static_accuracy(rec, float(spec.x[2]))

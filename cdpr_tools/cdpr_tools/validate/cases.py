@@ -713,8 +713,8 @@ def _eigen_push(spec: CaseSpec, robot, overrides: dict, push: float) -> float:
 def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     """A payload step at the pose: REST tared empty, the step over PAYLOAD_RAMP (cosine, as a load
     put down by hand: an instantaneous step rings the lightly damped vertical mode), PAYLOAD_DWELL
-    after it; the plant's cables settled to the rest's forces before the sag's unloaded reference
-    (:func:`settle_plant`) -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
+    after it; the plant's cables settled to every force they carry in the unloaded rest
+    (:func:`settle_plant` each period until the step) -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
     first hold (control.safety.ForceWatch, on by default) as (t [s], reason), else None: the
     figures of a held run are those of the held robot, not of the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
@@ -729,7 +729,6 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     params = LoadCompensationParams(**{**lc_values, "enabled": CONFIGS[config][2]})
     stage = LoadCompensationStage(robot, DT, params, feed_force_setpoint=CONFIGS[config][3])
     n_rest, n_ramp = int(round(PAYLOAD_REST / DT)), int(round(PAYLOAD_RAMP / DT))
-    n_settled = int(round((PAYLOAD_REST - SAG_WINDOW) / DT))     # the plant settled before the unloaded reference
     m_c, held, settlement, slack = [], [], [], []
     warning = []
 
@@ -744,8 +743,8 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
                 warning.append(f"{problem} (from {float(sim.output.t):.2f} s)")
             if loop.failure is not None and not held:
                 held.append((float(sim.output.t), loop.failure))
-        if k == n_settled:
-            settle_plant(sim)
+        if k <= n_rest:
+            settle_plant(sim)                    # the plant settles under the payload only
         i = k - n_rest
         if 0 <= i < n_ramp + 1:
             sim.set_payload(mass * (0.5 * (1.0 - np.cos(np.pi * min(i + 1, n_ramp) / n_ramp))))
@@ -769,15 +768,16 @@ def settle_plant(sim) -> None:
     growth s kept: f_settled becomes the force at which its settlement law's target is the present s,
     so s grows again only under forces above the present ones (and above the power-on forces).
 
-    The payload case calls it before the sag's unloaded reference (PAYLOAD_REST - SAG_WINDOW): the
-    simulator's cables settle from the forces of its first measurement (the gravity-only state of a
-    fresh start, ``Simulator.reset``), and force control raises them at start-up to its distribution's
-    pre-tension (on the Mini 2-12 N per cable, against the 0.1-3 kg payloads' 1-3 N), under which the
-    plant settles with its T (2 s) through the whole dwell: up to 0.4 mm per cable, a drift of the
-    platform of +0.04 to +0.09 mm at the Mini's seed 2 poses with no payload at all, which the sag
-    then counted as the payload's (docs/validation.md, "The Mini's sag after session 15"). A robot
-    that has been running has settled to its pre-tension long before a payload is put down, which
-    is also what the load compensation's model assumes from its tare on (``SettlementModel.reset``)."""
+    The payload case calls it in every period of the unloaded rest, so that the plant settles under
+    the payload only (above the highest forces of the rest). The simulator's cables settle from the
+    forces of its first measurement (the gravity-only state of a fresh start, ``Simulator.reset``),
+    and force control raises them at start-up to its distribution's pre-tension (on the Mini 2-12 N
+    per cable, against the 0.1-3 kg payloads' 1-3 N), under which the plant went on settling with its
+    T (2 s) through the whole dwell: up to 0.4 mm per cable, a drift of the platform of +0.04 to
+    +0.09 mm at the Mini's seed 2 poses with no payload at all, which the sag counted as the
+    payload's (docs/validation.md, "The Mini's sag after session 15"). A robot that has been running
+    has settled to its pre-tension long before a payload is put down, which is also what the load
+    compensation's model assumes from its tare on (``SettlementModel.reset``)."""
     from cdpr_control.model import cable
 
     st = sim.settlement
