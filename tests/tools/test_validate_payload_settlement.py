@@ -156,9 +156,9 @@ def test_settle_plant_leaves_a_plant_without_settlement():
 
 def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
     """Mini #1 of the 40-pose grid, mismatched plant seed 2, force control (shipped), no payload: the
-    plant's cables no longer settle (they did by 0.05-0.32 mm under force control's start-up
-    pre-tension after the sag's unloaded reference: docs/validation.md, "The Mini's sag after session
-    15"), and the platform's drift over the dwell is within its static accuracy."""
+    plant's cables settle by at most a few µm (by 66-382 µm under force control's start-up
+    pre-tension without cases.settle_plant: docs/validation.md, "The Mini's sag after session 15"),
+    and the platform's drift over the dwell is within its static accuracy."""
     from cdpr_tools.validate.grid import sweep_poses
 
     robot = load_robot("ipanema3_mini")
@@ -167,6 +167,7 @@ def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
                     {"fraction": 0.5, "controller": "force_control"})
     rec, _, ok, hold = cases._payload_run(spec, robot, "force_control", 0.0)
     assert ok and hold is None
-    # below 1 µm (the force rise of a period before the next call; without it 66-382 µm per cable)
-    np.testing.assert_allclose(rec.settlement, 0.0, rtol=0.0, atol=1e-6)
+    # at most 1.5 µm (the forces of the dwell above the rest's end as the loop converges; without
+    # settle_plant 66-382 µm per cable)
+    assert np.abs(rec.settlement).max() < 3e-6, np.abs(rec.settlement).max(axis=0)
     assert abs(cases._sag(rec)) <= cases.static_accuracy(rec, float(spec.x[2]))
