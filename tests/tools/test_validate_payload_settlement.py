@@ -66,10 +66,12 @@ def test_shipped_settlement_record_leaves_the_parameter_file():
 def test_identified_settlement_takes_cause_a_out_of_the_force_control_sag(tmp_path):
     """ipanema3 #8 of the 40-pose grid on the mismatched plant seed 1, 100 % of its dynamic capacity
     (35.7 kg) under force control: with the parameter file's settlement model (not in the pose) the
-    forward kinematics misses about 2 mm of the sag (the plant's settlement: cause A) and the cut is
-    below the default plant's 85 % (session 12's sweep: 81.6 %); with the settlement identified on the
-    plant first (as a user does, `cdpr identify settlement`) the unseen part is below 0.5 mm and the
-    cut within the band."""
+    forward kinematics misses about 2 mm of the sag (the plant's settlement: cause A); with the
+    settlement identified on the plant first (as a user does, `cdpr identify settlement`) the unseen
+    part is below 0.5 mm and the case passes. (The shipped run's cut, 81.6 % in session 12's sweep,
+    is 90.7 % since the plant no longer settles from force control's start-up, cases.settle_plant;
+    the identified run's 86.7 %: with the printed (3.19) the integral's offset above the set-point
+    is what cause A had cancelled, docs/validation.md "Payload after session 13".)"""
     from cdpr_tools.validate.grid import sweep_poses
 
     robot = load_robot("ipanema3")
@@ -83,7 +85,89 @@ def test_identified_settlement_takes_cause_a_out_of_the_force_control_sag(tmp_pa
     assert not reused and 0.2 < record["settlement_ratio"] < 0.6      # the plant's 0.3 of its own k0
     shipped = cases._payload_result(spec, robot, mass, {}, None, "")
     identified = cases._payload_result(replace(spec, settlement=record), robot, mass, {}, None, "")
-    assert shipped.metrics["sag_unseen_mm"] < -1.5 and shipped.metrics["sag_cut_percent"] < 85.0
+    assert shipped.metrics["sag_unseen_mm"] < -1.5
     assert abs(identified.metrics["sag_unseen_mm"]) < 0.5
     assert identified.status == "passed", identified.note
     assert settlement.identified(tmp_path, "ipanema3", "mismatched", 1)[1]           # reused
+
+
+def _settling_plant(robot, f_power_on, f, periods):
+    """The simulator's settlement (cdpr_sim.plant.Settlement, ratio 0.3, T 2 s as plants/mismatch.yaml)
+    settled to f_power_on and run ``periods`` of 1 ms at the forces f, at home, as a stand-in for the
+    simulator that cases.settle_plant reads (its settlement, true forces, drive lengths and robot)."""
+    from types import SimpleNamespace
+
+    from cdpr_control.model import cable
+    from cdpr_control.model.kinematics import inverse_kinematics
+    from cdpr_sim.plant import Settlement
+
+    st = Settlement(0.3, 2.0, robot.cable.k0, 1e-3, robot.m)
+    theta = inverse_kinematics(robot, robot.home).q
+    st.reset(f_power_on)
+    sim = SimpleNamespace(settlement=st, output=SimpleNamespace(f=np.asarray(f, dtype=float)),
+                          drives=SimpleNamespace(theta=theta), robot=robot)
+
+    def run(periods):
+        for _ in range(periods):
+            st.update(sim.output.f, cable.total_free_length(robot, theta + st.s))
+    run(periods)
+    return sim, run
+
+
+def test_settle_plant_ends_the_start_up_settlement_and_keeps_the_payloads():
+    """cases.settle_plant: a plant that settles from its power-on forces under a raised pre-tension
+    (force control's start-up) keeps its growth s but grows no further at the present forces (without
+    it, s goes on towards ratio l_t df / k0 with T); a later force rise df settles by the law's closed
+    form ratio l_t df / k0 on top of s, on every cable, also one whose force had dropped below its
+    power-on force (settled to the present state)."""
+    from cdpr_control.model import cable
+
+    robot = load_robot("ipanema3_mini")
+    f0 = np.full(robot.m, 10.0)
+    pretension = np.array([8.0, 12.0, 3.0, 0.0, 8.0, 12.0, 3.0, -5.0])    # the start-up's rise [N]
+    sim, run = _settling_plant(robot, f0, f0 + pretension, 400)             # 0.4 s of the start-up
+    st = sim.settlement
+    s_rest = st.s.copy()
+    assert np.all(s_rest[pretension > 0] > 1e-6) and np.all(s_rest[pretension <= 0] == 0.0)
+    unsettled, run_unsettled = _settling_plant(robot, f0, f0 + pretension, 400)
+    run_unsettled(4000)
+    assert np.all(unsettled.settlement.s[pretension > 0] - s_rest[pretension > 0] > 2e-5)   # the creep it ends
+
+    cases.settle_plant(sim)
+    np.testing.assert_array_equal(st.s, s_rest)                             # no jump
+    run(4000)                                                               # 4 s at the rest's forces
+    np.testing.assert_allclose(st.s, s_rest, rtol=0.0, atol=1e-12)
+
+    df = 1.0                                                                # a payload's rise on every cable
+    sim.output.f = f0 + pretension + df
+    run(20000)                                                              # 10 T
+    l_t = cable.total_free_length(robot, sim.drives.theta + st.s)
+    np.testing.assert_allclose(st.s, s_rest + 0.3 * l_t * df / robot.cable.k0, rtol=1e-3)
+
+
+def test_settle_plant_leaves_a_plant_without_settlement():
+    robot = load_robot("ipanema3_mini")
+    sim, _ = _settling_plant(robot, np.full(robot.m, 10.0), np.full(robot.m, 12.0), 10)
+    sim.settlement.ratio = 0.0
+    before = sim.settlement.f_settled.copy()
+    cases.settle_plant(sim)
+    np.testing.assert_array_equal(sim.settlement.f_settled, before)
+
+
+def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
+    """Mini #1 of the 40-pose grid, mismatched plant seed 2, force control (shipped), no payload: the
+    plant's cables settle by at most a few µm (by 66-382 µm under force control's start-up
+    pre-tension without cases.settle_plant: docs/validation.md, "The Mini's sag after session 15"),
+    and the platform's drift over the dwell is within its static accuracy."""
+    from cdpr_tools.validate.grid import sweep_poses
+
+    robot = load_robot("ipanema3_mini")
+    pose = sweep_poses(robot, 40)[1]
+    spec = CaseSpec("payload", "ipanema3_mini", 1, list(pose.x), pose.border, "mismatched", 2,
+                    {"fraction": 0.5, "controller": "force_control"})
+    rec, _, ok, hold = cases._payload_run(spec, robot, "force_control", 0.0)
+    assert ok and hold is None
+    # at most 1.5 µm (the forces of the dwell above the rest's end as the loop converges; without
+    # settle_plant 66-382 µm per cable)
+    assert np.abs(rec.settlement).max() < 3e-6, np.abs(rec.settlement).max(axis=0)
+    assert abs(cases._sag(rec)) <= cases.static_accuracy(rec, float(spec.x[2]))
