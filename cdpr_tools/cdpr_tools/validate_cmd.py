@@ -31,13 +31,13 @@ def add_parser(sub) -> None:
                    help=f"poses per robot (default {DEFAULT_POSES}; fewer: the first N of the grid, a third or more near the border)")
     p.add_argument("--jobs", type=int, default=1, help=f"processes, 1..{MAX_JOBS} (default 1)")
     p.add_argument("--friction", default="identified", choices=FRICTION_MODES,
-                   help="the guiding cases' pulley friction: identified on each plant first, as a user runs the robot, "
+                   help="the guiding and payload cases' pulley friction: identified on each plant first, as a user runs the robot, "
                    "the parameter files cached in OUTPUT/friction/ (default), or shipped (the robot file's)")
-    p.add_argument("--settlement", default="shipped", choices=SETTLEMENT_MODES,
-                   help="the payload cases' cable settlement: shipped (the parameter file's model, never in the pose "
-                   "estimator; the default) or identified on each plant first (`cdpr identify settlement`, cached in "
-                   "OUTPUT/settlement/; it then also goes to the pose estimator: docs/validation.md, \"Payload after "
-                   "session 13\")")
+    p.add_argument("--settlement", default="identified", choices=SETTLEMENT_MODES,
+                   help="the payload cases' cable settlement: identified on each plant first, as a user runs the "
+                   "robot (`cdpr identify settlement`, cached in OUTPUT/settlement/; it then goes to the pose "
+                   "estimator and, under force control, out of the command: docs/validation.md, \"Payload after "
+                   "session 15\"; the default) or shipped (the parameter file's model, never in the pose estimator)")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help=f"directory for JSON, text and PNG (default {DEFAULT_OUT})")
     p.add_argument("--from-cases", metavar="FILE",
                    help="report the cases.jsonl of an earlier (or interrupted) run instead of running")
@@ -81,7 +81,7 @@ def run(args) -> int:
         raise ValueError(f"--poses must be >= 3, got {args.poses}")
     print(f"[validate] {', '.join(robots)}; {', '.join(families)}; {args.poses} poses per robot; plants "
           f"{', '.join(p if p == 'nominal' else f'{p} seed {s}' for p, s in plant_list)}; {args.jobs} job(s); "
-          f"guiding with {args.friction} friction; payload with {args.settlement} settlement", flush=True)
+          f"guiding and payload with {args.friction} friction; payload with {args.settlement} settlement", flush=True)
     progress = Progress("validate")
     command = "cdpr " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["validate"] else "cdpr validate"
     try:

@@ -405,6 +405,42 @@ def test_guiding_cases_run_with_the_friction_identified_on_their_own_plant(tmp_p
     assert all(r.spec.friction == {"source": "shipped"} for r in read_cases(tmp_path / "s" / "cases.jsonl"))
 
 
+def test_payload_cases_run_with_the_friction_identified_on_their_own_plant(tmp_path, monkeypatch):
+    """`cdpr validate --family payload`: every run of a payload case (the IK-only reference, force
+    control, IK-only + LC) compensates the friction identified on its own plant ((4.4) reads the
+    friction-compensated forces); --friction shipped gives the parameter file's loop."""
+    from cdpr_tools.cli import main
+    from cdpr_tools.validate import cases, friction
+
+    calls, runs = [], []
+    monkeypatch.setattr(friction, "identify_on_plant", _fake_identification(calls))
+
+    def recorded_run(robot, rec, source, duration, params, **kwargs):    # the runs' loop, then refused
+        runs.append((kwargs["config"].plant, kwargs["config"].plant_seed, params))
+        raise ValueError("stopped by the test")
+    monkeypatch.setattr(cases, "recorded_run", recorded_run)
+
+    robot = load_robot("ipanema3")
+    argv = ["validate", "--family", "payload", "--robot", "ipanema3", "--poses", "3", "--settlement", "shipped"]
+    assert main(argv + ["-o", str(tmp_path / "v")]) == 1
+    assert runs and calls and len(calls) == len(set(calls))            # each case's plant identified once
+    for plant, plant_seed, loop in runs:
+        scale = 1.0 + 0.1 * (plant_seed if plant == "mismatched" else 0)
+        np.testing.assert_allclose(loop.friction.mu, scale * robot.friction.mu, rtol=1e-12)
+    assert any(plant == "mismatched" and seed > 0 for plant, seed, _ in runs)     # not the robot file's there
+    runs.clear()
+    assert main(argv + ["--friction", "shipped", "-o", str(tmp_path / "s")]) == 1
+    shipped = control_loop_params_of(robot)
+    assert runs and all(np.array_equal(loop.friction.mu, shipped) for *_, loop in runs)
+
+
+def control_loop_params_of(robot):
+    """The friction compensation's mu of the shipped parameter file (the payload runs' without --friction)."""
+    from cdpr_tools.identify.load_steps import loop_params
+
+    return loop_params("ik", robot.file.stem).friction.mu
+
+
 def test_the_sweep_identifies_friction_on_the_cases_plant(tmp_path, monkeypatch):
     """identify_on_plant records the friction run on the plant and seed it is given (the plant
     seed, not only the noise: the experiments' bug of session 10) and writes the fit's file."""

@@ -719,6 +719,7 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     figures of a held run are those of the held robot, not of the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
+    from cdpr_tools.validate.friction import with_friction
 
     x = np.asarray(spec.x, dtype=float)
     from cdpr_tools.validate.settlement import lc_values as settlement_values
@@ -749,7 +750,9 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
         if 0 <= i < n_ramp + 1:
             sim.set_payload(mass * (0.5 * (1.0 - np.cos(np.pi * min(i + 1, n_ramp) / n_ramp))))
 
-    params = loop_params(config, spec.robot)
+    # the pulley friction compensated as the case's record says (the sweep: identified on the plant,
+    # validate.friction): (4.4) reads the friction-compensated forces
+    params = with_friction(loop_params(config, spec.robot), spec.friction)
     if config == REFERENCE:
         # the reference measures the sag IK-only control leaves; its lower cables go slack under a
         # payload (the Mini's at any payload worth compensating), which the force watch would hold

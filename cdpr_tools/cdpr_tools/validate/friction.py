@@ -1,5 +1,6 @@
-"""The friction the sweep's guiding cases run with: identified on the case's plant first, as a user
-runs the robot (docs/validation.md, "Guiding with identified friction (session 10)").
+"""The friction the sweep's guiding and payload cases run with: identified on the case's plant first,
+as a user runs the robot (docs/validation.md, "Guiding with identified friction (session 10)",
+"Payload after session 15").
 
 Per (robot, plant, seed) the friction identification run is recorded on that plant
 (:func:`cdpr_tools.identify.experiments.record_friction_run` with ``plant``, ``plant_seed``) and
@@ -22,7 +23,10 @@ import numpy as np
 from cdpr_tools.validate import plant_cache
 
 MODES = ("identified", "shipped")
-FAMILIES = ("guiding",)          # the families --friction applies to; the others run with the robot file's
+# the families --friction applies to (the payload's estimate (4.4) reads the friction-compensated
+# forces: the plant's Coulomb friction off the robot file's by 20 % reads as 0.15-0.7 kg at
+# ipanema3 #9 and #25, docs/validation.md "Payload after session 15"); the others run with the robot file's
+FAMILIES = ("guiding", "payload")
 NAMES = ("mu", "sigma", "F_pv")  # the friction_compensation parameters a fit gives (3.45)
 
 
@@ -86,13 +90,20 @@ def deviation_percent(robot_name: str, values: dict) -> dict:
 
 def loop_params(robot_name: str, record: dict):
     """The shipped loop with the record's friction in its friction compensation (None: shipped)."""
-    from dataclasses import replace
-
     from cdpr_control.control.params import shipped_configuration
 
     if record.get("source", "shipped") == "shipped":
         return None
-    loop = shipped_configuration(robot_name).loop
+    return with_friction(shipped_configuration(robot_name).loop, record)
+
+
+def with_friction(loop, record: dict):
+    """``loop`` (ControlLoopParams) with the record's friction in its friction compensation
+    (unchanged where the record is the robot file's)."""
+    from dataclasses import replace
+
+    if record.get("source", "shipped") == "shipped":
+        return loop
     return replace(loop, friction=replace(loop.friction, **{k: np.asarray(record[k], dtype=float) for k in NAMES}))
 
 

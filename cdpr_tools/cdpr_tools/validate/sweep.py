@@ -108,10 +108,10 @@ def _timed(spec: CaseSpec) -> list[CaseResult]:
 
 
 def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, progress=None, command: str = "cdpr validate",
-             friction_mode: str = "identified", log=print, settlement_mode: str = "shipped"):
+             friction_mode: str = "identified", log=print, settlement_mode: str = "identified"):
     """Plan, run and report the sweep -> (results, the JSON document, figure paths).
 
-    The guiding family runs with ``friction_mode``'s friction (:mod:`.friction`): identified, the
+    The guiding and payload families run with ``friction_mode``'s friction (:mod:`.friction`): identified, the
     friction of each (robot, plant, seed) among its cases is identified before the cases run
     (:func:`with_friction`; reused from ``outdir`` when there); its time is the meta's
     ``friction_wall_s``, not the cases'. The payload family likewise runs with ``settlement_mode``'s
