@@ -5,16 +5,8 @@ before the latest load change the estimate's history shows."""
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from cdpr_control.control.load_compensation import LoadCompensation, LoadCompensationParams, payload_wrench
-from cdpr_control.model.dynamics import platform_wrench
-from cdpr_control.model.kinematics import inverse_kinematics
-from cdpr_control.model.robot import load_robot
+from load_steps import DT, IPANEMA3, RAMP, REST, payload as _payload, run as _load_step_run
 
-IPANEMA3 = load_robot("ipanema3")
-POSE = np.r_[-1.0, -1.0, 0.5, 0.0, 0.0, 0.0]
-DT = 1e-3
-ESTIMATED = LoadCompensationParams(enabled=False, acceleration_source="estimated")
-REST, RAMP = 0.7, 0.3            # the sweep's step: put down over 0.3 s (cosine) from 0.7 s
 T_FILTER = 0.24
 
 # ipanema3 #24 (8.5 kg, default plant seed 1, force control with the internal integral and the
@@ -26,34 +18,7 @@ RECORDED_Z = [0.0, -0.9, -2.3, -2.8, -1.2, -0.5, 0.4, 0.6, 0.75, 0.6, 0.48, 0.3,
               -0.45, -0.52, -0.45]
 
 
-def _forces(m_c, a_z):
-    """Cable forces with -A^T(POSE) f = the wrench of the platform and a payload m_c [kg] at its
-    origin (2.33) accelerating vertically by a_z [m/s²]: the forces of the true state, exact."""
-    xddot = np.r_[0.0, 0.0, a_z, 0.0, 0.0, 0.0]
-    w = platform_wrench(IPANEMA3, POSE, np.zeros(6), xddot) + payload_wrench(IPANEMA3, POSE, np.zeros(6), xddot,
-                                                                              m_c, np.zeros(3))
-    return np.linalg.pinv(inverse_kinematics(IPANEMA3, POSE).AT) @ -w
-
-
-def _payload(t, mass, start=REST):
-    return mass * 0.5 * (1.0 - np.cos(np.pi * np.clip((t - start) / RAMP, 0.0, 1.0)))
-
-
-def _run(payload, z, duration):
-    """The payload m(t) [kg], the platform moving by z(t) -> (true z, z the forward kinematics gives);
-    the forces those of the true motion -> (t, m_c per period, windows [s])."""
-    lc = LoadCompensation(IPANEMA3, DT, ESTIMATED)
-    t = np.arange(int(round(duration / DT))) * DT
-    true_z, estimated_z = z(t)
-    a = np.gradient(np.gradient(true_z, DT), DT)
-    m_c, windows = [], []
-    for k, (m, a_k) in enumerate(zip(payload(t), a)):
-        x = POSE.copy()
-        x[2] += estimated_z[k]
-        lc.update(POSE, np.zeros(6), np.zeros(6), _forces(m, a_k), x)
-        m_c.append(lc.m_c)
-        windows.append((lc.window_n or lc.wrench_filter.n) * DT)
-    return t, np.array(m_c), np.array(windows)
+_run = _load_step_run
 
 
 def _recorded_sag(t):

@@ -3,46 +3,12 @@ step (session 14)"): a window matched to a swing must not reach back across the 
 swing the step excites is still matched once the window no longer reaches the change."""
 import numpy as np
 
-from cdpr_control.control.load_compensation import LoadCompensation, LoadCompensationParams, payload_wrench
-from cdpr_control.model.dynamics import platform_wrench
-from cdpr_control.model.kinematics import inverse_kinematics
-from cdpr_control.model.robot import load_robot
-
-IPANEMA3 = load_robot("ipanema3")
-POSE = np.r_[-1.0, -1.0, 0.5, 0.0, 0.0, 0.0]
-DT = 1e-3
-ESTIMATED = LoadCompensationParams(enabled=False, acceleration_source="estimated")
-REST, RAMP = 0.7, 0.3            # the sweep's step: put down over 0.3 s (cosine) from 0.7 s
-
-
-def _forces(m_c, a_z):
-    """Cable forces with -A^T(POSE) f = the wrench of the platform and a payload m_c [kg] at its
-    origin (2.33) accelerating vertically by a_z [m/s²]: the forces of the true state, exact."""
-    xddot = np.r_[0.0, 0.0, a_z, 0.0, 0.0, 0.0]
-    w = platform_wrench(IPANEMA3, POSE, np.zeros(6), xddot) + payload_wrench(IPANEMA3, POSE, np.zeros(6), xddot,
-                                                                              m_c, np.zeros(3))
-    return np.linalg.pinv(inverse_kinematics(IPANEMA3, POSE).AT) @ -w
-
-
-def _payload(t, mass):
-    return mass * 0.5 * (1.0 - np.cos(np.pi * np.clip((t - REST) / RAMP, 0.0, 1.0)))
+from load_steps import DT, RAMP, REST, payload as _payload, run as _load_step_run
 
 
 def _run(mass, z, duration):
-    """The payload put down as in the sweep, the platform moving by z(t) -> (true z, z the forward
-    kinematics gives); the forces those of the true motion -> (t, m_c per period, windows [s])."""
-    lc = LoadCompensation(IPANEMA3, DT, ESTIMATED)
-    t = np.arange(int(round(duration / DT))) * DT
-    true_z, estimated_z = z(t)
-    a = np.gradient(np.gradient(true_z, DT), DT)
-    m_c, windows = [], []
-    for k, (m, a_k) in enumerate(zip(_payload(t, mass), a)):
-        x = POSE.copy()
-        x[2] += estimated_z[k]
-        lc.update(POSE, np.zeros(6), np.zeros(6), _forces(m, a_k), x)
-        m_c.append(lc.m_c)
-        windows.append((lc.window_n or lc.wrench_filter.n) * DT)
-    return t, np.array(m_c), np.array(windows)
+    """The payload put down as in the sweep (load_steps.run)."""
+    return _load_step_run(lambda t: _payload(t, mass), z, duration)
 
 
 def _blend(t, t0, t1, z0, z1):
