@@ -3,7 +3,7 @@ step (session 14)"): a window matched to a swing must not reach back across the 
 swing the step excites is still matched once the window no longer reaches the change."""
 import numpy as np
 
-from load_steps import DT, RAMP, REST, payload as _payload, run as _load_step_run
+from load_steps import RAMP, REST, payload as _payload, run as _load_step_run
 
 
 def _run(mass, z, duration):
