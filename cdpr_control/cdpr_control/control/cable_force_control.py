@@ -13,8 +13,9 @@ shortens the winch by it (θ_d = q_d - Δq_CFC, see :mod:`cdpr_control.control.j
 Near the force limits the saturation is widened (section 3.5.2): a cable close to f_min (sagging,
 much softer than modelled) may pull harder, a cable close to f_max may release harder.
 
-With ``internal_integral`` (off by default; a departure from the printed (3.19): docs/load_compensation.md,
-"The CFC's integral part on the internal forces") the integral part integrates only the internal
+With ``internal_integral`` (off by default, on in the IPAnema 3's parameter file; a departure from the
+printed (3.19): docs/load_compensation.md, "The CFC's integral part on the internal forces") the
+integral part integrates only the internal
 forces, the component of the force error in the nullspace of A^T(x_d) (2.41)
 (:func:`internal_pi_update`): a force change in that nullspace moves no pose, so the pose is the
 OSPC's (3.16) alone and the integral part leaves no pose offset after a payload step
