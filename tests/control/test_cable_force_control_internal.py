@@ -39,6 +39,17 @@ def test_nullspace_projector_is_the_orthogonal_projector_onto_the_internal_force
     assert np.trace(Ph) == pytest.approx(m - 7)
 
 
+def test_nullspace_projector_of_a_rank_deficient_structure_matrix(AT):
+    """A^T without full row rank (two cables' columns one, a degenerate pose): the 6x6 solve cannot
+    give the projector; the pseudo-inverse's still projects onto the nullspace, of dimension m - 5."""
+    singular = AT.copy()
+    singular[5] = singular[4]                                          # rank 5
+    P = nullspace_projector(singular)
+    np.testing.assert_allclose(P @ P, P, atol=1e-9)
+    np.testing.assert_allclose(singular @ P, 0.0, atol=1e-9)
+    assert np.trace(P) == pytest.approx(singular.shape[1] - 5)
+
+
 def test_internal_integral_is_the_projected_sum_and_exerts_no_wrench(AT):
     """Unsaturated, from 0: I_n = P sum_k K_p dt / T_i e_k (closed form), A^T I_n = 0 for any errors."""
     rng = np.random.default_rng(3)
