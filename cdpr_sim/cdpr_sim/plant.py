@@ -150,6 +150,14 @@ class Settlement:
         self.s[:] = 0.0
         self.f_settled = np.array(f_settled, dtype=float)
 
+    def settle(self, f, l_t) -> None:
+        """The cables have settled to the forces f (m,) they carry now at the free lengths l_t (m,),
+        their lasting growth s kept: f_settled becomes the force at which the law's target is the
+        present s, so s grows again only under forces above f (a robot that has stood loaded so long)."""
+        if self.ratio == 0.0 or self.f_settled is None:
+            return
+        self.f_settled[:] = np.asarray(f, dtype=float) - self.s * self.k0 / (self.ratio * np.asarray(l_t, dtype=float))
+
     def update(self, f, l_t) -> np.ndarray:
         """One step with the forces f (m,) and free lengths l_t (m,) -> s (m,) [m]."""
         if self.ratio == 0.0:

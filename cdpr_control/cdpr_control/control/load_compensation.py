@@ -420,8 +420,8 @@ class LoadCompensationParams:
     # the ratio was identified on this robot (`cdpr identify settlement -o` writes true): the model's
     # s then also lengthens the forward kinematics' cables (PoseEstimator.settlement, cause A of
     # docs/load_compensation.md "The settlement in the pose estimator"), and with x_d,LC off (force
-    # control) the output is settlement_offset of s (docs/load_compensation.md, session 15); false (default): s acts in
-    # x_d,LC only, as an assumed ratio over-compensates a plant that does not settle
+    # control) the output is settlement_offset of s (docs/load_compensation.md, session 15); false
+    # (default): s acts in x_d,LC only, as an assumed ratio over-compensates a plant that does not settle
     settlement_identified: bool = False
 
     def validate(self) -> None:

@@ -714,9 +714,10 @@ def _payload_run(spec: CaseSpec, robot, config: str, mass: float):
     """A payload step at the pose: REST tared empty, the step over PAYLOAD_RAMP (cosine, as a load
     put down by hand: an instantaneous step rings the lightly damped vertical mode), PAYLOAD_DWELL
     after it; the plant's cables settled to the unloaded rest they carry the payload from
-    (:func:`settle_plant` each period until the step) -> (recorder, m_c (N,), ok, hold): ok False when it diverged; hold the force watch's
-    first hold (control.safety.ForceWatch, on by default) as (t [s], reason), else None: the
-    figures of a held run are those of the held robot, not of the controller."""
+    (:func:`settle_plant` each period until the step) -> (recorder, m_c (N,), ok, hold): ok False
+    when it diverged; hold the force watch's first hold (control.safety.ForceWatch, on by default)
+    as (t [s], reason), else None: the figures of a held run are those of the held robot, not of
+    the controller."""
     from cdpr_control.control.load_compensation import LoadCompensationParams, LoadCompensationStage
     from cdpr_tools.identify.load_steps import CONFIGS, loop_params
     from cdpr_tools.validate.friction import with_friction
@@ -787,11 +788,7 @@ def settle_plant(sim) -> None:
     from cdpr_control.model import cable
 
     st = sim.settlement
-    if st.ratio == 0.0 or st.f_settled is None:
-        return
-    f = np.asarray(sim.output.f, dtype=float)
-    l_t = cable.total_free_length(sim.robot, np.asarray(sim.drives.theta, dtype=float) + st.s)
-    st.f_settled[:] = f - st.s * st.k0 / (st.ratio * l_t)
+    st.settle(sim.output.f, cable.total_free_length(sim.robot, np.asarray(sim.drives.theta, dtype=float) + st.s))
 
 
 def _sag(rec) -> float:
