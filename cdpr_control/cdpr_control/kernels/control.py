@@ -120,3 +120,212 @@ def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out):
             worst, i_worst = excess, i
     out[0], out[1], out[2], out[3], out[4] = clean, longest, i_longest, worst, i_worst
     return True
+
+
+# a Cholesky pivot below this fraction of the Gram matrix's largest diagonal: the columns are too
+# close to dependent for the normal equations, the projector is the pseudo-inverse's
+_PIVOT_RATIO = 1e-8
+
+
+@njit(error_model="numpy")
+def _gram_cholesky(AT, free, n_free, rows, L):
+    """The Cholesky factor L (n, n) of the Gram matrix of A^T's free columns, n = ``rows``: 6 for
+    A_F A_F^T (n_free > 6), n_free for A_F^T A_F (the free columns alone); False where the Gram
+    matrix is not well positive definite (_PIVOT_RATIO)."""
+    m = AT.shape[1]
+    G = np.zeros((rows, rows))
+    if rows == 6:
+        for i in range(6):
+            for j in range(i + 1):
+                s = 0.0
+                for k in range(m):
+                    if free[k]:
+                        s += AT[i, k] * AT[j, k]
+                G[i, j] = s
+    else:
+        idx = np.empty(n_free, dtype=np.int64)
+        n = 0
+        for k in range(m):
+            if free[k]:
+                idx[n] = k
+                n += 1
+        for i in range(n_free):
+            for j in range(i + 1):
+                s = 0.0
+                for r in range(6):
+                    s += AT[r, idx[i]] * AT[r, idx[j]]
+                G[i, j] = s
+    scale = 0.0
+    for j in range(rows):
+        scale = max(scale, G[j, j])
+    for j in range(rows):
+        d = G[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > _PIVOT_RATIO * scale:
+            return False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, rows):
+            s = G[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return True
+
+
+@njit(error_model="numpy")
+def nullspace_projector_kernel(AT, held, P):
+    """P (m, m) of control.cable_force_control.nullspace_projector(AT, held): the orthogonal
+    projector onto the nullspace of [A^T; E_held^T] (2.41), the internal forces with the held cables'
+    components 0. With F the free cables and A_F^T their columns: P_FF = I - A_F (A_F^T A_F)^-1 A_F^T
+    by a 6x6 Cholesky while more than six cables are free, P = 0 where six or fewer free columns are
+    independent, the held rows and columns 0. Where the Cholesky pivots are small (near-dependent
+    columns) or A^T P is not 0 to 1e-9 (the reference's check), the pseudo-inverse's projector, as
+    the reference."""
+    m = AT.shape[1]
+    n_free = 0
+    for k in range(m):
+        if not held[k]:
+            n_free += 1
+    free = np.empty(m, dtype=np.bool_)
+    for k in range(m):
+        free[k] = not held[k]
+    rows = 6 if n_free > 6 else n_free
+    L = np.zeros((max(rows, 1), max(rows, 1)))
+    ok = n_free == 0 or _gram_cholesky(AT, free, n_free, rows, L)
+    if ok:
+        for i in range(m):
+            for j in range(m):
+                P[i, j] = 0.0
+        if rows == 6:
+            # X = (A_F^T A_F)^-1 A_F^T (6, m) column by column (held columns stay 0)
+            X = np.zeros((6, m))
+            for k in range(m):
+                if not free[k]:
+                    continue
+                for i in range(6):                       # L y = a_k
+                    s = AT[i, k]
+                    for r in range(i):
+                        s -= L[i, r] * X[r, k]
+                    X[i, k] = s / L[i, i]
+                for i in range(5, -1, -1):               # L^T x = y
+                    s = X[i, k]
+                    for r in range(i + 1, 6):
+                        s -= L[r, i] * X[r, k]
+                    X[i, k] = s / L[i, i]
+            for i in range(m):
+                if not free[i]:
+                    continue
+                for j in range(m):
+                    if not free[j]:
+                        continue
+                    s = 0.0
+                    for r in range(6):
+                        s += AT[r, i] * X[r, j]
+                    P[i, j] = (1.0 if i == j else 0.0) - s
+            worst, size = 0.0, 0.0                       # the reference's check: |A^T P| <= 1e-9 |A^T|
+            for r in range(6):
+                for j in range(m):
+                    size = max(size, abs(AT[r, j]))
+                    s = 0.0
+                    for k in range(m):
+                        s += AT[r, k] * P[k, j]
+                    worst = max(worst, abs(s))
+            ok = worst <= 1e-9 * size
+    if not ok:
+        n_held = m - n_free
+        M = np.empty((6 + n_held, m))
+        M[:6] = AT
+        r = 6
+        for k in range(m):
+            if held[k]:
+                M[r] = 0.0
+                M[r, k] = 1.0
+                r += 1
+        P[:, :] = np.eye(m) - np.linalg.pinv(M) @ M
+
+
+@njit(error_model="numpy")
+def internal_pi_kernel(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, integ, saturated, output):
+    """One period of control.cable_force_control.internal_pi_update into the (new) arrays integ,
+    saturated, output: the PI (3.19) whose increment is projected onto the internal forces (2.41)
+    (P of :func:`nullspace_projector_kernel`), a part of I outside the nullspace decaying by
+    min(1, dt/T_i) a period, the saturated cables pushed further out held and the increment
+    projected again, the integrator scaled into the output range (see the reference)."""
+    m = e.shape[0]
+    P, Ph = np.empty((m, m)), np.empty((m, m))
+    held, pushed = np.zeros(m, dtype=np.bool_), np.empty(m, dtype=np.bool_)
+    nullspace_projector_kernel(AT, held, P)
+    I, p, printed, step = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):                                   # the part outside the nullspace decays
+        s = 0.0
+        for k in range(m):
+            s += P[i, k] * integrator[k]
+        I[i] = integrator[i] - min(1.0, dt / T_i[i]) * (integrator[i] - s)
+    for i in range(m):
+        p[i] = K_p[i] * e[i]
+        printed[i] = K_p[i] * dt / T_i[i] * e[i]
+    for i in range(m):
+        s = 0.0
+        for k in range(m):
+            s += P[i, k] * printed[k]
+        step[i] = s
+    any_held = False
+    for _ in range(m):                                   # conditional integration inside the projection
+        same, anything = True, False
+        for i in range(m):
+            u_free = p[i] + I[i] + step[i]
+            out = (u_free > u_pos[i] and step[i] > 0.0) or (u_free < -u_neg[i] and step[i] < 0.0)
+            pushed[i] = out or (any_held and held[i])
+            anything = anything or pushed[i]
+            same = same and pushed[i] == held[i]
+        if (any_held and same) or not (any_held or anything):
+            break
+        any_held = True
+        held[:] = pushed
+        nullspace_projector_kernel(AT, held, Ph)
+        for i in range(m):
+            s = 0.0
+            for k in range(m):
+                s += Ph[i, k] * printed[k]
+            step[i] = s
+    factor, outside = 1.0, False                         # clamping: one factor towards 0
+    for i in range(m):
+        c = I[i] + step[i]
+        integ[i] = c
+        if c > u_pos[i]:
+            outside = True
+            factor = min(factor, u_pos[i] / c)
+        elif c < -u_neg[i]:
+            outside = True
+            factor = min(factor, -u_neg[i] / c)
+    for i in range(m):
+        if outside:
+            integ[i] = integ[i] * factor
+        u = p[i] + integ[i]
+        lo, hi = -u_neg[i], u_pos[i]
+        saturated[i] = u > hi or u < lo
+        output[i] = lo if u < lo else (hi if u > hi else u)
+
+
+@njit(error_model="numpy")
+def cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, AT, constants, saturated,
+                        out):
+    """:func:`cfc_period` with the internal integral (:func:`internal_pi_kernel`, A^T = ``AT`` of
+    x_d) in place of the PI (3.19): the twin of control.cable_force_control.cfc_internal_period."""
+    m = f.shape[0]
+    c = constants[0]
+    e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):
+        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
+        e[i] = f_d[i] - y[i]                                           # (3.2)
+    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    internal_pi_kernel(e, K_p, T_i, c.dt, integrator, sat_n, sat_p, AT, out[0], saturated, out[1])   # (3.19)
+    for i in range(m):
+        f_out = f_ff[i] + out[1, i]                                    # (3.22)
+        if c.linear != 0.0:
+            k = c.k_spec_nominal / l_t[i]                              # (2.15)
+        else:
+            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
+        out[2, i] = f_out
+        out[3, i] = f_out / k - dq_0[i]                                # (3.23)
