@@ -122,127 +122,73 @@ def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out):
     return True
 
 
-# a Cholesky pivot below this fraction of the Gram matrix's largest diagonal: the columns are too
-# close to dependent for the normal equations, the projector is the pseudo-inverse's
-_PIVOT_RATIO = 1e-8
-
-
-@njit(error_model="numpy")
-def _gram_cholesky(AT, free, n_free, rows, L):
-    """The Cholesky factor L (n, n) of the Gram matrix of A^T's free columns, n = ``rows``: 6 for
-    A_F A_F^T (n_free > 6), n_free for A_F^T A_F (the free columns alone); False where the Gram
-    matrix is not well positive definite (_PIVOT_RATIO)."""
-    m = AT.shape[1]
-    G = np.zeros((rows, rows))
-    if rows == 6:
-        for i in range(6):
-            for j in range(i + 1):
-                s = 0.0
-                for k in range(m):
-                    if free[k]:
-                        s += AT[i, k] * AT[j, k]
-                G[i, j] = s
-    else:
-        idx = np.empty(n_free, dtype=np.int64)
-        n = 0
-        for k in range(m):
-            if free[k]:
-                idx[n] = k
-                n += 1
-        for i in range(n_free):
-            for j in range(i + 1):
-                s = 0.0
-                for r in range(6):
-                    s += AT[r, idx[i]] * AT[r, idx[j]]
-                G[i, j] = s
-    scale = 0.0
-    for j in range(rows):
-        scale = max(scale, G[j, j])
-    for j in range(rows):
-        d = G[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > _PIVOT_RATIO * scale:
-            return False
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, rows):
-            s = G[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    return True
+# a row of A^T left with less than this fraction of its norm by the rows before it (in the free
+# cables' components) counts as dependent on them: the projector is then the pseudo-inverse's
+_INDEPENDENT = 1e-6
 
 
 @njit(error_model="numpy")
 def nullspace_projector_kernel(AT, held, P):
     """P (m, m) of control.cable_force_control.nullspace_projector(AT, held): the orthogonal
     projector onto the nullspace of [A^T; E_held^T] (2.41), the internal forces with the held cables'
-    components 0. With F the free cables and A_F^T their columns: P_FF = I - A_F (A_F^T A_F)^-1 A_F^T
-    by a 6x6 Cholesky while more than six cables are free, P = 0 where six or fewer free columns are
-    independent, the held rows and columns 0. Where the Cholesky pivots are small (near-dependent
-    columns) or A^T P is not 0 to 1e-9 (the reference's check), the pseudo-inverse's projector, as
-    the reference."""
+    components 0. With F the free cables: the rows of A^T in the components F orthonormalised (Gram-
+    Schmidt, twice), Q with min(6, |F|) rows, P_FF = I - Q^T Q, the held rows and columns 0. The same
+    projector as the reference's I - A (A^T A)^-1 A^T (its 6x6 solve, no cable held) and
+    I - pinv(M) M (held cables), with the rounding error of an orthogonalisation (eps cond(A^T)), not of
+    the normal equations (eps cond(A^T)^2): six or fewer independent free cables give P = 0 to rounding.
+    Where a row keeps less than ``_INDEPENDENT`` of its norm (A^T near rank-deficient on the free
+    cables) the pseudo-inverse's projector, as the reference."""
     m = AT.shape[1]
     n_free = 0
     for k in range(m):
         if not held[k]:
             n_free += 1
-    free = np.empty(m, dtype=np.bool_)
-    for k in range(m):
-        free[k] = not held[k]
-    rows = 6 if n_free > 6 else n_free
-    L = np.zeros((max(rows, 1), max(rows, 1)))
-    ok = n_free == 0 or _gram_cholesky(AT, free, n_free, rows, L)
-    if ok:
-        for i in range(m):
-            for j in range(m):
-                P[i, j] = 0.0
-        if rows == 6:
-            # X = (A_F^T A_F)^-1 A_F^T (6, m) column by column (held columns stay 0)
-            X = np.zeros((6, m))
-            for k in range(m):
-                if not free[k]:
-                    continue
-                for i in range(6):                       # L y = a_k
-                    s = AT[i, k]
-                    for r in range(i):
-                        s -= L[i, r] * X[r, k]
-                    X[i, k] = s / L[i, i]
-                for i in range(5, -1, -1):               # L^T x = y
-                    s = X[i, k]
-                    for r in range(i + 1, 6):
-                        s -= L[r, i] * X[r, k]
-                    X[i, k] = s / L[i, i]
-            for i in range(m):
-                if not free[i]:
-                    continue
-                for j in range(m):
-                    if not free[j]:
-                        continue
-                    s = 0.0
-                    for r in range(6):
-                        s += AT[r, i] * X[r, j]
-                    P[i, j] = (1.0 if i == j else 0.0) - s
-            worst, size = 0.0, 0.0                       # the reference's check: |A^T P| <= 1e-9 |A^T|
-            for r in range(6):
-                for j in range(m):
-                    size = max(size, abs(AT[r, j]))
-                    s = 0.0
-                    for k in range(m):
-                        s += AT[r, k] * P[k, j]
-                    worst = max(worst, abs(s))
-            ok = worst <= 1e-9 * size
-    if not ok:
-        n_held = m - n_free
-        M = np.empty((6 + n_held, m))
-        M[:6] = AT
-        r = 6
+    Q = np.zeros((6, m))
+    rank = 0
+    for r in range(6):
+        v = np.zeros(m)
+        size = 0.0
         for k in range(m):
-            if held[k]:
-                M[r] = 0.0
-                M[r, k] = 1.0
-                r += 1
-        P[:, :] = np.eye(m) - np.linalg.pinv(M) @ M
+            if not held[k]:
+                v[k] = AT[r, k]
+                size += v[k] * v[k]
+        size = np.sqrt(size)
+        for _ in range(2):                                # classical Gram-Schmidt, twice
+            for j in range(rank):
+                s = 0.0
+                for k in range(m):
+                    s += Q[j, k] * v[k]
+                for k in range(m):
+                    v[k] -= s * Q[j, k]
+        norm = 0.0
+        for k in range(m):
+            norm += v[k] * v[k]
+        norm = np.sqrt(norm)
+        if norm > _INDEPENDENT * size and rank < n_free:
+            for k in range(m):
+                Q[rank, k] = v[k] / norm
+            rank += 1
+    if rank == min(6, n_free):
+        for i in range(m):
+            for j in range(i + 1):
+                if held[i] or held[j]:
+                    P[i, j] = P[j, i] = 0.0
+                    continue
+                s = 0.0
+                for r in range(rank):
+                    s += Q[r, i] * Q[r, j]
+                P[i, j] = P[j, i] = (1.0 if i == j else 0.0) - s
+        return
+    n_held = m - n_free                                   # rank-deficient: the reference's pseudo-inverse
+    M = np.empty((6 + n_held, m))
+    M[:6] = AT
+    r = 6
+    for k in range(m):
+        if held[k]:
+            M[r] = 0.0
+            M[r, k] = 1.0
+            r += 1
+    P[:, :] = np.eye(m) - np.linalg.pinv(M) @ M
 
 
 @njit(error_model="numpy")
