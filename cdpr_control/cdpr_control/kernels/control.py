@@ -143,15 +143,13 @@ def nullspace_projector_kernel(AT, held, P):
     for k in range(m):
         if not held[k]:
             n_free += 1
-    Q = np.zeros((6, m))
+    Q, v = np.zeros((6, m)), np.empty(m)
     rank = 0
     for r in range(6):
-        v = np.zeros(m)
         size = 0.0
         for k in range(m):
-            if not held[k]:
-                v[k] = AT[r, k]
-                size += v[k] * v[k]
+            v[k] = 0.0 if held[k] else AT[r, k]
+            size += v[k] * v[k]
         size = np.sqrt(size)
         for _ in range(2):                                # classical Gram-Schmidt, twice
             for j in range(rank):
