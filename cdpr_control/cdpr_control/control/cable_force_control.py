@@ -155,8 +155,9 @@ def _internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
     :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here, kept while
     A^T's bytes repeat, as at rest).
 
-    The law :data:`internal_pi_update` runs it compiled (``kernels.compiled_internal_pi_update``:
-    the projector by a 6x6 Cholesky of A^T A on the free cables, the same numbers to rounding)."""
+    The law :data:`internal_pi_update` runs it compiled (``kernels.compiled_internal_pi_update``, the
+    projector of A^T by Gram-Schmidt on its rows over the free cables, the same numbers to rounding;
+    :data:`cfc_internal_period` the whole CFC period with it)."""
     e = np.asarray(e, dtype=float)
     lo, hi = -np.asarray(u_neg, dtype=float), np.asarray(u_pos, dtype=float)
     P = _projector(AT) if P is None else P
