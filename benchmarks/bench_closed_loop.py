@@ -9,7 +9,11 @@ ControlLoop.step runs besides, and the real-time factor of controller + simulato
 alone on the same commands is the baseline of the RTF. ``ik_x_d_us`` is the IK of x_d as
 ControlLoop.step takes it since session 10: the fields of one computation the stages share
 (kernels.inverse_kinematics_fields; the force set-point's A^T of the same x_d is then no second IK),
-before it the full kernels.inverse_kinematics handed to the estimator. ``startup_s`` is the time a fresh process
+before it the full kernels.inverse_kinematics handed to the estimator. The CFC is given x_d, as
+ControlLoop.step gives it. ``shipped_params``: the IPAnema 3 once more with its parameter file
+(control_loop_params: among others the CFC's internal integral, CFCParams.internal_integral, whose
+integral part projects onto the nullspace of A^T(x_d) every period while x_d moves), compiled and on
+the numpy reference; the other runs take the dataclass defaults. ``startup_s`` is the time a fresh process
 takes to import the kernels and load them from the on-disk cache (kernels.warm_up). The node graph
 itself (ROS transport, composed and one process per node) is measured by bench_graph.py.
 
@@ -30,6 +34,7 @@ import numpy as np
 
 from cdpr_control import kernels
 from cdpr_control.control.loop import ControlLoop
+from cdpr_control.control.params import control_loop_params
 from cdpr_control.model.robot import load_robot
 from cdpr_sim.simulator import SimConfig, Simulator
 from cdpr_sim.startup import startup_state
@@ -62,12 +67,13 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter_ns() - t0
 
 
-def run(robot, compiled: bool) -> tuple[dict, list]:
-    """STEPS periods of the stages of ControlLoop.step, each timed; -> (figures, commands)."""
+def run(robot, compiled: bool, params=None) -> tuple[dict, list]:
+    """STEPS periods of the stages of ControlLoop.step, each timed; -> (figures, commands).
+    ``params``: the ControlLoopParams (None: the dataclass defaults)."""
     mode = contextlib.nullcontext() if compiled else kernels.numpy_reference()
     with mode:
         x0, theta0, offset = startup_state(robot, robot.home, 0.0, calibrate_home=True)
-        loop = ControlLoop(robot, PERIOD)
+        loop = ControlLoop(robot, PERIOD, params)
         parts = {k: [] for k in STAGES + ("safety_monitor_us",)}
         commands = []
         with Simulator(robot, SimConfig(), x0=x0, theta0=theta0, encoder_offset=offset) as sim:
@@ -80,7 +86,7 @@ def run(robot, compiled: bool) -> tuple[dict, list]:
                 f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, beta)
                 (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d)
                 dist, t3 = timed(loop.force.update, x_d, xd, xdd, w)
-                dq, t4 = timed(loop.cfc.update, dist.f, f, out.theta, dist.f_min, dist.f_max)
+                dq, t4 = timed(loop.cfc.update, dist.f, f, out.theta, dist.f_min, dist.f_max, x_d=x_d)
                 x_ospc, t5 = timed(loop.ospc.update, x_d, x)
                 _, t_safety = timed(loop.monitor.check, out.t, f=f, f_min=robot.cable.f_min,
                                     f_max=robot.cable.f_max, x_d=x_d, x=x,
@@ -110,6 +116,15 @@ def simulator_alone_rtf(robot, commands) -> float:
         return STEPS * PERIOD / (time.perf_counter() - t0)
 
 
+def shipped(name: str) -> dict:
+    """The robot with its parameter file (control_loop_params), compiled and on the reference."""
+    robot = load_robot(name)
+    compiled, _ = run(robot, compiled=True, params=control_loop_params(robot))
+    reference, _ = run(robot, compiled=False, params=control_loop_params(robot))
+    return {"internal_integral": control_loop_params(robot).cfc.internal_integral, "compiled": compiled,
+            "numpy_reference": reference, "speedup": reference["controller_median_us"] / compiled["controller_median_us"]}
+
+
 def bench(name: str) -> dict:
     robot = load_robot(name)
     compiled, commands = run(robot, compiled=True)
@@ -137,7 +152,8 @@ def main() -> None:
               "python_calibration_us": python_calibration_us(),
               "target_controller_median_us": TARGET_US,
               "startup_s": startup_s(),
-              "robots": {name: bench(name) for name in ("ipanema3_mini", "ipanema3")}}
+              "robots": {name: bench(name) for name in ("ipanema3_mini", "ipanema3")},
+              "shipped_params": {"ipanema3": shipped("ipanema3")}}
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))

@@ -97,18 +97,24 @@ def _cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, 
     e = f_d - y                                                         # (3.2)
     sat_n, sat_p = _widened(y, f_min, f_max, c["F_sat_n"], c["F_sat_p"], c["widen_band"], c["widen_factor"])
     integrator, saturated, u = pi_update.reference(e, K_p, T_i, c["dt"], integrator, sat_n, sat_p)   # (3.19)
+    f_out, dq = _cfc_output(f_ff, u, l_t, dq_0, c)
+    return integrator, saturated, u, f_out, dq
+
+
+def _cfc_output(f_ff, u, l_t, dq_0, c):
+    """(f_c,out, Δq_CFC) of a CFC period: the feed-forward plus the PI output, as an elongation."""
     f_out = f_ff + u                                                    # (3.22)
     if c["linear"]:
         k = c["k_spec_nominal"] / l_t                                   # (2.15)
     else:
         k = cable.k_spec(np.maximum(f_out, 0.0), c["k0"], c["k1"], c["k2"]) / l_t   # (2.16)-(2.17)
-    return integrator, saturated, u, f_out, f_out / k - dq_0            # (3.23)
+    return f_out, f_out / k - dq_0                                      # (3.23)
 
 
 cfc_period = kernels.law("cfc_period", _cfc_period, kernels.compiled_cfc_period)
 
 
-def nullspace_projector(AT, held=None) -> np.ndarray:
+def _nullspace_projector(AT, held=None) -> np.ndarray:
     """P (m, m): the orthogonal projector onto the nullspace of A^T (2.41), the cable forces that
     exert no wrench on the platform (internal forces, which move no pose); ``held`` (m,) bool: the
     cables whose component must in addition be zero (P projects onto the nullspace of [A^T; E_held^T])."""
@@ -128,7 +134,7 @@ def nullspace_projector(AT, held=None) -> np.ndarray:
     return np.eye(m) - np.linalg.pinv(M) @ M
 
 
-def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
+def _internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
     """One period of the PI (3.19) whose integral part integrates only internal forces -> new arrays
     (integrator, saturated, output), as :func:`cdpr_control.control.pi_control.pi_update`.
 
@@ -146,10 +152,15 @@ def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
     A part of I outside the nullspace (the integrator of the printed (3.19) when the projection
     starts, after a contact, or as x_d and with it A^T move) decays with T_i: a factor
     min(1, dt/T_i) of it per period, so the drive command does not step. ``P``: the
-    :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here)."""
+    :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here, kept while
+    A^T's bytes repeat, as at rest).
+
+    The law :data:`internal_pi_update` runs it compiled (``kernels.compiled_internal_pi_update``, the
+    projector of A^T by Gram-Schmidt on its rows over the free cables, the same numbers to rounding;
+    :data:`cfc_internal_period` the whole CFC period with it)."""
     e = np.asarray(e, dtype=float)
     lo, hi = -np.asarray(u_neg, dtype=float), np.asarray(u_pos, dtype=float)
-    P = nullspace_projector(AT) if P is None else P
+    P = _projector(AT) if P is None else P
     integrator = np.asarray(integrator, dtype=float)
     integrator = integrator - np.minimum(1.0, dt / T_i) * (integrator - P @ integrator)
     p = K_p * e
@@ -166,7 +177,7 @@ def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
         elif not pushed.any():
             break
         held = pushed
-        step = nullspace_projector(AT, held) @ printed
+        step = _nullspace_projector(AT, held) @ printed
     candidate = integrator + step
     if np.any(candidate > hi) or np.any(candidate < lo):
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -175,6 +186,33 @@ def internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
     integrator = candidate
     u = p + integrator
     return integrator, (u > hi) | (u < lo), np.clip(u, lo, hi)
+
+
+nullspace_projector = kernels.law("nullspace_projector", _nullspace_projector, kernels.compiled_nullspace_projector)
+internal_pi_update = kernels.law("internal_pi_update", _internal_pi_update, kernels.compiled_internal_pi_update)
+
+# the reference's projector of the last A^T (x_d repeats while the robot holds a pose)
+_projectors = Memo(read_only=True)
+
+
+def _projector(AT) -> np.ndarray:
+    AT = np.asarray(AT, dtype=float)
+    return _projectors((AT.shape, AT.tobytes()), _nullspace_projector, AT)
+
+
+def _cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, AT, constants):
+    """:func:`cfc_period` with the internal integral: the PI (3.19) of :func:`internal_pi_update`
+    with A^T = ``AT`` (6, m) of x_d (2.10), the rest of the period (3.20), (3.22)-(3.23) as there."""
+    c = constants[0]
+    y += c["alpha"] * (f - y)                                           # (3.20), as LowPass.update
+    e = f_d - y                                                         # (3.2)
+    sat_n, sat_p = _widened(y, f_min, f_max, c["F_sat_n"], c["F_sat_p"], c["widen_band"], c["widen_factor"])
+    integrator, saturated, u = _internal_pi_update(e, K_p, T_i, c["dt"], integrator, sat_n, sat_p, AT)   # (3.19)
+    f_out, dq = _cfc_output(f_ff, u, l_t, dq_0, c)
+    return integrator, saturated, u, f_out, dq
+
+
+cfc_internal_period = kernels.law("cfc_internal_period", _cfc_internal_period, kernels.compiled_cfc_internal_period)
 
 
 class CableForceController:
@@ -191,7 +229,6 @@ class CableForceController:
         self.f_out = np.zeros(m)
         self.dq_cfc = np.zeros(m)
         self._f_ref: np.ndarray | None = None    # the start ramp's set-point, None once it has caught up
-        self._projector = Memo(read_only=True)     # the nullspace projector of A^T's bytes (x_d repeats while holding)
 
     def set_params(self, params: CFCParams) -> None:
         """Apply new parameters live; the integrator state is kept."""
@@ -255,10 +292,8 @@ class CableForceController:
         if AT is None or pi.hold:
             u = pi.update(e_f, sat_n, sat_p)                        # (3.19) with saturation
         else:                                                       # (3.19), its integral internal
-            AT = np.asarray(AT, dtype=float)
-            P = self._projector(AT.tobytes(), nullspace_projector, AT)
             pi.integrator, pi.saturated, pi.output = internal_pi_update(e_f, pi.K_p, pi.T_i, pi.dt, pi.integrator,
-                                                                        sat_n, sat_p, AT, P)
+                                                                        sat_n, sat_p, AT)
             u = pi.output
         self.f_out = (f_d if f_ff is None else f_ff) + u            # feed-forward (3.22)
         stiffness = k_l(self.f_out) if callable(k_l) else k_l
@@ -275,15 +310,17 @@ class CableForceController:
                              linear=float(p.stiffness_model == "linear"), k_spec_nominal=cable_params.k_spec_nominal,
                              k0=cable_params.k0, k1=cable_params.k1, k2=cable_params.k2)
 
-    def update_period(self, f_d, f, l_t, constants, f_min, f_max, f_ff=None) -> np.ndarray:
+    def update_period(self, f_d, f, l_t, constants, f_min, f_max, f_ff=None, AT=None) -> np.ndarray:
         """:meth:`update` as one call of the law :func:`cfc_period` (the same arithmetic; compiled
         where the kernels are), once the feedback filter has its first sample and while the PI
-        integrates (not held); ``constants`` (:meth:`constants`) instead of K_l."""
+        integrates (not held); ``constants`` (:meth:`constants`) instead of K_l. With ``AT`` (A^T of
+        x_d) the law :func:`cfc_internal_period`: the integral part on the internal forces."""
         pi = self.pi
         f_d, f_ff = self._set_point(f_d, f_ff, f_min, f_max)
-        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = cfc_period(
-            f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
-            pi.integrator, pi.K_p, pi.T_i, constants)
+        args = (f_d, f_d if f_ff is None else f_ff, f, f_min, f_max, l_t, self.dq_0, self.feedback_filter.y,
+                pi.integrator, pi.K_p, pi.T_i)
+        pi.integrator, pi.saturated, pi.output, self.f_out, self.dq_cfc = (
+            cfc_period(*args, constants) if AT is None else cfc_internal_period(*args, AT, constants))
         return self.dq_cfc
 
 
@@ -359,6 +396,6 @@ class CableForceControl:
         AT = None
         if x_d is not None and self.params.internal_integral:
             AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")       # (2.10) at x_d
-        if c.feedback_filter.y is not None and not c.pi.hold and AT is None:
-            return c.update_period(f_d, f, l_t, self._constants, f_min, f_max, f_ff)
+        if c.feedback_filter.y is not None and not c.pi.hold:
+            return c.update_period(f_d, f, l_t, self._constants, f_min, f_max, f_ff, AT)
         return c.update(f_d, f, self._stiffness(l_t), f_min, f_max, f_ff, AT)

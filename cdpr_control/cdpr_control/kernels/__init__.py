@@ -36,8 +36,10 @@ from cdpr_control.model import dynamics as np_dynamics
 from cdpr_control.model import kinematics as np_kinematics
 from cdpr_control.model.memo import Memo
 from cdpr_control.kernels.control import CFC_CONSTANTS, cfc_constants
+from cdpr_control.kernels.control import cfc_internal_period as _cfc_internal_period
 from cdpr_control.kernels.control import cfc_period as _cfc_period
 from cdpr_control.kernels.control import force_watch_period
+from cdpr_control.kernels.control import internal_pi_kernel, nullspace_projector_kernel
 from cdpr_control.kernels.control import pi_update as _pi_update
 from cdpr_control.kernels.control import widened_saturation_kernel
 from cdpr_control.kernels.friction import friction_platform_force, friction_sensor_force
@@ -55,7 +57,8 @@ from cdpr_control.kernels.setpoint import smith_step
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
 __all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
-           "cfc_constants", "compiled_cfc_period", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
+           "cfc_constants", "compiled_cfc_internal_period", "compiled_cfc_period", "compiled_internal_pi_update",
+           "compiled_nullspace_projector", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
            "force_watch_period", "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
            "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
            "vector", "warm_up"]
@@ -167,6 +170,44 @@ def compiled_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     return out
 
 
+def _per_channel(n, v) -> np.ndarray:
+    """v (a scalar or (n,)) as the writeable float64 (n,) array a kernel takes."""
+    return np.full(n, v, dtype=float) if np.ndim(v) == 0 else vector(v)
+
+
+def compiled_nullspace_projector(AT, held=None) -> np.ndarray:
+    """The twin of control.cable_force_control.nullspace_projector (see
+    :func:`.control.nullspace_projector_kernel`)."""
+    AT = vector(AT)
+    m = AT.shape[1]
+    P = np.empty((m, m))
+    nullspace_projector_kernel(AT, np.zeros(m, dtype=bool) if held is None else np.asarray(held, dtype=bool), P)
+    return P
+
+
+def compiled_internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
+    """The compiled internal-integral PI period (see :func:`.control.internal_pi_kernel`) -> new arrays
+    (integrator, saturated, output): the twin of control.cable_force_control.internal_pi_update.
+    Scalar gains and limits apply to every channel. ``P``, the reference's cached projector, is not
+    used: the kernel computes the projector of ``AT`` (a 6x6 Cholesky) in less time than a look-up."""
+    n = e.shape[0]
+    out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
+    internal_pi_kernel(vector(e), _per_channel(n, K_p), _per_channel(n, T_i), float(dt), vector(integrator),
+                       _per_channel(n, u_neg), _per_channel(n, u_pos), vector(AT), *out)
+    return out
+
+
+def compiled_cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, AT, constants):
+    """:func:`compiled_cfc_period` with the internal integral: the twin of
+    control.cable_force_control.cfc_internal_period (see :func:`.control.cfc_internal_period`); AT
+    (6, m) is A^T of x_d (2.10)."""
+    m = f.shape[0]
+    saturated, out = np.empty(m, dtype=bool), np.empty((4, m))
+    _cfc_internal_period(vector(f_d), vector(f_ff), vector(f), vector(f_min), vector(f_max), vector(l_t),
+                         vector(dq_0), y, vector(integrator), K_p, T_i, vector(AT), constants, saturated, out)
+    return out[0], saturated, out[1], out[2], out[3]
+
+
 def compiled_widened_saturation(params, f, f_min, f_max):
     """The twin of control.cable_force_control.widened_saturation."""
     m = len(f)
@@ -222,7 +263,12 @@ def warm_up(robot=None) -> None:
         widened_saturation_kernel(f, f, f, 1.0, 1.0, 1.0, 1.0, np.empty(8), np.empty(8))
         secant_stiffness(f, f, 1.0, 0.0, 0.0, np.empty(8))
         smith_step(np.zeros((2, 6)), 0, ones, ones, np.zeros(6), 0.5, ones, np.zeros(6), np.empty(6))
-        compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, cfc_constants(**dict.fromkeys(CFC_CONSTANTS.names, 1.0)))
+        constants = cfc_constants(**dict.fromkeys(CFC_CONSTANTS.names, 1.0))
+        compiled_cfc_period(f, f, f, f, f, f, f, f.copy(), f, f, f, constants)
+        AT = np.hstack([np.eye(6), np.ones((6, 2))])
+        compiled_cfc_internal_period(f, f, f, f, f, f, f, f.copy(), f, f, f, AT, constants)
+        compiled_internal_pi_update(f, f, f, 1e-3, f, f, f, AT)
+        compiled_nullspace_projector(AT, np.arange(8) < 1)
         force_watch_period(f, f, True, np.ones((3, 8)), np.zeros((4, 8)), 0.5, 1e3, np.empty(5))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:

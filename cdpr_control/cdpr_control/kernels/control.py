@@ -120,3 +120,156 @@ def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out):
             worst, i_worst = excess, i
     out[0], out[1], out[2], out[3], out[4] = clean, longest, i_longest, worst, i_worst
     return True
+
+
+# a row of A^T left with less than this fraction of its norm by the rows before it (in the free
+# cables' components) counts as dependent on them: the projector is then the pseudo-inverse's
+_INDEPENDENT = 1e-6
+
+
+@njit(error_model="numpy")
+def nullspace_projector_kernel(AT, held, P):
+    """P (m, m) of control.cable_force_control.nullspace_projector(AT, held): the orthogonal
+    projector onto the nullspace of [A^T; E_held^T] (2.41), the internal forces with the held cables'
+    components 0. With F the free cables: the rows of A^T in the components F orthonormalised (Gram-
+    Schmidt, twice), Q with min(6, |F|) rows, P_FF = I - Q^T Q, the held rows and columns 0. The same
+    projector as the reference's I - A (A^T A)^-1 A^T (its 6x6 solve, no cable held) and
+    I - pinv(M) M (held cables), with the rounding error of an orthogonalisation (eps cond(A^T)), not of
+    the normal equations (eps cond(A^T)^2): six or fewer independent free cables give P = 0 to rounding.
+    Where a row keeps less than ``_INDEPENDENT`` of its norm (A^T near rank-deficient on the free
+    cables) the pseudo-inverse's projector, as the reference."""
+    m = AT.shape[1]
+    n_free = 0
+    for k in range(m):
+        if not held[k]:
+            n_free += 1
+    Q, v = np.zeros((6, m)), np.empty(m)
+    rank = 0
+    for r in range(6):
+        size = 0.0
+        for k in range(m):
+            v[k] = 0.0 if held[k] else AT[r, k]
+            size += v[k] * v[k]
+        size = np.sqrt(size)
+        for _ in range(2):                                # classical Gram-Schmidt, twice
+            for j in range(rank):
+                s = 0.0
+                for k in range(m):
+                    s += Q[j, k] * v[k]
+                for k in range(m):
+                    v[k] -= s * Q[j, k]
+        norm = 0.0
+        for k in range(m):
+            norm += v[k] * v[k]
+        norm = np.sqrt(norm)
+        if norm > _INDEPENDENT * size and rank < n_free:
+            for k in range(m):
+                Q[rank, k] = v[k] / norm
+            rank += 1
+    if rank == min(6, n_free):
+        for i in range(m):
+            for j in range(i + 1):
+                if held[i] or held[j]:
+                    P[i, j] = P[j, i] = 0.0
+                    continue
+                s = 0.0
+                for r in range(rank):
+                    s += Q[r, i] * Q[r, j]
+                P[i, j] = P[j, i] = (1.0 if i == j else 0.0) - s
+        return
+    n_held = m - n_free                                   # rank-deficient: the reference's pseudo-inverse
+    M = np.empty((6 + n_held, m))
+    M[:6] = AT
+    r = 6
+    for k in range(m):
+        if held[k]:
+            M[r] = 0.0
+            M[r, k] = 1.0
+            r += 1
+    P[:, :] = np.eye(m) - np.linalg.pinv(M) @ M
+
+
+@njit(error_model="numpy")
+def internal_pi_kernel(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, integ, saturated, output):
+    """One period of control.cable_force_control.internal_pi_update into the (new) arrays integ,
+    saturated, output: the PI (3.19) whose increment is projected onto the internal forces (2.41)
+    (P of :func:`nullspace_projector_kernel`), a part of I outside the nullspace decaying by
+    min(1, dt/T_i) a period, the saturated cables pushed further out held and the increment
+    projected again, the integrator scaled into the output range (see the reference)."""
+    m = e.shape[0]
+    P, Ph = np.empty((m, m)), np.empty((m, m))
+    held, pushed = np.zeros(m, dtype=np.bool_), np.empty(m, dtype=np.bool_)
+    nullspace_projector_kernel(AT, held, P)
+    I, p, printed, step = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):                                   # the part outside the nullspace decays
+        s = 0.0
+        for k in range(m):
+            s += P[i, k] * integrator[k]
+        I[i] = integrator[i] - min(1.0, dt / T_i[i]) * (integrator[i] - s)
+    for i in range(m):
+        p[i] = K_p[i] * e[i]
+        printed[i] = K_p[i] * dt / T_i[i] * e[i]
+    for i in range(m):
+        s = 0.0
+        for k in range(m):
+            s += P[i, k] * printed[k]
+        step[i] = s
+    any_held = False
+    for _ in range(m):                                   # conditional integration inside the projection
+        same, anything = True, False
+        for i in range(m):
+            u_free = p[i] + I[i] + step[i]
+            out = (u_free > u_pos[i] and step[i] > 0.0) or (u_free < -u_neg[i] and step[i] < 0.0)
+            pushed[i] = out or (any_held and held[i])
+            anything = anything or pushed[i]
+            same = same and pushed[i] == held[i]
+        if (any_held and same) or not (any_held or anything):
+            break
+        any_held = True
+        held[:] = pushed
+        nullspace_projector_kernel(AT, held, Ph)
+        for i in range(m):
+            s = 0.0
+            for k in range(m):
+                s += Ph[i, k] * printed[k]
+            step[i] = s
+    factor, outside = 1.0, False                         # clamping: one factor towards 0
+    for i in range(m):
+        c = I[i] + step[i]
+        integ[i] = c
+        if c > u_pos[i]:
+            outside = True
+            factor = min(factor, u_pos[i] / c)
+        elif c < -u_neg[i]:
+            outside = True
+            factor = min(factor, -u_neg[i] / c)
+    for i in range(m):
+        if outside:
+            integ[i] = integ[i] * factor
+        u = p[i] + integ[i]
+        lo, hi = -u_neg[i], u_pos[i]
+        saturated[i] = u > hi or u < lo
+        output[i] = lo if u < lo else (hi if u > hi else u)
+
+
+@njit(error_model="numpy")
+def cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, AT, constants, saturated,
+                        out):
+    """:func:`cfc_period` with the internal integral (:func:`internal_pi_kernel`, A^T = ``AT`` of
+    x_d) in place of the PI (3.19): the twin of control.cable_force_control.cfc_internal_period."""
+    m = f.shape[0]
+    c = constants[0]
+    e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):
+        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
+        e[i] = f_d[i] - y[i]                                           # (3.2)
+    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    internal_pi_kernel(e, K_p, T_i, c.dt, integrator, sat_n, sat_p, AT, out[0], saturated, out[1])   # (3.19)
+    for i in range(m):
+        f_out = f_ff[i] + out[1, i]                                    # (3.22)
+        if c.linear != 0.0:
+            k = c.k_spec_nominal / l_t[i]                              # (2.15)
+        else:
+            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
+        out[2, i] = f_out
+        out[3, i] = f_out / k - dq_0[i]                                # (3.23)
