@@ -61,6 +61,33 @@ def widened_saturation_kernel(f, f_min, f_max, F_sat_n, F_sat_p, band, factor, s
 
 
 @njit(error_model="numpy")
+def _cfc_error(f_d, f, f_min, f_max, y, c):
+    """The CFC period's feedback: y <- PT1 of f (3.20) in place -> (e = f_d - y (3.2), the widened
+    saturation's sat_n, sat_p)."""
+    m = f.shape[0]
+    e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
+    for i in range(m):
+        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
+        e[i] = f_d[i] - y[i]                                           # (3.2)
+    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    return e, sat_n, sat_p
+
+
+@njit(error_model="numpy")
+def _cfc_output(f_ff, l_t, dq_0, c, out):
+    """The CFC period's output from the PI's u (out[1]): f_c,out = f_ff + u (3.22) into out[2] and
+    Δq_CFC (3.23) into out[3], K_l the linear k_spec / l_t (2.15) or the secant (2.16)-(2.17)."""
+    for i in range(f_ff.shape[0]):
+        f_out = f_ff[i] + out[1, i]                                    # (3.22)
+        if c.linear != 0.0:
+            k = c.k_spec_nominal / l_t[i]                              # (2.15)
+        else:
+            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
+        out[2, i] = f_out
+        out[3, i] = f_out / k - dq_0[i]                                # (3.23)
+
+
+@njit(error_model="numpy")
 def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, constants, saturated, out):
     """One period of the cable force controller (3.19)-(3.23) in one call, the twin of
     control.cable_force_control.cfc_period (the PI and the widened saturation above).
@@ -69,22 +96,10 @@ def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, c
     integrator, the PI output u, f_c,out = f_ff + u (3.22) and Δq_CFC (3.23) with K_l the linear
     k_spec / l_t (2.15) or the secant (2.16)-(2.17) at f_c,out.
     """
-    m = f.shape[0]
     c = constants[0]
-    e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
-    for i in range(m):
-        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
-        e[i] = f_d[i] - y[i]                                           # (3.2)
-    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    e, sat_n, sat_p = _cfc_error(f_d, f, f_min, f_max, y, c)
     pi_update(e, K_p, T_i, c.dt, integrator, sat_n, sat_p, out[0], saturated, out[1])   # (3.19)
-    for i in range(m):
-        f_out = f_ff[i] + out[1, i]                                    # (3.22)
-        if c.linear != 0.0:
-            k = c.k_spec_nominal / l_t[i]                              # (2.15)
-        else:
-            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
-        out[2, i] = f_out
-        out[3, i] = f_out / k - dq_0[i]                                # (3.23)
+    _cfc_output(f_ff, l_t, dq_0, c, out)
 
 
 @njit(error_model="numpy")
@@ -257,19 +272,7 @@ def cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_
                         out):
     """:func:`cfc_period` with the internal integral (:func:`internal_pi_kernel`, A^T = ``AT`` of
     x_d) in place of the PI (3.19): the twin of control.cable_force_control.cfc_internal_period."""
-    m = f.shape[0]
     c = constants[0]
-    e, sat_n, sat_p = np.empty(m), np.empty(m), np.empty(m)
-    for i in range(m):
-        y[i] += c.alpha * (f[i] - y[i])                                # (3.20)
-        e[i] = f_d[i] - y[i]                                           # (3.2)
-    widened_saturation_kernel(y, f_min, f_max, c.F_sat_n, c.F_sat_p, c.widen_band, c.widen_factor, sat_n, sat_p)
+    e, sat_n, sat_p = _cfc_error(f_d, f, f_min, f_max, y, c)
     internal_pi_kernel(e, K_p, T_i, c.dt, integrator, sat_n, sat_p, AT, out[0], saturated, out[1])   # (3.19)
-    for i in range(m):
-        f_out = f_ff[i] + out[1, i]                                    # (3.22)
-        if c.linear != 0.0:
-            k = c.k_spec_nominal / l_t[i]                              # (2.15)
-        else:
-            k = k_spec(max(f_out, 0.0), c.k0, c.k1, c.k2) / l_t[i]    # (2.16)-(2.17)
-        out[2, i] = f_out
-        out[3, i] = f_out / k - dq_0[i]                                # (3.23)
+    _cfc_output(f_ff, l_t, dq_0, c, out)
