@@ -119,9 +119,10 @@ def simulator_alone_rtf(robot, commands) -> float:
 def shipped(name: str) -> dict:
     """The robot with its parameter file (control_loop_params), compiled and on the reference."""
     robot = load_robot(name)
-    compiled, _ = run(robot, compiled=True, params=control_loop_params(robot))
-    reference, _ = run(robot, compiled=False, params=control_loop_params(robot))
-    return {"internal_integral": control_loop_params(robot).cfc.internal_integral, "compiled": compiled,
+    params = control_loop_params(robot)
+    compiled, _ = run(robot, compiled=True, params=params)
+    reference, _ = run(robot, compiled=False, params=params)
+    return {"internal_integral": params.cfc.internal_integral, "compiled": compiled,
             "numpy_reference": reference, "speedup": reference["controller_median_us"] / compiled["controller_median_us"]}
 
 

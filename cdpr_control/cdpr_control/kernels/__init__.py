@@ -189,7 +189,8 @@ def compiled_internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P
     """The compiled internal-integral PI period (see :func:`.control.internal_pi_kernel`) -> new arrays
     (integrator, saturated, output): the twin of control.cable_force_control.internal_pi_update.
     Scalar gains and limits apply to every channel. ``P``, the reference's cached projector, is not
-    used: the kernel computes the projector of ``AT`` (a 6x6 Cholesky) in less time than a look-up."""
+    used: the kernel computes the projector of ``AT`` (Gram-Schmidt on its rows) in less time than a
+    look-up."""
     n = e.shape[0]
     out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
     internal_pi_kernel(vector(e), _per_channel(n, K_p), _per_channel(n, T_i), float(dt), vector(integrator),
