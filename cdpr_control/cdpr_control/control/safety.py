@@ -87,9 +87,16 @@ class SafetyConfig:
     # of max_force_rate, the diverging gains of issue 28 cross it within 10 ms (tests/control/test_force_watch.py)
     force_watch: bool = True            # trip the latched hold to the last safe command
     force_band: float = 0.05            # -, the watch's tolerance beyond [f_min, f_max] as a share of f_max - f_min
+    # -, the tolerance below f_min at most this share of f_min: a slack cable (0 N) is beyond the band
+    # (force_band alone puts the IPAnema 3's lower edge at -45 N); the Mini's 1.75 N stays (docs/control.md, "Safety")
+    lower_band_share: float = 0.5
     force_limit_time: float = 0.05      # s a cable force may stay beyond the band
     max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
     force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
+    # a sustained oscillation: the rate away from f_d, its positive part averaged (PT1) over
+    # mean_rate_filter, beyond max_mean_force_rate force ranges per second (docs/control.md, "Safety")
+    max_mean_force_rate: float = 2.0    # 1/s
+    mean_rate_filter: float = 0.2       # s
     safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
     # s from the first period before the force rate is watched: the start-up transient (the plant
     # settling from its initial tension while the encoders calibrate Δq_0, 0.1 s) is no oscillation
@@ -99,11 +106,14 @@ class SafetyConfig:
     def validate(self) -> None:
         bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
                   "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
-                  "force_band": self.force_band, "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
-                  "safe_history": self.safe_history, "rate_watch_delay": self.rate_watch_delay}
+                  "force_band": self.force_band, "lower_band_share": self.lower_band_share,
+                  "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
+                  "mean_rate_filter": self.mean_rate_filter, "safe_history": self.safe_history,
+                  "rate_watch_delay": self.rate_watch_delay}
         bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
-        if not self.max_force_rate > 0:
-            bad.append(f"max_force_rate = {self.max_force_rate} (must be > 0)")
+        for name in ("max_force_rate", "max_mean_force_rate"):
+            if not getattr(self, name) > 0:
+                bad.append(f"{name} = {getattr(self, name)} (must be > 0)")
         if bad:
             raise ValueError(f"safety bounds must be >= 0: {', '.join(bad)}")
 
@@ -113,6 +123,20 @@ class Fault:
     code: str
     message: str
     holds: bool
+
+
+def watch_edges(config: SafetyConfig, f_min, f_max) -> tuple:
+    """The force watch's band (arrays of the limits' broadcast shape) [N]: (lower tolerance, upper
+    tolerance, lower edge f_min - lower tolerance, upper edge f_max + upper tolerance). The upper
+    tolerance is ``force_band`` (f_max - f_min); the lower one that, but at most ``lower_band_share``
+    f_min, so that a slack cable (0 N) is beyond the band whatever the force range (on the IPAnema 3,
+    f 100..3000 N, force_band alone gives 145 N and an edge of -45 N; with the share 0.5 the edge is
+    50 N; the Mini's 1.75 N is below 0.5 f_min = 2.5 N and stays). The issue's demand: a cable
+    force beyond its limits for longer than a set time ends in the hold; the thesis has no watch."""
+    f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
+    upper = config.force_band * (f_max - f_min)
+    lower = np.minimum(upper, config.lower_band_share * f_min)
+    return lower, upper, f_min - lower, f_max + upper
 
 
 def _extreme_limits(f_min: np.ndarray, f_max: np.ndarray) -> tuple:
@@ -212,8 +236,9 @@ class ForceWatch:
         self._clean = 0
         # per cable: periods beyond the band in a row, filtered df/dt [N/s], that rate away from f_d
         # [N/s], the last force [N] (force_watch_period's state; None until a finite period)
+        # and the mean rate away from f_d [N/s]
         self._state: np.ndarray | None = None
-        self._out = np.empty(5)                      # force_watch_period's summary of the period
+        self._out = np.empty(7)                      # force_watch_period's summary of the period
         self._bounds = Memo()    # _bands of the last limits' bytes (the configuration: cleared by configure)
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
@@ -226,6 +251,7 @@ class ForceWatch:
         self._limit_periods = int(round(config.force_limit_time / self.dt))
         self._rate_from = int(round(config.rate_watch_delay / self.dt))
         self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
+        self._beta = self.dt / (config.mean_rate_filter + self.dt)          # PT1 of the mean rate (> 0)
         self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
         self._bounds.clear()
 
@@ -238,18 +264,18 @@ class ForceWatch:
         self.safe = self._outputs = None
 
     def _limits(self, f_min, f_max, m: int) -> tuple:
-        """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
-        while the limits' bytes repeat (the robot's, every period), and the last three as the rows of
-        an array (force_watch_period's bounds)."""
+        """(f_min, f_max, lower tolerance, upper tolerance, lower edge, upper edge, rate limit, mean
+        rate limit), each a list of m floats, kept while the limits' bytes repeat (the robot's, every
+        period), and the last four as the rows of an array (force_watch_period's bounds)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
         return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
 
     def _bands(self, f_min, f_max, m: int) -> tuple:
         f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
-        tol = self.config.force_band * (f_max - f_min)
-        bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
-                                            self.config.max_force_rate * (f_max - f_min)))
-        return bounds, np.array(bounds[3:])
+        c = self.config
+        bounds = tuple(v.tolist() for v in (f_min, f_max, *watch_edges(c, f_min, f_max),
+                                            c.max_force_rate * (f_max - f_min), c.max_mean_force_rate * (f_max - f_min)))
+        return bounds, np.array(bounds[4:])
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
         """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
@@ -268,20 +294,22 @@ class ForceWatch:
             return None
         bounds, bounds_array = self._limits(f_min, f_max, m)
         if fresh:
-            self._state = np.zeros((4, m))
+            self._state = np.zeros((5, m))
             self._state[3] = values
         targets = values if f_d is None else _vector(f_d)
         if targets.shape != (m,):
             raise ValueError(f"f_d needs {m} forces like f, got {targets.shape[0]}")
         if not force_watch_period(values, targets, f_d is not None, bounds_array, self._state, self._alpha,
-                                  1.0 / self.dt, self._out):
+                                  1.0 / self.dt, self._out, self._beta):
             self._clean = 0
             return None
-        clean, longest, i_longest, worst, i_worst = self._out.tolist()
+        clean, longest, i_longest, worst, i_worst, mean, i_mean = self._out.tolist()
         self._periods += 1
+        rates = self._periods > self._rate_from
         self.fault = (self._band(values, bounds, longest, int(i_longest))
-                      or (self._oscillation(values, bounds, worst, int(i_worst)) if self._periods > self._rate_from
-                          else None) or self._lag(x_d, x))
+                      or (self._oscillation(values, bounds, worst, int(i_worst))
+                          or self._sustained(values, bounds, mean, int(i_mean)) if rates else None)
+                      or self._lag(x_d, x))
         self._clean = self._clean + 1 if clean else 0
         if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
             self._outputs = self._history[0]
@@ -303,8 +331,10 @@ class ForceWatch:
         longer than force_limit_time."""
         if longest <= self._limit_periods:
             return None
-        f_min, f_max, tol, lower = bounds[:4]
-        side = f"below f_min {f_min[i]:.1f} N" if f[i] < lower[i] else f"above f_max {f_max[i]:.1f} N"
+        f_min, f_max, tol_lower, tol_upper, lower = bounds[:5]
+        below = f[i] < lower[i]
+        side = f"below f_min {f_min[i]:.1f} N" if below else f"above f_max {f_max[i]:.1f} N"
+        tol = tol_lower if below else tol_upper
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
                      f"for {1e3 * longest * self.dt:.0f} ms (limit {1e3 * self.config.force_limit_time:.0f} ms)", True)
 
@@ -314,7 +344,16 @@ class ForceWatch:
         if worst <= 1.0:
             return None
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._state[1, i]):.0f} N/s beyond "
-                     f"{bounds[5][i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
+                     f"{bounds[6][i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
+
+    def _sustained(self, f: np.ndarray, bounds: tuple, mean: float, i: int) -> Fault | None:
+        """The mean rate away from f_d of cable i, ``mean`` times max_mean_force_rate force ranges
+        per second (the largest), beyond it."""
+        if mean <= 1.0:
+            return None
+        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: mean force rate away from f_d {self._state[4, i]:.1f} N/s "
+                     f"over {1e3 * self.config.mean_rate_filter:.0f} ms beyond {bounds[7][i]:.1f} N/s "
+                     f"(a sustained oscillation; at {f[i]:.1f} N)", True)
 
     def _lag(self, x_d, x) -> Fault | None:
         if x_d is None or x is None:
@@ -332,7 +371,8 @@ def _vector(values) -> np.ndarray:
     return v if v.ndim == 1 else v.ravel()
 
 
-def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out) -> bool:
+def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out,
+                        beta: float = 0.0) -> bool:
     """One period of :class:`ForceWatch`'s per-cable counters and rates on Python floats (at 1 kHz
     numpy's per-call cost on 8 values is more than the arithmetic), the reference of its compiled
     twin: f (m,) the measured forces [N]; f_d (m,) their set-point, read when has_f_d (then only a
@@ -342,24 +382,39 @@ def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_
     inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s] and the last f [N], updated in place;
     out (5,) <- (clean: every force within the band and every rate below half its limit, the
     longest run beyond the band, its cable, the largest rate away from f_d in limits, its cable; the
-    first cable of equal ones) -> whether f is finite (else nothing is changed)."""
+    first cable of equal ones) -> whether f is finite (else nothing is changed).
+
+    With beta > 0 also the mean rate away from f_d (the sustained-oscillation watch of
+    :class:`ForceWatch`): bounds (4, m) has its limit [N/s] as a fourth row, state (5, m) the PT1
+    (of beta) of the positive part of the rate away from f_d [N/s] as a fifth, out (7,) the largest
+    mean rate in limits and its cable as entries 5 and 6, and clean asks it below half its limit
+    too. beta 0 (omitted) leaves them out: the arrays may have the shapes above."""
     values = f.tolist()
     if not all_finite(values):
         return False
-    lower, upper, limit = bounds.tolist()
-    outside, rate, away, prev = state.tolist()
+    watch_mean = beta > 0.0
+    lower, upper, limit = bounds.tolist()[:3]
+    outside, rate, away, prev = state.tolist()[:4]
+    mean, mean_limit = (state[4].tolist(), bounds[3].tolist()) if watch_mean else ([], [])
     targets = f_d.tolist()
     clean = True
     for i, fi in enumerate(values):
         out_i = fi < lower[i] or fi > upper[i]
         outside[i] = outside[i] + 1.0 if out_i else 0.0
         r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
-        away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
+        a = away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
         clean = clean and not out_i and abs(r) < 0.5 * limit[i]
+        if watch_mean:
+            mean[i] = mean[i] + beta * ((a if a > 0.0 else 0.0) - mean[i])
+            clean = clean and mean[i] < 0.5 * mean_limit[i]
     excess = [a / lim for a, lim in zip(away, limit)]
     longest, worst = max(outside), max(excess)
-    state[:] = (outside, rate, away, values)
-    out[:] = (clean, longest, outside.index(longest), worst, excess.index(worst))
+    state[:4] = (outside, rate, away, values)
+    out[:5] = (clean, longest, outside.index(longest), worst, excess.index(worst))
+    if watch_mean:
+        state[4] = mean
+        sustained = [v / lim for v, lim in zip(mean, mean_limit)]
+        out[5:7] = (max(sustained), sustained.index(max(sustained)))
     return True
 
 

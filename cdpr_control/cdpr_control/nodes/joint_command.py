@@ -91,12 +91,19 @@ PARAMS = [
               "until ~/release_hold, and fails the running program"),
     ParamSpec("force_band", _S.force_band, "force watch: tolerance beyond [f_min, f_max] as a share of f_max - f_min [-]",
               range=(0.0, 10.0)),
+    ParamSpec("lower_band_share", _S.lower_band_share, "force watch: the tolerance below f_min at most this share "
+              "of f_min (a slack cable is beyond the band) [-]", range=(0.0, 1.0)),
     ParamSpec("force_limit_time", _S.force_limit_time, "force watch: time a cable force may stay beyond its band [s]",
               range=(0.0, 10.0)),
     ParamSpec("max_force_rate", _S.max_force_rate, "force watch: filtered |df/dt| that holds, in force ranges "
               "(f_max - f_min) per second [1/s]", range=(1e-3, 1e6)),
     ParamSpec("force_rate_filter", _S.force_rate_filter, "force watch: PT1 time constant of the force rate [s]",
               range=(0.0, 1.0)),
+    ParamSpec("max_mean_force_rate", _S.max_mean_force_rate, "force watch: the rate away from the force set-point, "
+              "averaged over mean_rate_filter, that holds (a sustained oscillation), in force ranges per second [1/s]",
+              range=(1e-3, 1e6)),
+    ParamSpec("mean_rate_filter", _S.mean_rate_filter, "force watch: PT1 time constant of that mean rate [s]",
+              range=(0.0, 10.0)),
     ParamSpec("safe_history", _S.safe_history, "force watch: clean time after a command that makes its controller "
               "outputs the safe ones [s]", range=(1e-3, 10.0)),
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
@@ -186,7 +193,8 @@ class JointCommandNode(CdprNode):
     def _safety(v: dict) -> SafetyConfig:
         return SafetyConfig(**{k: v[k] for k in ("force_tolerance", "max_position_lag", "max_orientation_lag",
                                                  "stale_timeout", "hold_on_force_limit", "force_watch", "force_band",
-                                                 "force_limit_time", "max_force_rate", "force_rate_filter",
+                                                 "lower_band_share", "force_limit_time", "max_force_rate",
+                                                 "force_rate_filter", "max_mean_force_rate", "mean_rate_filter",
                                                  "safe_history")})
 
     def _offset_configs(self, v: dict) -> dict[str, OffsetConfig]:
