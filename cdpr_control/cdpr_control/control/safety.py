@@ -100,9 +100,10 @@ class SafetyConfig:
     max_oscillation_rate: float = 2.0   # 1/s
     oscillation_filter: float = 0.2     # s
     safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
-    # s from the first period before the force rate is watched: the start-up transient (the plant
-    # settling from its initial tension while the encoders calibrate Δq_0, 0.1 s) is no oscillation
-    # (measured: 66 kN/s on an IPAnema 3 cable 9 ms after start at a border pose, limit 58 kN/s)
+    # s from the first period before the force rate and the oscillation rate are watched: the
+    # start-up transient (the plant settling from its initial tension while the encoders calibrate
+    # Δq_0, 0.1 s) is no oscillation (measured: 66 kN/s on an IPAnema 3 cable 9 ms after start at a
+    # border pose, limit 58 kN/s)
     rate_watch_delay: float = 0.3
 
     def validate(self) -> None:
