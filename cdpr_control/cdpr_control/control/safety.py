@@ -97,7 +97,7 @@ class SafetyConfig:
     # a sustained oscillation: the oscillation rate (the mean |rate| less the |mean rate| away from
     # f_d, PT1 over oscillation_filter) beyond max_oscillation_rate force ranges per second
     # (docs/control.md, "Safety")
-    max_oscillation_rate: float = 2.0   # 1/s
+    max_oscillation_rate: float = 2.5   # 1/s (measured: healthy runs <= 1.66, the Mini's sustained oscillation 4.4)
     oscillation_filter: float = 0.2     # s
     safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
     # s from the first period before the force rate and the oscillation rate are watched: the
@@ -229,7 +229,8 @@ class ForceWatch:
       oscillates at 7.5-10 Hz between 0.2 and 24 N, below the band's lower edge 162 ms of a second
       on its worst cable but at most 35 ms in a row, its filtered rate at most 0.54 of
       max_force_rate, so neither criterion above holds it; its oscillation rate reaches 4.4 ranges
-      per second. A count of the time beyond the band in a window would have to count a 16 % duty
+      per second, the healthy runs' (the validation's contact and program families, the closed-loop
+      tests) at most 1.66 (the Mini's border program on seed 2): the limit 2.5 between them. A count of the time beyond the band in a window would have to count a 16 % duty
       as a fault, which the three 40 ms excursions at 40 % duty of the short-excursion test are
       not; the mean rate away from f_d alone (no reversal) reached 2.0 ranges per second on a
       healthy IPAnema 3 contact whose forces rise ahead of their set-point;
