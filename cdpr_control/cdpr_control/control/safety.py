@@ -230,10 +230,11 @@ class ForceWatch:
       on its worst cable but at most 35 ms in a row, its filtered rate at most 0.54 of
       max_force_rate, so neither criterion above holds it; its oscillation rate reaches 4.4 ranges
       per second, the healthy runs' (the validation's contact and program families, the closed-loop
-      tests) at most 1.66 (the Mini's border program on seed 2): the limit 2.5 between them. A count of the time beyond the band in a window would have to count a 16 % duty
-      as a fault, which the three 40 ms excursions at 40 % duty of the short-excursion test are
-      not; the mean rate away from f_d alone (no reversal) reached 2.0 ranges per second on a
-      healthy IPAnema 3 contact whose forces rise ahead of their set-point;
+      tests) at most 1.66 (the Mini's border program on seed 2): the limit 2.5 between them. A
+      count of the time beyond the band in a window would have to count a 16 % duty as a fault,
+      which the three 40 ms excursions at 40 % duty of the short-excursion test are not; the mean
+      rate away from f_d alone (no reversal) reached 1.97 ranges per second on a healthy IPAnema 3
+      contact whose forces rise ahead of their set-point (its oscillation rate 0.80);
     * a position error |r_d - r| beyond ``max_position_lag``.
 
     The first of these trips it: :attr:`fault` (code FORCE_WATCH, holding) stays set until
@@ -256,14 +257,15 @@ class ForceWatch:
         self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
         self._clean = 0
         # per cable: periods beyond the band in a row, filtered df/dt [N/s], that rate away from f_d
-        # [N/s], the last force [N] (force_watch_period's state; None until a finite period)
-        # and the PT1 of the signed rate s and of |s| [N/s] (the oscillation rate's)
+        # [N/s], the last force [N], the PT1 of the signed rate s and of |s| [N/s] (the oscillation
+        # rate's) (force_watch_period's state; None until a finite period)
         self._state: np.ndarray | None = None
         self._out = np.empty(7)                      # force_watch_period's summary of the period
         self._bounds = Memo()    # _bands of the last limits' bytes (the configuration: cleared by configure)
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
         kernels.warm_up()                            # force_watch_period loaded now, not in the first period
+        _warm_up_oscillation_rate()
 
     def configure(self, config: SafetyConfig) -> None:
         """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
@@ -285,9 +287,10 @@ class ForceWatch:
         self.safe = self._outputs = None
 
     def _limits(self, f_min, f_max, m: int) -> tuple:
-        """(f_min, f_max, lower tolerance, upper tolerance, lower edge, upper edge, rate limit, mean
-        rate limit, oscillation rate limit), each a list of m floats, kept while the limits' bytes repeat (the robot's, every
-        period), and the last four as the rows of an array (force_watch_period's bounds)."""
+        """(f_min, f_max, lower tolerance, upper tolerance, lower edge, upper edge, rate limit,
+        oscillation rate limit), each a list of m floats, kept while the limits' bytes repeat (the
+        robot's, every period), and the last four as the rows of an array (force_watch_period's
+        bounds)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
         return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
 
@@ -384,6 +387,18 @@ class ForceWatch:
             return None
         return Fault(FORCE_WATCH, f"force watch: position error {1e3 * dr:.1f} mm beyond "
                      f"{1e3 * self.config.max_position_lag:.1f} mm", True)
+
+
+_warm = []
+
+
+def _warm_up_oscillation_rate() -> None:
+    """force_watch_period with beta (another compiled signature than kernels.warm_up's) loaded
+    once per process, not in a watch's first period."""
+    if not _warm:
+        f = np.full(1, 1.0)
+        force_watch_period(f, f, True, np.ones((4, 1)), np.zeros((6, 1)), 0.5, 1e3, np.empty(7), 0.5)
+        _warm.append(True)
 
 
 def _vector(values) -> np.ndarray:
