@@ -1,7 +1,6 @@
 """The validation's IK-only slack checks (cases.ik_only_payload_slack, cases.ik_only_slack) judge
-against the force watch's own lower edge (control.safety.watch_edges), not a copy of it: on the
-IPAnema 3 (f 100..3000 N) that edge is 50 N (0.5 f_min), where force_band alone gave -45 N, which
-no slack cable reaches."""
+against the force watch's own lower edge (control.safety.watch_edges), not a copy of it: on the Mini
+(f 5..40 N, force_band 0.05) 3.25 N."""
 import numpy as np
 
 from cdpr_control.control.params import control_loop_params
@@ -9,7 +8,7 @@ from cdpr_control.control.safety import watch_edges
 from cdpr_control.model.robot import load_robot
 from cdpr_tools.validate import cases
 
-ROBOT = load_robot("ipanema3")
+ROBOT = load_robot("ipanema3_mini")
 
 
 def _run(duration, forces, dip=None):
@@ -27,22 +26,24 @@ def _run(duration, forces, dip=None):
 
 def test_the_edge_is_the_watchs():
     c = ROBOT.cable
-    edge = watch_edges(control_loop_params(ROBOT).safety, c.f_min, c.f_max)[2]
-    np.testing.assert_allclose(edge, 50.0)
+    safety = control_loop_params(ROBOT).safety
+    edge = watch_edges(safety, c.f_min, c.f_max)[2]
+    np.testing.assert_allclose(edge, c.f_min - safety.force_band * (c.f_max - c.f_min))
+    np.testing.assert_allclose(edge, 3.25)
 
 
-def test_a_slack_ipanema3_cable_under_the_payload_refuses_ik_lc():
-    """0 N for 60 ms after the step (slack): refused, naming the cable and the 50 N edge; 40 N (below
-    the edge) for 40 ms, or 60 N (above it) for 0.5 s, are not (the old edge -45 N refused neither)."""
-    rest, forces = cases.PAYLOAD_REST, np.full(ROBOT.m, 800.0)
-    reason = cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 0.0, rest + 0.1, 0.060)), 20.0)
-    assert reason is not None and "cable 3 falls to 0 N" in reason and "edge 50 N" in reason
-    assert cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 40.0, rest + 0.1, 0.040)), 20.0) is None
-    assert cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 60.0, rest + 0.1, 0.5)), 20.0) is None
+def test_a_slack_cable_under_the_payload_refuses_ik_lc():
+    """0 N for 60 ms after the step: refused, naming the cable and the 3.25 N edge; 3 N (below the
+    edge) for 40 ms, or 3.5 N (above it) for 0.5 s, are not."""
+    rest, forces = cases.PAYLOAD_REST, np.full(ROBOT.m, 12.0)
+    reason = cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 0.0, rest + 0.1, 0.060)), 1.0)
+    assert reason is not None and "cable 3 falls to 0 N" in reason and "edge 3.25 N" in reason
+    assert cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 3.0, rest + 0.1, 0.040)), 1.0) is None
+    assert cases.ik_only_payload_slack(ROBOT, _run(rest + 0.5, forces, (2, 3.5, rest + 0.1, 0.5)), 1.0) is None
 
 
-def test_a_slack_ipanema3_cable_before_the_payload_is_reported():
-    rest, forces = cases.PAYLOAD_REST, np.full(ROBOT.m, 800.0)
-    reason = cases.ik_only_slack(ROBOT, _run(rest, forces, (6, 30.0, 0.1, 0.060)))
-    assert reason is not None and "cable(s) 7 (30.0 N)" in reason and "edge 50.0 N" in reason
-    assert cases.ik_only_slack(ROBOT, _run(rest, forces, (6, 60.0, 0.1, 0.060))) is None
+def test_a_slack_cable_before_the_payload_is_reported():
+    rest, forces = cases.PAYLOAD_REST, np.full(ROBOT.m, 12.0)
+    reason = cases.ik_only_slack(ROBOT, _run(rest, forces, (6, 3.0, 0.1, 0.060)))
+    assert reason is not None and "cable(s) 7 (3.0 N)" in reason and "edge 3.2 N" in reason
+    assert cases.ik_only_slack(ROBOT, _run(rest, forces, (6, 3.5, 0.1, 0.060))) is None

@@ -88,9 +88,6 @@ class SafetyConfig:
     # of max_force_rate, the diverging gains of issue 28 cross it within 10 ms (tests/control/test_force_watch.py)
     force_watch: bool = True            # trip the latched hold to the last safe command
     force_band: float = 0.05            # -, the watch's tolerance beyond [f_min, f_max] as a share of f_max - f_min
-    # -, the tolerance below f_min at most this share of f_min: a slack cable (0 N) is beyond the band
-    # (force_band alone puts the IPAnema 3's lower edge at -45 N); the Mini's 1.75 N stays (docs/control.md, "Safety")
-    lower_band_share: float = 0.5
     force_limit_time: float = 0.05      # s a cable force may stay beyond the band
     max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
     force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
@@ -109,8 +106,7 @@ class SafetyConfig:
     def validate(self) -> None:
         bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
                   "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
-                  "force_band": self.force_band, "lower_band_share": self.lower_band_share,
-                  "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
+                  "force_band": self.force_band, "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
                   "oscillation_filter": self.oscillation_filter, "safe_history": self.safe_history,
                   "rate_watch_delay": self.rate_watch_delay}
         bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
@@ -130,16 +126,15 @@ class Fault:
 
 def watch_edges(config: SafetyConfig, f_min, f_max) -> tuple:
     """The force watch's band (arrays of the limits' broadcast shape) [N]: (lower tolerance, upper
-    tolerance, lower edge f_min - lower tolerance, upper edge f_max + upper tolerance). The upper
-    tolerance is ``force_band`` (f_max - f_min); the lower one that, but at most ``lower_band_share``
-    f_min, so that a slack cable (0 N) is beyond the band whatever the force range (on the IPAnema 3,
-    f 100..3000 N, force_band alone gives 145 N and an edge of -45 N; with the share 0.5 the edge is
-    50 N; the Mini's 1.75 N is below 0.5 f_min = 2.5 N and stays). The issue's demand: a cable
-    force beyond its limits for longer than a set time ends in the hold; the thesis has no watch."""
+    tolerance, lower edge f_min - tolerance, upper edge f_max + tolerance), the tolerance
+    ``force_band`` (f_max - f_min) on both sides; the one place the edges are computed (the
+    validation's IK-only slack checks call it too). On the IPAnema 3 (f 100..3000 N) the lower edge
+    is -45 N, which no slack cable reaches: a cap of the lower tolerance at 0.5 f_min (edge 50 N) was
+    measured in session 16 and not shipped, because force control's payload ramps then held at 14 of
+    the sweep's poses (docs/validation.md, "The force watch after session 16")."""
     f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
-    upper = config.force_band * (f_max - f_min)
-    lower = np.minimum(upper, config.lower_band_share * f_min)
-    return lower, upper, f_min - lower, f_max + upper
+    tol = config.force_band * (f_max - f_min)
+    return tol, tol, f_min - tol, f_max + tol
 
 
 def _extreme_limits(f_min: np.ndarray, f_max: np.ndarray) -> tuple:
@@ -208,9 +203,8 @@ class ForceWatch:
 
     Per period (:meth:`update`) it watches the measured cable forces f and the pose error:
 
-    * a cable outside its band [f_min - tol_lower, f_max + tol_upper] (:func:`watch_edges`:
-      tol_upper = ``force_band`` (f_max - f_min), tol_lower that but at most ``lower_band_share``
-      f_min, so a slack cable is outside) for longer than ``force_limit_time`` (consecutive periods);
+    * a cable outside its band [f_min - tol, f_max + tol] (:func:`watch_edges`: tol =
+      ``force_band`` (f_max - f_min)) for longer than ``force_limit_time`` (consecutive periods);
     * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, away
       from the force set-point f_d (a force that follows a step of its set-point, a new tension
       level, moves towards it) beyond ``max_force_rate`` (f_max - f_min) per second on any cable.
@@ -265,7 +259,6 @@ class ForceWatch:
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
         kernels.warm_up()                            # force_watch_period loaded now, not in the first period
-        _warm_up_oscillation_rate()
 
     def configure(self, config: SafetyConfig) -> None:
         """New settings (a node's parameters) for the next periods; a tripped watch stays tripped."""
@@ -389,18 +382,6 @@ class ForceWatch:
                      f"{1e3 * self.config.max_position_lag:.1f} mm", True)
 
 
-_warm = []
-
-
-def _warm_up_oscillation_rate() -> None:
-    """force_watch_period with beta (another compiled signature than kernels.warm_up's) loaded
-    once per process, not in a watch's first period."""
-    if not _warm:
-        f = np.full(1, 1.0)
-        force_watch_period(f, f, True, np.ones((4, 1)), np.zeros((6, 1)), 0.5, 1e3, np.empty(7), 0.5)
-        _warm.append(True)
-
-
 def _vector(values) -> np.ndarray:
     """values as force_watch_period takes them: a flat C-contiguous float64 array (kernels.vector)."""
     v = kernels.vector(values)
@@ -408,31 +389,25 @@ def _vector(values) -> np.ndarray:
 
 
 def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out,
-                        beta: float = 0.0) -> bool:
+                        beta: float) -> bool:
     """One period of :class:`ForceWatch`'s per-cable counters and rates on Python floats (at 1 kHz
     numpy's per-call cost on 8 values is more than the arithmetic), the reference of its compiled
     twin: f (m,) the measured forces [N]; f_d (m,) their set-point, read when has_f_d (then only a
     rate away from it counts: a force that follows a new set-point moves towards it; else any
-    rate); bounds (3, m) per cable the band's lower and upper edge [N] and the rate limit [N/s];
-    state (4, m) per cable the periods beyond the band in a row, the filtered df/dt (PT1 of alpha,
-    inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s] and the last f [N], updated in place;
-    out (5,) <- (clean: every force within the band and every rate below half its limit, the
-    longest run beyond the band, its cable, the largest rate away from f_d in limits, its cable; the
-    first cable of equal ones) -> whether f is finite (else nothing is changed).
-
-    With beta > 0 also the oscillation rate (the sustained-oscillation watch of :class:`ForceWatch`)
-    of the signed rate s (the rate away from f_d with f_d, else df/dt): bounds (4, m) has its limit
-    [N/s] as a fourth row, state (6, m) the PT1 (of beta) of s and of |s| [N/s] as rows 4 and 5,
-    out (7,) the largest oscillation rate PT1(|s|) - |PT1(s)| in limits and its cable as entries 5
-    and 6, and clean asks it below half its limit too. beta 0 (omitted) leaves them out: the arrays
-    may then have the shapes above."""
+    rate); bounds (4, m) per cable the band's lower and upper edge [N], the rate limit [N/s] and the
+    oscillation rate's limit [N/s]; state (6, m) per cable the periods beyond the band in a row, the
+    filtered df/dt (PT1 of alpha, inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s], the last f
+    [N], and the PT1 (of beta) of the signed rate s (the rate away from f_d with f_d, else df/dt)
+    and of |s| [N/s], updated in place; out (7,) <- (clean: every force within the band, every rate
+    below half its limit and every oscillation rate below half its limit, the longest run beyond the
+    band, its cable, the largest rate away from f_d in limits, its cable, the largest oscillation
+    rate PT1(|s|) - |PT1(s)| in limits, its cable; the first cable of equal ones) -> whether f is
+    finite (else nothing is changed)."""
     values = f.tolist()
     if not all_finite(values):
         return False
-    watch_swing = beta > 0.0
-    lower, upper, limit = bounds.tolist()[:3]
-    outside, rate, away, prev = state.tolist()[:4]
-    net, total, swing_limit = (state[4].tolist(), state[5].tolist(), bounds[3].tolist()) if watch_swing else ([], [], [])
+    lower, upper, limit, swing_limit = bounds.tolist()
+    outside, rate, away, prev, net, total = state.tolist()
     swing = []
     targets = f_d.tolist()
     clean = True
@@ -441,20 +416,15 @@ def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_
         outside[i] = outside[i] + 1.0 if out_i else 0.0
         r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
         a = away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
-        clean = clean and not out_i and abs(r) < 0.5 * limit[i]
-        if watch_swing:
-            signed = a if has_f_d else r
-            net[i] = net[i] + beta * (signed - net[i])
-            total[i] = total[i] + beta * (abs(signed) - total[i])
-            swing.append((total[i] - abs(net[i])) / swing_limit[i])
-            clean = clean and swing[i] < 0.5
+        signed = a if has_f_d else r
+        net[i] = net[i] + beta * (signed - net[i])
+        total[i] = total[i] + beta * (abs(signed) - total[i])
+        swing.append((total[i] - abs(net[i])) / swing_limit[i])
+        clean = clean and not out_i and abs(r) < 0.5 * limit[i] and swing[i] < 0.5
     excess = [a / lim for a, lim in zip(away, limit)]
-    longest, worst = max(outside), max(excess)
-    state[:4] = (outside, rate, away, values)
-    out[:5] = (clean, longest, outside.index(longest), worst, excess.index(worst))
-    if watch_swing:
-        state[4:6] = (net, total)
-        out[5:7] = (max(swing), swing.index(max(swing)))
+    longest, worst, widest = max(outside), max(excess), max(swing)
+    state[:] = (outside, rate, away, values, net, total)
+    out[:] = (clean, longest, outside.index(longest), worst, excess.index(worst), widest, swing.index(widest))
     return True
 
 

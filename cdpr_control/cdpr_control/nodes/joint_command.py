@@ -91,8 +91,6 @@ PARAMS = [
               "until ~/release_hold, and fails the running program"),
     ParamSpec("force_band", _S.force_band, "force watch: tolerance beyond [f_min, f_max] as a share of f_max - f_min [-]",
               range=(0.0, 10.0)),
-    ParamSpec("lower_band_share", _S.lower_band_share, "force watch: the tolerance below f_min at most this share "
-              "of f_min (a slack cable is beyond the band) [-]", range=(0.0, 1.0)),
     ParamSpec("force_limit_time", _S.force_limit_time, "force watch: time a cable force may stay beyond its band [s]",
               range=(0.0, 10.0)),
     ParamSpec("max_force_rate", _S.max_force_rate, "force watch: filtered |df/dt| that holds, in force ranges "
@@ -193,7 +191,7 @@ class JointCommandNode(CdprNode):
     def _safety(v: dict) -> SafetyConfig:
         return SafetyConfig(**{k: v[k] for k in ("force_tolerance", "max_position_lag", "max_orientation_lag",
                                                  "stale_timeout", "hold_on_force_limit", "force_watch", "force_band",
-                                                 "lower_band_share", "force_limit_time", "max_force_rate",
+                                                 "force_limit_time", "max_force_rate",
                                                  "force_rate_filter", "max_oscillation_rate", "oscillation_filter",
                                                  "safe_history")})
 
