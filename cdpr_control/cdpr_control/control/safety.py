@@ -6,9 +6,8 @@ Faults: cable force beyond its limits, position lag error beyond a bound, forwar
 converged, a stale input, and non-finite input values.
 
 The force watch (:class:`ForceWatch`, on by default) is the latched part: a cable force outside
-its band (:func:`watch_edges`) for longer than ``force_limit_time``, a force rate beyond
-``max_force_rate`` force ranges per second (a growing oscillation), a force that goes back and
-forth faster than ``max_oscillation_rate`` (a sustained oscillation), or a position error beyond
+[f_min - tol, f_max + tol] for longer than ``force_limit_time``, a force rate beyond
+``max_force_rate`` force ranges per second (a growing oscillation), or a position error beyond
 ``max_position_lag`` trips it once and for good (until released). The joint command then goes to
 the last command that the forces followed within their limits for ``safe_history`` seconds, and
 stays there: the controllers' outputs of that moment frozen, not the diverging ones.
@@ -91,28 +90,20 @@ class SafetyConfig:
     force_limit_time: float = 0.05      # s a cable force may stay beyond the band
     max_force_rate: float = 20.0        # 1/s: |df/dt| (filtered) in force ranges (f_max - f_min) per second
     force_rate_filter: float = 0.005    # s, PT1 time constant of the force rate
-    # a sustained oscillation: the oscillation rate (the mean |rate| less the |mean rate| away from
-    # f_d, PT1 over oscillation_filter) beyond max_oscillation_rate force ranges per second
-    # (docs/control.md, "Safety")
-    max_oscillation_rate: float = 2.5   # 1/s (measured: healthy runs <= 1.66, the Mini's sustained oscillation 4.4)
-    oscillation_filter: float = 0.2     # s
     safe_history: float = 0.1           # s of clean periods after a command that make it the safe one
-    # s from the first period before the force rate and the oscillation rate are watched: the
-    # start-up transient (the plant settling from its initial tension while the encoders calibrate
-    # Δq_0, 0.1 s) is no oscillation (measured: 66 kN/s on an IPAnema 3 cable 9 ms after start at a
-    # border pose, limit 58 kN/s)
+    # s from the first period before the force rate is watched: the start-up transient (the plant
+    # settling from its initial tension while the encoders calibrate Δq_0, 0.1 s) is no oscillation
+    # (measured: 66 kN/s on an IPAnema 3 cable 9 ms after start at a border pose, limit 58 kN/s)
     rate_watch_delay: float = 0.3
 
     def validate(self) -> None:
         bounds = {"force_tolerance": self.force_tolerance, "max_position_lag": self.max_position_lag,
                   "max_orientation_lag": self.max_orientation_lag, "stale_timeout": self.stale_timeout,
                   "force_band": self.force_band, "force_limit_time": self.force_limit_time, "force_rate_filter": self.force_rate_filter,
-                  "oscillation_filter": self.oscillation_filter, "safe_history": self.safe_history,
-                  "rate_watch_delay": self.rate_watch_delay}
+                  "safe_history": self.safe_history, "rate_watch_delay": self.rate_watch_delay}
         bad = [f"{k} = {v}" for k, v in bounds.items() if not v >= 0]
-        for name in ("max_force_rate", "max_oscillation_rate"):
-            if not getattr(self, name) > 0:
-                bad.append(f"{name} = {getattr(self, name)} (must be > 0)")
+        if not self.max_force_rate > 0:
+            bad.append(f"max_force_rate = {self.max_force_rate} (must be > 0)")
         if bad:
             raise ValueError(f"safety bounds must be >= 0: {', '.join(bad)}")
 
@@ -122,19 +113,6 @@ class Fault:
     code: str
     message: str
     holds: bool
-
-
-def watch_edges(config: SafetyConfig, f_min, f_max) -> tuple:
-    """The force watch's band (arrays of the limits' broadcast shape) [N]: (lower tolerance, upper
-    tolerance, lower edge f_min - tolerance, upper edge f_max + tolerance), the tolerance
-    ``force_band`` (f_max - f_min) on both sides; the one place the edges are computed (the
-    validation's IK-only slack checks call it too). On the IPAnema 3 (f 100..3000 N) the lower edge
-    is -45 N, which no slack cable reaches: a cap of the lower tolerance at 0.5 f_min (edge 50 N) was
-    measured in session 16 and not shipped, because force control's payload ramps then held at 14 of
-    the sweep's poses (docs/validation.md, "The force watch after session 16")."""
-    f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
-    tol = config.force_band * (f_max - f_min)
-    return tol, tol, f_min - tol, f_max + tol
 
 
 def _extreme_limits(f_min: np.ndarray, f_max: np.ndarray) -> tuple:
@@ -203,32 +181,14 @@ class ForceWatch:
 
     Per period (:meth:`update`) it watches the measured cable forces f and the pose error:
 
-    * a cable outside its band [f_min - tol, f_max + tol] (:func:`watch_edges`: tol =
-      ``force_band`` (f_max - f_min)) for longer than ``force_limit_time`` (consecutive periods);
+    * a cable outside [f_min - tol, f_max + tol], tol = ``force_band`` (f_max - f_min), for longer
+      than ``force_limit_time`` (consecutive periods);
     * a growing oscillation: the force rate df/dt, PT1-filtered over ``force_rate_filter``, away
       from the force set-point f_d (a force that follows a step of its set-point, a new tension
       level, moves towards it) beyond ``max_force_rate`` (f_max - f_min) per second on any cable.
       A rate, not an energy: it is per cable, needs no model of the platform, and on the Mini
       crossed the limit within 10 ms of an unstable gain while the shipped programs and contacts stayed
       below a quarter of it;
-    * a sustained oscillation: the oscillation rate of a cable beyond ``max_oscillation_rate``
-      (f_max - f_min) per second. Of the signed rate s (the filtered rate away from f_d, positive
-      away, negative towards; df/dt without f_d) it is PT1(|s|) - |PT1(s)|, both PT1 over
-      ``oscillation_filter``: the mean speed of the force less its mean velocity, the part of its
-      motion that goes back and forth. A force that moves one way (away, as a contact force that
-      builds up ahead of its set-point, or following a set-point) has none; a sinusoid of amplitude
-      A at ω much faster than 1 / oscillation_filter has about (2 / π) A ω; a single excursion of
-      size Δf and back at most about 2 Δf / oscillation_filter. Measured (docs/validation.md, "The
-      force watch after session 16"): the Mini's CFC T_i of 1 ms with the internal integral
-      oscillates at 7.5-10 Hz between 0.2 and 24 N, below the band's lower edge 162 ms of a second
-      on its worst cable but at most 35 ms in a row, its filtered rate at most 0.54 of
-      max_force_rate, so neither criterion above holds it; its oscillation rate reaches 4.4 ranges
-      per second, the healthy runs' (the validation's contact and program families, the closed-loop
-      tests) at most 1.66 (the Mini's border program on seed 2): the limit 2.5 between them. A
-      count of the time beyond the band in a window would have to count a 16 % duty as a fault,
-      which the three 40 ms excursions at 40 % duty of the short-excursion test are not; the mean
-      rate away from f_d alone (no reversal) reached 1.97 ranges per second on a healthy IPAnema 3
-      contact whose forces rise ahead of their set-point (its oscillation rate 0.80);
     * a position error |r_d - r| beyond ``max_position_lag``.
 
     The first of these trips it: :attr:`fault` (code FORCE_WATCH, holding) stays set until
@@ -251,10 +211,9 @@ class ForceWatch:
         self._history: deque = deque(maxlen=max(1, int(round(config.safe_history / dt))) + 1)
         self._clean = 0
         # per cable: periods beyond the band in a row, filtered df/dt [N/s], that rate away from f_d
-        # [N/s], the last force [N], the PT1 of the signed rate s and of |s| [N/s] (the oscillation
-        # rate's) (force_watch_period's state; None until a finite period)
+        # [N/s], the last force [N] (force_watch_period's state; None until a finite period)
         self._state: np.ndarray | None = None
-        self._out = np.empty(7)                      # force_watch_period's summary of the period
+        self._out = np.empty(5)                      # force_watch_period's summary of the period
         self._bounds = Memo()    # _bands of the last limits' bytes (the configuration: cleared by configure)
         self._periods = 0                            # watched so far (the rate from rate_watch_delay on)
         self.configure(config)
@@ -267,7 +226,6 @@ class ForceWatch:
         self._limit_periods = int(round(config.force_limit_time / self.dt))
         self._rate_from = int(round(config.rate_watch_delay / self.dt))
         self._alpha = self.dt / (config.force_rate_filter + self.dt)        # PT1 of the rate
-        self._beta = self.dt / (config.oscillation_filter + self.dt)        # PT1 of the oscillation rate (> 0)
         self._history = deque(self._history, maxlen=max(1, int(round(config.safe_history / self.dt))) + 1)
         self._bounds.clear()
 
@@ -280,19 +238,18 @@ class ForceWatch:
         self.safe = self._outputs = None
 
     def _limits(self, f_min, f_max, m: int) -> tuple:
-        """(f_min, f_max, lower tolerance, upper tolerance, lower edge, upper edge, rate limit,
-        oscillation rate limit), each a list of m floats, kept while the limits' bytes repeat (the
-        robot's, every period), and the last four as the rows of an array (force_watch_period's
-        bounds)."""
+        """(f_min, f_max, tol, lower edge, upper edge, rate limit), each a list of m floats, kept
+        while the limits' bytes repeat (the robot's, every period), and the last three as the rows of
+        an array (force_watch_period's bounds)."""
         f_min, f_max = np.asarray(f_min, dtype=float), np.asarray(f_max, dtype=float)
         return self._bounds((f_min.tobytes(), f_max.tobytes(), m), self._bands, f_min, f_max, m)
 
     def _bands(self, f_min, f_max, m: int) -> tuple:
         f_min, f_max = np.broadcast_to(f_min, (m,)), np.broadcast_to(f_max, (m,))
-        c = self.config
-        bounds = tuple(v.tolist() for v in (f_min, f_max, *watch_edges(c, f_min, f_max),
-                                            c.max_force_rate * (f_max - f_min), c.max_oscillation_rate * (f_max - f_min)))
-        return bounds, np.array(bounds[4:])
+        tol = self.config.force_band * (f_max - f_min)
+        bounds = tuple(v.tolist() for v in (f_min, f_max, tol, f_min - tol, f_max + tol,
+                                            self.config.max_force_rate * (f_max - f_min)))
+        return bounds, np.array(bounds[3:])
 
     def update(self, f, f_min, f_max, x_d, offset, dq_cfc, f_d=None, x=None) -> Fault | None:
         """One period: measured forces f (m,) [N] (None or non-finite: not watched this period), the
@@ -311,22 +268,20 @@ class ForceWatch:
             return None
         bounds, bounds_array = self._limits(f_min, f_max, m)
         if fresh:
-            self._state = np.zeros((6, m))
+            self._state = np.zeros((4, m))
             self._state[3] = values
         targets = values if f_d is None else _vector(f_d)
         if targets.shape != (m,):
             raise ValueError(f"f_d needs {m} forces like f, got {targets.shape[0]}")
         if not force_watch_period(values, targets, f_d is not None, bounds_array, self._state, self._alpha,
-                                  1.0 / self.dt, self._out, self._beta):
+                                  1.0 / self.dt, self._out):
             self._clean = 0
             return None
-        clean, longest, i_longest, worst, i_worst, swing, i_swing = self._out.tolist()
+        clean, longest, i_longest, worst, i_worst = self._out.tolist()
         self._periods += 1
-        rates = self._periods > self._rate_from
         self.fault = (self._band(values, bounds, longest, int(i_longest))
-                      or (self._oscillation(values, bounds, worst, int(i_worst))
-                          or self._sustained(values, bounds, swing, int(i_swing)) if rates else None)
-                      or self._lag(x_d, x))
+                      or (self._oscillation(values, bounds, worst, int(i_worst)) if self._periods > self._rate_from
+                          else None) or self._lag(x_d, x))
         self._clean = self._clean + 1 if clean else 0
         if self._clean >= len(self._history) and len(self._history) == self._history.maxlen:
             self._outputs = self._history[0]
@@ -348,10 +303,8 @@ class ForceWatch:
         longer than force_limit_time."""
         if longest <= self._limit_periods:
             return None
-        f_min, f_max, tol_lower, tol_upper, lower = bounds[:5]
-        below = f[i] < lower[i]
-        side = f"below f_min {f_min[i]:.1f} N" if below else f"above f_max {f_max[i]:.1f} N"
-        tol = tol_lower if below else tol_upper
+        f_min, f_max, tol, lower = bounds[:4]
+        side = f"below f_min {f_min[i]:.1f} N" if f[i] < lower[i] else f"above f_max {f_max[i]:.1f} N"
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: {f[i]:.1f} N {side} (tolerance {tol[i]:.3g} N) "
                      f"for {1e3 * longest * self.dt:.0f} ms (limit {1e3 * self.config.force_limit_time:.0f} ms)", True)
 
@@ -361,16 +314,7 @@ class ForceWatch:
         if worst <= 1.0:
             return None
         return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: force rate {abs(self._state[1, i]):.0f} N/s beyond "
-                     f"{bounds[6][i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
-
-    def _sustained(self, f: np.ndarray, bounds: tuple, swing: float, i: int) -> Fault | None:
-        """The oscillation rate of cable i, ``swing`` times max_oscillation_rate force ranges per
-        second (the largest), beyond it."""
-        if swing <= 1.0:
-            return None
-        return Fault(FORCE_WATCH, f"force watch: cable {i + 1}: oscillation rate {swing * bounds[7][i]:.1f} N/s over "
-                     f"{1e3 * self.config.oscillation_filter:.0f} ms beyond {bounds[7][i]:.1f} N/s "
-                     f"(a sustained oscillation; at {f[i]:.1f} N)", True)
+                     f"{bounds[5][i]:.0f} N/s (a growing oscillation; at {f[i]:.1f} N)", True)
 
     def _lag(self, x_d, x) -> Fault | None:
         if x_d is None or x is None:
@@ -388,43 +332,34 @@ def _vector(values) -> np.ndarray:
     return v if v.ndim == 1 else v.ravel()
 
 
-def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out,
-                        beta: float) -> bool:
+def _force_watch_period(f, f_d, has_f_d: bool, bounds, state, alpha: float, inv_dt: float, out) -> bool:
     """One period of :class:`ForceWatch`'s per-cable counters and rates on Python floats (at 1 kHz
     numpy's per-call cost on 8 values is more than the arithmetic), the reference of its compiled
     twin: f (m,) the measured forces [N]; f_d (m,) their set-point, read when has_f_d (then only a
     rate away from it counts: a force that follows a new set-point moves towards it; else any
-    rate); bounds (4, m) per cable the band's lower and upper edge [N], the rate limit [N/s] and the
-    oscillation rate's limit [N/s]; state (6, m) per cable the periods beyond the band in a row, the
-    filtered df/dt (PT1 of alpha, inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s], the last f
-    [N], and the PT1 (of beta) of the signed rate s (the rate away from f_d with f_d, else df/dt)
-    and of |s| [N/s], updated in place; out (7,) <- (clean: every force within the band, every rate
-    below half its limit and every oscillation rate below half its limit, the longest run beyond the
-    band, its cable, the largest rate away from f_d in limits, its cable, the largest oscillation
-    rate PT1(|s|) - |PT1(s)| in limits, its cable; the first cable of equal ones) -> whether f is
-    finite (else nothing is changed)."""
+    rate); bounds (3, m) per cable the band's lower and upper edge [N] and the rate limit [N/s];
+    state (4, m) per cable the periods beyond the band in a row, the filtered df/dt (PT1 of alpha,
+    inv_dt = 1 / dt) [N/s], that rate away from f_d [N/s] and the last f [N], updated in place;
+    out (5,) <- (clean: every force within the band and every rate below half its limit, the
+    longest run beyond the band, its cable, the largest rate away from f_d in limits, its cable; the
+    first cable of equal ones) -> whether f is finite (else nothing is changed)."""
     values = f.tolist()
     if not all_finite(values):
         return False
-    lower, upper, limit, swing_limit = bounds.tolist()
-    outside, rate, away, prev, net, total = state.tolist()
-    swing = []
+    lower, upper, limit = bounds.tolist()
+    outside, rate, away, prev = state.tolist()
     targets = f_d.tolist()
     clean = True
     for i, fi in enumerate(values):
         out_i = fi < lower[i] or fi > upper[i]
         outside[i] = outside[i] + 1.0 if out_i else 0.0
         r = rate[i] = rate[i] + alpha * ((fi - prev[i]) * inv_dt - rate[i])
-        a = away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
-        signed = a if has_f_d else r
-        net[i] = net[i] + beta * (signed - net[i])
-        total[i] = total[i] + beta * (abs(signed) - total[i])
-        swing.append((total[i] - abs(net[i])) / swing_limit[i])
-        clean = clean and not out_i and abs(r) < 0.5 * limit[i] and swing[i] < 0.5
+        away[i] = (r if fi > targets[i] else -r if fi < targets[i] else 0.0) if has_f_d else abs(r)
+        clean = clean and not out_i and abs(r) < 0.5 * limit[i]
     excess = [a / lim for a, lim in zip(away, limit)]
-    longest, worst, widest = max(outside), max(excess), max(swing)
-    state[:] = (outside, rate, away, values, net, total)
-    out[:] = (clean, longest, outside.index(longest), worst, excess.index(worst), widest, swing.index(widest))
+    longest, worst = max(outside), max(excess)
+    state[:] = (outside, rate, away, values)
+    out[:] = (clean, longest, outside.index(longest), worst, excess.index(worst))
     return True
 
 

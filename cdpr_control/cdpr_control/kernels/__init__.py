@@ -270,7 +270,7 @@ def warm_up(robot=None) -> None:
         compiled_cfc_internal_period(f, f, f, f, f, f, f, f.copy(), f, f, f, AT, constants)
         compiled_internal_pi_update(f, f, f, 1e-3, f, f, f, AT)
         compiled_nullspace_projector(AT, np.arange(8) < 1)
-        force_watch_period(f, f, True, np.ones((4, 8)), np.zeros((6, 8)), 0.5, 1e3, np.empty(7), 0.5)
+        force_watch_period(f, f, True, np.ones((3, 8)), np.zeros((4, 8)), 0.5, 1e3, np.empty(5))
         _warm["robot_free"] = True
     if robot is None or _warm["robot"]:
         return

@@ -103,15 +103,14 @@ def cfc_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integrator, K_p, T_i, c
 
 
 @njit(error_model="numpy")
-def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out, beta):
-    """One period of the force watch's per-cable counters, rates and oscillation rates, the twin of
+def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out):
+    """One period of the force watch's per-cable counters and rates, the twin of
     control.safety.force_watch_period (see there for the arguments) -> whether f is finite."""
     m = f.shape[0]
     for i in range(m):
         if not np.isfinite(f[i]):
             return False
     clean, longest, i_longest, worst, i_worst = True, -1.0, 0, -np.inf, 0
-    swing_worst, i_swing = -np.inf, 0
     for i in range(m):
         fi = f[i]
         outside = fi < bounds[0, i] or fi > bounds[1, i]
@@ -134,15 +133,7 @@ def force_watch_period(f, f_d, has_f_d, bounds, state, alpha, inv_dt, out, beta)
         excess = away / bounds[2, i]
         if excess > worst:
             worst, i_worst = excess, i
-        signed = away if has_f_d else r
-        net = state[4, i] + beta * (signed - state[4, i])
-        total = state[5, i] + beta * (abs(signed) - state[5, i])
-        state[4, i], state[5, i] = net, total
-        swing = (total - abs(net)) / bounds[3, i]
-        clean = clean and swing < 0.5
-        if swing > swing_worst:
-            swing_worst, i_swing = swing, i
-    out[0], out[1], out[2], out[3], out[4], out[5], out[6] = clean, longest, i_longest, worst, i_worst, swing_worst, i_swing
+    out[0], out[1], out[2], out[3], out[4] = clean, longest, i_longest, worst, i_worst
     return True
 
 

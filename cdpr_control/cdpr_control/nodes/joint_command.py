@@ -97,11 +97,6 @@ PARAMS = [
               "(f_max - f_min) per second [1/s]", range=(1e-3, 1e6)),
     ParamSpec("force_rate_filter", _S.force_rate_filter, "force watch: PT1 time constant of the force rate [s]",
               range=(0.0, 1.0)),
-    ParamSpec("max_oscillation_rate", _S.max_oscillation_rate, "force watch: the oscillation rate that holds (a "
-              "sustained oscillation: the mean |rate| less the |mean rate| away from f_d over oscillation_filter), in "
-              "force ranges per second [1/s]", range=(1e-3, 1e6)),
-    ParamSpec("oscillation_filter", _S.oscillation_filter, "force watch: PT1 time constant of the oscillation rate's "
-              "means [s]", range=(0.0, 10.0)),
     ParamSpec("safe_history", _S.safe_history, "force watch: clean time after a command that makes its controller "
               "outputs the safe ones [s]", range=(1e-3, 10.0)),
     ParamSpec("a_brake", A_BRAKE, "deceleration of θ_d when holding (braking on the path) [m/s^2]", range=(1e-3, 1e4)),
@@ -191,8 +186,7 @@ class JointCommandNode(CdprNode):
     def _safety(v: dict) -> SafetyConfig:
         return SafetyConfig(**{k: v[k] for k in ("force_tolerance", "max_position_lag", "max_orientation_lag",
                                                  "stale_timeout", "hold_on_force_limit", "force_watch", "force_band",
-                                                 "force_limit_time", "max_force_rate",
-                                                 "force_rate_filter", "max_oscillation_rate", "oscillation_filter",
+                                                 "force_limit_time", "max_force_rate", "force_rate_filter",
                                                  "safe_history")})
 
     def _offset_configs(self, v: dict) -> dict[str, OffsetConfig]:

@@ -963,16 +963,14 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
 def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None:
     """Why IK-only control cannot carry the payload ``mass`` [kg] at this pose (None where it can),
     from the reference run (IK-only under the same payload on the same plant, its force watch off),
-    from the step on: a cable below the force watch's lower edge (f_min less its lower tolerance,
-    control.safety.watch_edges) for longer than the watch's ``force_limit_time``, i.e. where the
-    watch would hold ik_lc under this payload.
+    from the step on: a cable below the force watch's lower edge (f_min less its band) for longer
+    than the watch's ``force_limit_time``, i.e. where the watch would hold ik_lc under this payload.
     The load compensation cannot change that: x_d,LC is a pose offset, which moves a cable force by
     0.03-0.05 N per mm on the Mini and 0.25-0.34 N per mm on the IPAnema 3 (K_g of (2.22) only,
     docs/load_compensation.md "IK-only + LC refused where IK-only leaves cables slack"), and its
     slack warning comes from a 0.24 s window, after the watch has held (docs/validation.md,
     "Payload after session 13"). So the configuration refuses the payload before any hold, with this
     reason, as force control refuses one beyond its capacity (:func:`dynamic_capacity`)."""
-    from cdpr_control.control.safety import watch_edges
     from cdpr_tools.identify.load_steps import loop_params
 
     t, f = reference.array("t"), reference.array("f")
@@ -985,7 +983,7 @@ def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None
     safety = loop_params(REFERENCE, robot.file.stem).safety
     f_min, f_max = (np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min,
                                                                                         robot.cable.f_max))
-    edge = watch_edges(safety, f_min, f_max)[2]          # the watch's own lower edge
+    edge = f_min - safety.force_band * (f_max - f_min)
     below = f[after] < edge
     n_limit = int(round(safety.force_limit_time / DT))
     run = np.zeros(robot.m, dtype=int)
@@ -1027,15 +1025,13 @@ def _rest_forces(rec) -> np.ndarray:
 def ik_only_slack(robot, reference: Recorder) -> str | None:
     """Why IK-only control does not hold the empty platform at this pose with its cables tensed
     (None where it does), from the reference run's rest before the payload: a cable below the force
-    watch's lower edge (f_min less its lower tolerance, control.safety.watch_edges; the watch would
-    hold ik_lc there before any payload), or a window-mean force below the load compensation's slack
-    share of f_min (no stiffness for (4.6)). IK-only commands lengths, not forces: its cables carry
-    what the pre-tension set at home leaves at the pose (thesis 3.1.2, "the cable forces can only be
-    controlled in limited manner by the initial pre-tension of the cables in the home position"), and
-    x_d,LC, a pose offset, cannot tension a slack cable; the thesis evaluates the compensation near
-    home only (4.1.3)."""
+    watch's lower edge (f_min less its band, the watch would hold ik_lc there before any payload),
+    or a window-mean force below the load compensation's slack share of f_min (no stiffness for
+    (4.6)). IK-only commands lengths, not forces: its cables carry what the pre-tension set at home
+    leaves at the pose (thesis 3.1.2, "the cable forces can only be controlled in limited manner by
+    the initial pre-tension of the cables in the home position"), and x_d,LC, a pose offset, cannot
+    tension a slack cable; the thesis evaluates the compensation near home only (4.1.3)."""
     from cdpr_control.control.load_compensation import LoadCompensationParams
-    from cdpr_control.control.safety import watch_edges
     from cdpr_tools.identify.load_steps import loop_params
 
     t, f = reference.array("t"), reference.array("f")
@@ -1045,7 +1041,7 @@ def ik_only_slack(robot, reference: Recorder) -> str | None:
                                                                                         robot.cable.f_max))
     rest = t <= PAYLOAD_REST
     lowest = f[rest].min(axis=0)
-    edge = watch_edges(loop_params(REFERENCE, robot.file.stem).safety, f_min, f_max)[2]   # the watch's lower edge
+    edge = f_min - loop_params(REFERENCE, robot.file.stem).safety.force_band * (f_max - f_min)
     window = f[rest & (t > PAYLOAD_REST - SAG_WINDOW)].mean(axis=0)
     slack = window < LoadCompensationParams().slack_fraction * f_min
     low = np.flatnonzero((lowest < edge) | slack)
