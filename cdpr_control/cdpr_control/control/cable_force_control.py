@@ -134,7 +134,7 @@ def _nullspace_projector(AT, held=None) -> np.ndarray:
     return np.eye(m) - np.linalg.pinv(M) @ M
 
 
-def _internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
+def _internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT):
     """One period of the PI (3.19) whose integral part integrates only internal forces -> new arrays
     (integrator, saturated, output), as :func:`cdpr_control.control.pi_control.pi_update`.
 
@@ -151,16 +151,15 @@ def _internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
 
     A part of I outside the nullspace (the integrator of the printed (3.19) when the projection
     starts, after a contact, or as x_d and with it A^T move) decays with T_i: a factor
-    min(1, dt/T_i) of it per period, so the drive command does not step. ``P``: the
-    :func:`nullspace_projector` of ``AT`` where the caller has it (None: computed here, kept while
-    A^T's bytes repeat, as at rest).
+    min(1, dt/T_i) of it per period, so the drive command does not step. The projector of ``AT`` is
+    kept while A^T's bytes repeat, as at rest.
 
     The law :data:`internal_pi_update` runs it compiled (``kernels.compiled_internal_pi_update``, the
     projector of A^T by Gram-Schmidt on its rows over the free cables, the same numbers to rounding;
     :data:`cfc_internal_period` the whole CFC period with it)."""
     e = np.asarray(e, dtype=float)
     lo, hi = -np.asarray(u_neg, dtype=float), np.asarray(u_pos, dtype=float)
-    P = _projector(AT) if P is None else P
+    P = _projector(AT)
     integrator = np.asarray(integrator, dtype=float)
     integrator = integrator - np.minimum(1.0, dt / T_i) * (integrator - P @ integrator)
     p = K_p * e

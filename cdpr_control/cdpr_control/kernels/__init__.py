@@ -159,20 +159,20 @@ def _compute_packed(robot, x) -> tuple:
     return robot, P
 
 
+def _per_channel(n, v) -> np.ndarray:
+    """v (a scalar or (n,)) as the writeable float64 (n,) array a kernel takes."""
+    return np.full(n, v, dtype=float) if np.ndim(v) == 0 else vector(v)
+
+
 def compiled_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos):
     """The compiled PI period (see :mod:`.control`) -> new arrays (integrator, saturated, output):
     the twin of control.pi_control.pi_update. Scalar limits u_neg, u_pos apply to every channel."""
     n = e.shape[0]
     if not (type(u_neg) is np.ndarray and u_neg.ndim and type(u_pos) is np.ndarray and u_pos.ndim):
-        u_neg, u_pos = (np.full(n, v, dtype=float) if np.ndim(v) == 0 else v for v in (u_neg, u_pos))
+        u_neg, u_pos = _per_channel(n, u_neg), _per_channel(n, u_pos)
     out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
     _pi_update(vector(e), K_p, T_i, dt, vector(integrator), vector(u_neg), vector(u_pos), *out)
     return out
-
-
-def _per_channel(n, v) -> np.ndarray:
-    """v (a scalar or (n,)) as the writeable float64 (n,) array a kernel takes."""
-    return np.full(n, v, dtype=float) if np.ndim(v) == 0 else vector(v)
 
 
 def compiled_nullspace_projector(AT, held=None) -> np.ndarray:
@@ -185,12 +185,11 @@ def compiled_nullspace_projector(AT, held=None) -> np.ndarray:
     return P
 
 
-def compiled_internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT, P=None):
+def compiled_internal_pi_update(e, K_p, T_i, dt, integrator, u_neg, u_pos, AT):
     """The compiled internal-integral PI period (see :func:`.control.internal_pi_kernel`) -> new arrays
     (integrator, saturated, output): the twin of control.cable_force_control.internal_pi_update.
-    Scalar gains and limits apply to every channel. ``P``, the reference's cached projector, is not
-    used: the kernel computes the projector of ``AT`` (Gram-Schmidt on its rows) in less time than a
-    look-up."""
+    Scalar gains and limits apply to every channel. The kernel computes the projector of ``AT``
+    (Gram-Schmidt on its rows) every period, in less time than a look-up of a kept one."""
     n = e.shape[0]
     out = np.empty(n), np.empty(n, dtype=bool), np.empty(n)
     internal_pi_kernel(vector(e), _per_channel(n, K_p), _per_channel(n, T_i), float(dt), vector(integrator),
@@ -212,9 +211,9 @@ def compiled_cfc_internal_period(f_d, f_ff, f, f_min, f_max, l_t, dq_0, y, integ
 def compiled_widened_saturation(params, f, f_min, f_max):
     """The twin of control.cable_force_control.widened_saturation."""
     m = len(f)
-    f_min, f_max = (np.full(m, v, dtype=float) if np.ndim(v) == 0 else v for v in (f_min, f_max))   # as numpy broadcasts
+    f_min, f_max = _per_channel(m, f_min), _per_channel(m, f_max)   # as numpy broadcasts
     sat = np.empty(m), np.empty(m)
-    widened_saturation_kernel(vector(f), vector(f_min), vector(f_max), float(params.F_sat_n),
+    widened_saturation_kernel(vector(f), f_min, f_max, float(params.F_sat_n),
                               float(params.F_sat_p), float(params.widen_band), float(params.widen_factor), *sat)
     return sat
 
