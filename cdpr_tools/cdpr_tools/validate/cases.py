@@ -791,10 +791,15 @@ def settle_plant(sim) -> None:
     st.settle(sim.output.f, cable.total_free_length(sim.robot, np.asarray(sim.drives.theta, dtype=float) + st.s))
 
 
-def _sag(rec) -> float:
-    """Static z error [m] at the end of the dwell, from the unloaded one at the end of the rest."""
-    t, z = rec.array("t"), rec.array("x")[:, 2]
+def _sag(rec, twin=None) -> float:
+    """Static z error [m] at the end of the dwell: against the unloaded twin's at the end of its
+    dwell (``twin``: the same run with no payload, :func:`_payload_result`), or, without one, against
+    the run's own at the end of the unloaded rest."""
+    z = rec.array("x")[:, 2]
     n = int(SAG_WINDOW / DT)
+    if twin is not None:
+        return float(z[-n:].mean() - twin.array("x")[-n:, 2].mean())
+    t = rec.array("t")
     rest = (t > PAYLOAD_REST - SAG_WINDOW) & (t <= PAYLOAD_REST)
     return float(z[-n:].mean() - z[rest].mean())
 
@@ -828,32 +833,36 @@ def settlement_sag(robot, x, s) -> float:
     return float(np.linalg.lstsq(J, np.asarray(s, dtype=float), rcond=None)[0][2])
 
 
-def sag_diagnosis(robot, x, rec) -> dict:
-    """Where a run's sag [mm] comes from (reported, not judged; NaN where the run did not record it):
-    ``sag_seen_mm``, the sag of the controller's own pose (the forward kinematics': what its OSPC
-    can act on); ``sag_unseen_mm``, the rest of the true sag, which the controller cannot see (the
-    forward kinematics' error under the payload); ``settlement_sag_mm``, the part of the true sag
-    the plant's cable settlement (section 4.1.3) accounts for (:func:`settlement_sag` of its growth
-    from the rest to the end, a truth of the simulator); ``sag_drift_mm``, the true z's change over
-    the dwell's last second (window mean against the window one second before: a transient still
-    under way, not a static sag)."""
+def sag_diagnosis(robot, x, rec, twin=None) -> dict:
+    """Where a run's sag [mm] comes from (reported, not judged; NaN where the run did not record it),
+    each against the unloaded twin's at the same time (``twin``, as the sag itself) or, without one,
+    against the run's own unloaded rest: ``sag_seen_mm``, the sag of the controller's own pose (the
+    forward kinematics': what its OSPC can act on); ``sag_unseen_mm``, the rest of the true sag, which
+    the controller cannot see (the forward kinematics' error under the payload);
+    ``settlement_sag_mm``, the part of the true sag the plant's cable settlement (section 4.1.3)
+    accounts for (:func:`settlement_sag` of its growth, a truth of the simulator); ``sag_drift_mm``,
+    the sag's change over the dwell's last second (window mean against the window one second
+    before: a transient still under way, not a static sag)."""
     t, z = rec.array("t"), rec.array("x")[:, 2]
     nan = float("nan")
     out = dict.fromkeys(("sag_seen_mm", "sag_unseen_mm", "settlement_sag_mm", "sag_drift_mm"), nan)
-    if not len(t):
+    if not len(t) or (twin is not None and len(twin.array("t")) != len(t)):
         return out
     rest, end = _windows(t)
+    base = end if twin is not None else rest             # the windows the baseline run is read in
+    other = twin if twin is not None else rec
     earlier = (t > t[-1] - 1.0 - SAG_WINDOW + 0.5 * DT) & (t <= t[-1] - 1.0 + 0.5 * DT)
+    dz = z - (other.array("x")[:, 2] if twin is not None else 0.0)
     if rest.any() and earlier.any():
-        out["sag_drift_mm"] = 1e3 * float(z[end].mean() - z[earlier].mean())
-    z_c = _controller_z(rec)
-    if z_c is not None and rest.any():
-        seen = z_c[end].mean() - z_c[rest].mean()
+        out["sag_drift_mm"] = 1e3 * float(dz[end].mean() - dz[earlier].mean())
+    z_c, z_c0 = _controller_z(rec), _controller_z(other)
+    if z_c is not None and z_c0 is not None and rest.any():
+        seen = z_c[end].mean() - z_c0[base].mean()
         out["sag_seen_mm"] = 1e3 * float(seen)
-        out["sag_unseen_mm"] = 1e3 * float(z[end].mean() - z[rest].mean() - seen)
-    s = getattr(rec, "settlement", None)
-    if s is not None and len(s) == len(t) and rest.any():
-        out["settlement_sag_mm"] = 1e3 * settlement_sag(robot, x, s[end].mean(axis=0) - s[rest].mean(axis=0))
+        out["sag_unseen_mm"] = 1e3 * float(z[end].mean() - other.array("x")[base, 2].mean() - seen)
+    s, s0 = getattr(rec, "settlement", None), getattr(other, "settlement", None)
+    if s is not None and s0 is not None and len(s) == len(t) and len(s0) == len(t) and rest.any():
+        out["settlement_sag_mm"] = 1e3 * settlement_sag(robot, x, s[end].mean(axis=0) - s0[base].mean(axis=0))
     return out
 
 
@@ -932,7 +941,9 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
     (force_control: CFC + OSPC with the identified payload in the force set-point, the shipped
     graph; ik_lc: IK-only with load compensation), one result each, and under IK-only without
     compensation (the reference sag). Estimate error from 1 s after the step began; sag cut
-    against the reference."""
+    against the reference, each controller's sag against its unloaded twin (:func:`_payload_result`),
+    the reference's against its own rest (IK-only commands fixed lengths: no start-up convergence to
+    take out)."""
     from cdpr_control.motion.program_check import payload_capacity
 
     robot = load_robot(spec.robot)
@@ -1057,7 +1068,11 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
                     note_ref: str) -> CaseResult:
     """One controller's run: a run that diverged fails as diverged, one the force watch held as held,
     with the reason in the note. sag_reference [mm] None: :func:`elastic_sag` at the run's own
-    unloaded forces."""
+    unloaded forces. The sag is the loaded run's true z at the end against that of its unloaded
+    twin (the same run, plant and seed with no payload): what force control still moves the
+    platform by over the dwell with no payload (its start-up convergence through the OSPC's
+    integral part, up to 0.1 mm on the Mini at 0.7 s, docs/validation.md "Payload after session 17")
+    is not the payload's sag; a twin that diverged or was held leaves the sag unmeasured (failed)."""
     rec, m_c, ok, held = _payload_run(spec, robot, spec.variant["controller"], mass)
     after = rec.array("t") >= PAYLOAD_REST + 1.0
     f = rec.array("f")
@@ -1066,7 +1081,14 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
     # held by the force watch or by any other holding fault of the loop (the forward kinematics
     # not converging, a pose lag): what follows is the held command's, not the controller's
     usable = ok and held is None and rec.held is None
-    sag = 1e3 * _sag(rec) if usable else float("nan")
+    twin, twin_failed = None, ""
+    if usable:
+        # the same run with no payload: what the platform does over the dwell whatever the payload
+        # (the controller's start-up convergence, the OSPC's integral part) is not the payload's sag
+        twin, _, ok_twin, held_twin = _payload_run(spec, robot, spec.variant["controller"], 0.0)
+        if not ok_twin or held_twin is not None or twin.held is not None:
+            twin_failed = f"the unloaded twin run {'diverged' if not ok_twin else 'was held'}: no sag measured"
+    sag = 1e3 * _sag(rec, twin) if usable and not twin_failed else float("nan")
     accuracy = 1e3 * static_accuracy(rec, float(spec.x[2]))
     resolution = 1e3 * sag_resolution(1e-3 * accuracy, spec.plant)
     metrics = {**base, "estimate_error_percent": criteria.estimate_error_percent(m_c[after], mass) if usable
@@ -1075,13 +1097,13 @@ def _payload_result(spec: CaseSpec, robot, mass: float, base: dict, sag_referenc
                "static_accuracy_mm": accuracy, "sag_resolution_mm": resolution,
                "max_force_N": float(f.max()) if len(f) else float("nan"),
                "held_at_s": float("nan") if held is None else held[0]}
-    if usable:
-        metrics.update(sag_diagnosis(robot, spec.x, rec))
+    if usable and not twin_failed:
+        metrics.update(sag_diagnosis(robot, spec.x, rec, twin))
     slack = getattr(rec, "slack_cables", None)
     if slack is not None and len(slack) == len(after):
         # the load compensation's own diagnostic: cables slack under the payload (x_d,LC cannot tension them)
         metrics["slack_cables_after_step"] = float(slack[after].max()) if after.any() else float("nan")
-    notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s", note_ref]
+    notes = ["" if ok else f"diverged at {rec.diverged_at:.3f} s", note_ref, twin_failed]
     unjudged = ()
     if abs(sag_reference) < resolution:
         # the cut in percent of a reference below the resolution measures the static accuracy, not
