@@ -273,7 +273,7 @@ def test_sag_diagnosis_splits_the_sag_into_what_the_controller_sees_and_the_rest
     dx = np.r_[0.0, 0.0, -0.5e-3, 0.0, 0.0, 0.0]
     s = inverse_kinematics(robot, robot.home + dx).q - inverse_kinematics(robot, robot.home).q
     rec.settlement = np.where(step[:, None], s, 0.0)
-    d = cases.sag_diagnosis(robot, robot.home, rec)
+    d = cases.sag_diagnosis(robot, robot.home, rec, _twin(robot, (rec, m_c, ok, hold))[0])
     assert d["sag_seen_mm"] == pytest.approx(-0.4)
     assert d["sag_unseen_mm"] == pytest.approx(-0.6)
     assert d["settlement_sag_mm"] == pytest.approx(-0.5, abs=1e-3)

@@ -804,10 +804,10 @@ def _sag(rec, twin=None) -> float:
     return float(z[-n:].mean() - z[rest].mean())
 
 
-def _windows(t) -> tuple[np.ndarray, np.ndarray]:
-    """(the unloaded rest's window, the dwell's last window) of the sag (SAG_WINDOW each) as masks."""
+def _end_window(t) -> np.ndarray:
+    """The dwell's last window (SAG_WINDOW) of the sag, as a mask of t."""
     t = np.asarray(t, dtype=float)
-    return (t > PAYLOAD_REST - SAG_WINDOW) & (t <= PAYLOAD_REST), t > t[-1] - SAG_WINDOW + 0.5 * DT
+    return t > t[-1] - SAG_WINDOW + 0.5 * DT
 
 
 def _controller_z(rec) -> np.ndarray | None:
@@ -833,36 +833,33 @@ def settlement_sag(robot, x, s) -> float:
     return float(np.linalg.lstsq(J, np.asarray(s, dtype=float), rcond=None)[0][2])
 
 
-def sag_diagnosis(robot, x, rec, twin=None) -> dict:
+def sag_diagnosis(robot, x, rec, twin) -> dict:
     """Where a run's sag [mm] comes from (reported, not judged; NaN where the run did not record it),
-    each against the unloaded twin's at the same time (``twin``, as the sag itself) or, without one,
-    against the run's own unloaded rest: ``sag_seen_mm``, the sag of the controller's own pose (the
-    forward kinematics': what its OSPC can act on); ``sag_unseen_mm``, the rest of the true sag, which
-    the controller cannot see (the forward kinematics' error under the payload);
-    ``settlement_sag_mm``, the part of the true sag the plant's cable settlement (section 4.1.3)
-    accounts for (:func:`settlement_sag` of its growth, a truth of the simulator); ``sag_drift_mm``,
-    the sag's change over the dwell's last second (window mean against the window one second
-    before: a transient still under way, not a static sag)."""
-    t, z = rec.array("t"), rec.array("x")[:, 2]
+    each against the unloaded twin's at the same time (``twin``, as the sag itself):
+    ``sag_seen_mm``, the sag of the controller's own pose (the forward kinematics': what its OSPC
+    can act on); ``sag_unseen_mm``, the rest of the true sag, which the controller cannot see (the
+    forward kinematics' error under the payload); ``settlement_sag_mm``, the part of the true sag
+    the plant's cable settlement (section 4.1.3) accounts for (:func:`settlement_sag` of its growth,
+    a truth of the simulator); ``sag_drift_mm``, the sag's change over the dwell's last second
+    (window mean against the window one second before: a transient still under way, not a static
+    sag)."""
+    t, z, z0 = rec.array("t"), rec.array("x")[:, 2], twin.array("x")[:, 2]
     nan = float("nan")
     out = dict.fromkeys(("sag_seen_mm", "sag_unseen_mm", "settlement_sag_mm", "sag_drift_mm"), nan)
-    if not len(t) or (twin is not None and len(twin.array("t")) != len(t)):
+    if not len(t) or len(z0) != len(t):
         return out
-    rest, end = _windows(t)
-    base = end if twin is not None else rest             # the windows the baseline run is read in
-    other = twin if twin is not None else rec
+    end = _end_window(t)
     earlier = (t > t[-1] - 1.0 - SAG_WINDOW + 0.5 * DT) & (t <= t[-1] - 1.0 + 0.5 * DT)
-    dz = z - (other.array("x")[:, 2] if twin is not None else 0.0)
-    if rest.any() and earlier.any():
-        out["sag_drift_mm"] = 1e3 * float(dz[end].mean() - dz[earlier].mean())
-    z_c, z_c0 = _controller_z(rec), _controller_z(other)
-    if z_c is not None and z_c0 is not None and rest.any():
-        seen = z_c[end].mean() - z_c0[base].mean()
+    dz = z - z0
+    out["sag_drift_mm"] = 1e3 * float(dz[end].mean() - dz[earlier].mean())
+    z_c, z_c0 = _controller_z(rec), _controller_z(twin)
+    if z_c is not None and z_c0 is not None:
+        seen = z_c[end].mean() - z_c0[end].mean()
         out["sag_seen_mm"] = 1e3 * float(seen)
-        out["sag_unseen_mm"] = 1e3 * float(z[end].mean() - other.array("x")[base, 2].mean() - seen)
-    s, s0 = getattr(rec, "settlement", None), getattr(other, "settlement", None)
-    if s is not None and s0 is not None and len(s) == len(t) and len(s0) == len(t) and rest.any():
-        out["settlement_sag_mm"] = 1e3 * settlement_sag(robot, x, s[end].mean(axis=0) - s0[base].mean(axis=0))
+        out["sag_unseen_mm"] = 1e3 * float(dz[end].mean() - seen)
+    s, s0 = getattr(rec, "settlement", None), getattr(twin, "settlement", None)
+    if s is not None and s0 is not None and len(s) == len(t) and len(s0) == len(t):
+        out["settlement_sag_mm"] = 1e3 * settlement_sag(robot, x, s[end].mean(axis=0) - s0[end].mean(axis=0))
     return out
 
 
