@@ -62,6 +62,7 @@ def area(results, meta: dict, calibration: dict, report: str) -> dict:
             "cases": len(results), "passed": n_passed, "applicable": n_applicable,
             "not_applicable": len(results) - n_applicable, "jobs": meta.get("jobs"),
             "sweep_wall_s": meta["wall_s"], "sweep_cpu_s": meta["cpu_s"],
+            "identification_wall_s": meta.get("identification_wall_s"),
             "pass_rate": n_passed / len(results) if results else None,
             "pass_rate_applicable": n_passed / n_applicable if n_applicable else None,
             "families": {f: family_figures(family_summary(results, f), f) for f in families},

@@ -101,7 +101,11 @@ def _summarise(results, doc, figures, outdir) -> int:
         print(report.summary_line(family, s))
     cpu = doc["meta"]["cpu_s"]
     cpu = f"{cpu:.0f} s CPU" if math.isfinite(cpu) else "CPU time not recorded"
-    print(f"[validate] {len(results)} cases in {doc['meta']['wall_s']:.0f} s wall, {cpu}; "
+    meta = doc["meta"]
+    ident = meta.get("identification_wall_s")
+    ident = (f" after {ident:.0f} s identifying the plants ({(ident + meta['wall_s']) / 60.0:.1f} min in all)"
+             if ident is not None else "")
+    print(f"[validate] {len(results)} cases in {meta['wall_s']:.0f} s wall, {cpu}{ident}; "
           f"{outdir}/validation.json, "
           "validation.txt, " + ", ".join(f.name for f in figures))
     return 0 if all(r.passed for r in results) else 1

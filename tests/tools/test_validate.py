@@ -459,3 +459,53 @@ def test_the_sweep_identifies_friction_on_the_cases_plant(tmp_path, monkeypatch)
     friction.identify_on_plant("ipanema3", "mismatched", 3, path)
     assert recorded == [{"seed": 3, "plant": "mismatched", "plant_seed": 3}]
     assert friction.read_parameters(path)["mu"] == [0.01 + i for i in range(8)]
+
+
+def test_the_friction_and_the_settlement_of_every_plant_are_identified_in_one_pool(tmp_path, monkeypatch):
+    """with_identified with two jobs: every (kind, robot, plant, seed) the cases need goes to one
+    pool together (the identifications are independent runs: no core waits for the friction before
+    the settlement starts); each case gets its own plant's records, the contact case none."""
+    import yaml
+
+    from cdpr_tools.validate import friction, settlement, sweep
+
+    calls = []
+    monkeypatch.setattr(friction, "identify_on_plant", _fake_identification(calls))
+
+    def settle(robot_name, plant, seed, path):
+        calls.append(("settlement", robot_name, plant, seed))
+        path.write_text(yaml.safe_dump({"load_compensation": {"ros__parameters": {
+            "settlement_ratio": 0.1 * (seed + 1), "settlement_time": 2.0, "settlement_identified": True}}}))
+    monkeypatch.setattr(settlement, "identify_on_plant", settle)
+
+    pools = []
+
+    class InlinePool:                     # the pool's map, run in this process (the stand-ins are not in a spawned one)
+        def __init__(self, jobs, mp_context=None):
+            pools.append([])
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def map(self, fn, *columns):
+            pools[-1].extend(zip(*columns))
+            return [fn(*args) for args in zip(*columns)]
+    monkeypatch.setattr(sweep, "ProcessPoolExecutor", InlinePool)
+
+    x = list(load_robot("ipanema3").home)
+    specs = [CaseSpec(family, "ipanema3", i, x, False, plant, seed)
+             for i, (family, plant, seed) in enumerate((("guiding", "mismatched", 2), ("payload", "nominal", 0),
+                                                        ("contact", "mismatched", 3)))]
+    out, frictions, settlements = sweep.with_identified(specs, "identified", "identified", tmp_path, jobs=2, log=lambda s: None)
+    assert len(pools) == 1 and sorted(task[1] for task in pools[0]) == ["friction", "friction", "settlement"]
+    assert sorted(frictions) == ["ipanema3 mismatched seed 2", "ipanema3 nominal"]
+    assert list(settlements) == ["ipanema3 nominal"] and settlements["ipanema3 nominal"]["settlement_ratio"] == 0.1
+    guiding, payload, contact = out
+    assert guiding.friction["file"].endswith("ipanema3_mismatched_seed2.yaml") and guiding.settlement == {"source": "shipped"}
+    assert payload.friction["file"].endswith("ipanema3_nominal.yaml") and payload.settlement["source"] == "identified"
+    assert contact.friction == {"source": "shipped"} and contact.settlement == {"source": "shipped"}
+    with pytest.raises(ValueError, match="--settlement must be one of"):
+        sweep.with_identified(specs, "identified", "guessed", tmp_path)

@@ -73,7 +73,7 @@ def _stand_in(robot, hold_at=None, diverged_at=None, sag=1e-3):
 
 def _runs(loaded, twin):
     """A stand-in of ``cases._payload_run``: ``loaded`` under a payload, ``twin`` with none (mass 0)."""
-    return lambda spec, robot_, config, mass: loaded if mass > 0.0 else twin
+    return lambda spec, robot_, config, mass, **_: loaded if mass > 0.0 else twin
 
 
 def _twin(robot, run):
@@ -157,7 +157,7 @@ def test_ik_lc_is_refused_where_ik_only_leaves_a_cable_slack_before_the_payload(
 def test_payload_case_refuses_only_ik_lc_where_ik_only_leaves_cables_slack(monkeypatch):
     robot = load_robot("ipanema3_mini")
     slack = _rest_run(robot, np.r_[np.full(7, 8.0), 0.0])
-    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass: (slack, np.zeros(0), True, None))
+    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass, **_: (slack, np.zeros(0), True, None))
     ran = []
     monkeypatch.setattr(cases, "_payload_result",
                         lambda s, robot_, mass, base, sag_reference, note: ran.append((s.variant["controller"],
@@ -321,3 +321,26 @@ def test_a_held_unloaded_twin_leaves_the_sag_unmeasured_and_the_case_failed(monk
     result = cases._payload_result(spec, robot, 2.0, {}, -20.0, "")
     assert result.status == "failed" and np.isnan(result.metrics["sag_mm"])
     assert "the unloaded twin run was held: no sag measured" in result.note
+
+
+def test_a_reference_whose_rest_refuses_ik_lc_ends_after_the_rest_with_the_same_verdict():
+    """The Mini at the sweep's grid pose #1 (mismatched plant, seed 2): IK-only leaves cables 7 and 8
+    slack in the unloaded rest. The reference run payload_case makes ends right after the rest
+    (after_rest), its rest's rows are those of the whole run and give the same refusal, which is all
+    that payload_case reads of it there."""
+    robot = load_robot("ipanema3_mini")
+    x = [-0.06282650359758432, -0.2046132279102765, -0.011790125856625614, 0.0, 0.0, 0.0]
+    spec = CaseSpec("payload", "ipanema3_mini", 1, x, False, "mismatched", 2, {"fraction": 0.5})
+    mass = 0.5 * dynamic_capacity(robot, x)
+    whole, _, ok, _ = cases._payload_run(spec, robot, cases.REFERENCE, mass)
+    asked = []
+    cut, _, ok_cut, _ = cases._payload_run(spec, robot, cases.REFERENCE, mass,
+                                           after_rest=lambda rec: asked.append(rec.array("t")[-1]) or True)
+    assert ok and ok_cut and len(asked) == 1
+    t_whole, t_cut = whole.array("t"), cut.array("t")
+    assert cases.PAYLOAD_REST <= t_cut[-1] < cases.PAYLOAD_REST + 0.01 < t_whole[-1]
+    n = len(t_cut)
+    for key in ("t", "x", "f"):
+        np.testing.assert_array_equal(cut.array(key), whole.array(key)[:n])
+    refusal = cases.ik_only_slack(robot, whole)
+    assert refusal is not None and "cable(s) 7" in refusal and cases.ik_only_slack(robot, cut) == refusal

@@ -45,7 +45,7 @@ def test_ik_lc_is_refused_where_the_ik_only_reference_trips_the_watch_under_the_
 def test_payload_case_refuses_ik_lc_before_the_hold_and_still_runs_force_control(monkeypatch):
     robot = load_robot("ipanema3_mini")
     reference = _loaded_run(robot, np.full(8, 8.0), (4, 2.0, 0.9, 0.1))
-    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass: (reference, np.zeros(0), True, None))
+    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass, **_: (reference, np.zeros(0), True, None))
     ran = []
     monkeypatch.setattr(cases, "_payload_result",
                         lambda s, robot_, mass, base, sag_reference, note: ran.append(s.variant["controller"]) or "run")

@@ -113,9 +113,9 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
 
     The guiding and payload families run with ``friction_mode``'s friction (:mod:`.friction`): identified, the
     friction of each (robot, plant, seed) among its cases is identified before the cases run
-    (:func:`with_friction`; reused from ``outdir`` when there); its time is the meta's
-    ``friction_wall_s``, not the cases'. The payload family likewise runs with ``settlement_mode``'s
-    cable settlement (:mod:`.settlement`, :func:`with_settlement`)."""
+    (:func:`with_identified`; reused from ``outdir`` when there); its time is the meta's
+    ``identification_wall_s``, not the cases' ``wall_s``. The payload family likewise runs with ``settlement_mode``'s
+    cable settlement (:mod:`.settlement`), identified in the same processes as the friction."""
     import platform
 
     from cdpr_tools.validate import report
@@ -124,71 +124,70 @@ def validate(robots, families, plant_list, n_poses: int, jobs: int, outdir, prog
     per_robot = [plan(robot, families, plant_list, n_poses)[1] for robot in robots]
     specs = [spec for group in itertools.zip_longest(*per_robot) for spec in group if spec is not None]
     start = time.perf_counter()
-    specs, frictions = with_friction(specs, friction_mode, outdir, jobs, log)
-    specs, settlements = with_settlement(specs, settlement_mode, outdir, log)
-    friction_wall = time.perf_counter() - start
+    specs, frictions, settlements = with_identified(specs, friction_mode, settlement_mode, outdir, jobs, log)
+    identification_wall = time.perf_counter() - start
     start = time.perf_counter()
     with report.CaseLog(outdir) as case_log:
         results = run_all(specs, jobs, progress, case_log.write)
     meta = {"command": command, "robots": list(robots), "families": list(families),
             "plants": [list(p) for p in plant_list], "poses": n_poses, "jobs": jobs,
             "wall_s": time.perf_counter() - start, "cpu_s": cpu_seconds(results), "host": platform.node(),
-            "friction": {"mode": friction_mode, "families": list(FRICTION_FAMILIES), "wall_s": friction_wall,
+            "identification_wall_s": identification_wall,
+            "friction": {"mode": friction_mode, "families": list(FRICTION_FAMILIES),
                          "plants": frictions},
             "settlement": {"mode": settlement_mode, "families": ["payload"], "plants": settlements}}
     doc, figures = report.write(results, meta, outdir)
     return results, doc, figures
 
 
-def with_friction(specs, mode: str, outdir, jobs: int = 1, log=print) -> tuple[list, dict]:
-    """The specs with their friction (:attr:`CaseSpec.friction`) -> (specs, {"<robot> <plant>":
-    record}). ``mode`` identified: the cases of FRICTION_FAMILIES get the friction identified on
-    their (robot, plant, seed), each identified once (in ``jobs`` processes) or reused from
-    ``outdir``; shipped, and the other families: the robot file's."""
-    from cdpr_tools.validate import friction
+IDENTIFIED_FAMILIES = {"friction": FRICTION_FAMILIES, "settlement": ("payload",)}
 
-    if mode not in friction.MODES:
-        raise ValueError(f"--friction must be one of {', '.join(friction.MODES)}, got {mode!r}")
-    if mode == "shipped":
-        return list(specs), {}
-    keys = sorted({(s.robot, s.plant, s.seed) for s in specs if s.family in FRICTION_FAMILIES})
-    if jobs == 1 or len(keys) < 2:
-        records = [friction.identified(outdir, *key) for key in keys]
+
+def with_identified(specs, friction_mode: str, settlement_mode: str, outdir, jobs: int = 1,
+                    log=print) -> tuple[list, dict, dict]:
+    """The specs with what is identified on their plants -> (specs, frictions, settlements), each
+    {"<robot> <plant>": record}. ``friction_mode`` identified: the cases of FRICTION_FAMILIES get the
+    pulley friction identified on their (robot, plant, seed) (:attr:`CaseSpec.friction`,
+    :mod:`.friction`); ``settlement_mode`` identified: the payload cases the cable settlement
+    (:attr:`CaseSpec.settlement`, :mod:`.settlement`, about 10 s CPU each); shipped: the robot's and
+    parameter file's. Each is identified once, all of them together in ``jobs`` processes (they are
+    independent runs), or reused from ``outdir``."""
+    from cdpr_tools.validate import friction, settlement
+
+    modes = {"friction": (friction_mode, friction), "settlement": (settlement_mode, settlement)}
+    for kind, (mode, module) in modes.items():
+        if mode not in module.MODES:
+            raise ValueError(f"--{kind} must be one of {', '.join(module.MODES)}, got {mode!r}")
+    tasks = [(kind, key) for kind, (mode, _) in modes.items() if mode == "identified"
+             for key in sorted({(s.robot, s.plant, s.seed) for s in specs if s.family in IDENTIFIED_FAMILIES[kind]})]
+    if jobs == 1 or len(tasks) < 2:
+        records = [_identified(outdir, kind, *key) for kind, key in tasks]
     else:
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            records = list(pool.map(friction.identified, [outdir] * len(keys), *zip(*keys)))
-    by_key = {}
-    for key, (record, reused) in zip(keys, records):
-        by_key[key] = record
+            records = list(pool.map(_identified, [outdir] * len(tasks), *zip(*((kind, *key) for kind, key in tasks))))
+    by_kind = {"friction": {}, "settlement": {}}
+    for (kind, key), (record, reused) in zip(tasks, records):
+        by_kind[kind][key] = record
+        log(f"[validate] {_plant_name(*key)}: {kind} {'reused from' if reused else 'identified into'} "
+            f"{record['file']}; {_identified_text(kind, record)}")
+    specs = [replace(s, **{kind: by_kind[kind][(s.robot, s.plant, s.seed)] for kind in by_kind
+                           if s.family in IDENTIFIED_FAMILIES[kind] and (s.robot, s.plant, s.seed) in by_kind[kind]})
+             for s in specs]
+    return specs, *({_plant_name(*key): record for key, record in by_kind[kind].items()} for kind in by_kind)
+
+
+def _identified(outdir, kind: str, robot: str, plant: str, seed: int) -> tuple[dict, bool]:
+    """(record, reused) of ``kind`` (friction or settlement) on (robot, plant, seed): one process's task."""
+    from cdpr_tools.validate import friction, settlement
+
+    return {"friction": friction, "settlement": settlement}[kind].identified(outdir, robot, plant, seed)
+
+
+def _identified_text(kind: str, record: dict) -> str:
+    if kind == "friction":
         d = record["deviation_percent"]
-        log(f"[validate] {_plant_name(*key)}: friction {'reused from' if reused else 'identified into'} "
-            f"{record['file']}; mu / sigma / F_pv up to {d['mu']:.3g} / {d['sigma']:.3g} / {d['F_pv']:.3g} % "
-            "from the robot file's")
-    specs = [replace(s, friction=by_key[(s.robot, s.plant, s.seed)]) if s.family in FRICTION_FAMILIES else s
-             for s in specs]
-    return specs, {_plant_name(*key): record for key, record in by_key.items()}
-
-
-def with_settlement(specs, mode: str, outdir, log=print) -> tuple[list, dict]:
-    """The payload specs with their cable settlement (:attr:`CaseSpec.settlement`) -> (specs,
-    {"<robot> <plant>": record}). ``mode`` identified: identified once per (robot, plant, seed) on
-    that plant (about 10 s CPU each) or reused from ``outdir`` (:func:`.settlement.identified`);
-    shipped: the parameter file's model."""
-    from cdpr_tools.validate import settlement
-
-    if mode not in settlement.MODES:
-        raise ValueError(f"--settlement must be one of {', '.join(settlement.MODES)}, got {mode!r}")
-    if mode == "shipped":
-        return list(specs), {}
-    by_key = {}
-    for key in sorted({(s.robot, s.plant, s.seed) for s in specs if s.family == "payload"}):
-        record, reused = settlement.identified(outdir, *key)
-        by_key[key] = record
-        log(f"[validate] {_plant_name(*key)}: settlement {'reused from' if reused else 'identified into'} "
-            f"{record['file']}; ratio {record['settlement_ratio']:.3g}, T {record['settlement_time']:.3g} s")
-    specs = [replace(s, settlement=by_key[(s.robot, s.plant, s.seed)]) if s.family == "payload" else s
-             for s in specs]
-    return specs, {_plant_name(*key): record for key, record in by_key.items()}
+        return f"mu / sigma / F_pv up to {d['mu']:.3g} / {d['sigma']:.3g} / {d['F_pv']:.3g} % from the robot file's"
+    return f"ratio {record['settlement_ratio']:.3g}, T {record['settlement_time']:.3g} s"
 
 
 def _plant_name(robot: str, plant: str, seed: int) -> str:
