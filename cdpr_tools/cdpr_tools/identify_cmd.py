@@ -95,10 +95,7 @@ def add_parser(sub) -> None:
     ls.add_argument("--dwell", type=float, default=3.0, help="time per step [s] (default 3)")
     ls.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
                     help="the simulated robot: cdpr_sim.plant (default mismatched)")
-    ls.add_argument("--model", help="robot file of the load compensation's model (e.g. with the identified "
-                    "cable stiffness); default: --robot, from which the simulated plant is built")
-    ls.add_argument("--lc-params", metavar="YAML", help="load_compensation parameter file (e.g. the settlement "
-                    "of `cdpr identify settlement -o`) over the defaults")
+    _model_arguments(ls)
     ls.set_defaults(run=run_load_steps)
 
     lp = what.add_parser("load-program", help="a program run with payloads, with and without load "
@@ -110,7 +107,16 @@ def add_parser(sub) -> None:
     lp.add_argument("--configs", default="ik,ik_lc", help="controller configurations, comma-separated")
     lp.add_argument("--plant", default="mismatched", choices=("mismatched", "nominal"),
                     help="the simulated robot: cdpr_sim.plant (default mismatched)")
+    _model_arguments(lp)
     lp.set_defaults(run=run_load_program)
+
+
+def _model_arguments(p) -> None:
+    """The load compensation's model and parameters, for load-steps and load-program alike."""
+    p.add_argument("--model", help="robot file of the load compensation's model (e.g. with the identified "
+                   "cable stiffness); default: --robot, from which the simulated plant is built")
+    p.add_argument("--lc-params", metavar="YAML", help="load_compensation parameter file (e.g. the settlement "
+                   "of `cdpr identify settlement -o`) over the defaults")
 
 
 def run_friction(args) -> int:
@@ -296,7 +302,7 @@ def run_load_program(args) -> int:
     payloads = [float(m) for m in args.payloads.split(",") if m]
     summary = run_program_experiment(args.outdir, args.robot, configs, payloads, args.program,
                                      progress=lambda line: print(line, flush=True), plant=args.plant, model=args.model,
-                             lc_params=_lc_params(args.lc_params))
+                                     lc_params=_lc_params(args.lc_params))
     for key, s in summary.items():
         print(f"{key:24s} rms position error {s['rms_position_error_mm']:6.2f} mm  "
               f"estimate error {s['max_estimate_error_percent']:5.1f} %")

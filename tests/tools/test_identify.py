@@ -308,3 +308,24 @@ def test_drive_fit_of_a_bag_that_lost_commands_and_states(drive_sweeps, tmp_path
     np.testing.assert_array_equal(data.theta[~lost], full_data.theta[~lost])
     for name, value in full.params.items():
         assert fit.params[name] == pytest.approx(value, rel=0.01), name
+
+
+@pytest.mark.parametrize("command, function", [("load-steps", "run_experiment"), ("load-program", "run_program_experiment")])
+def test_the_load_experiments_take_the_load_compensations_model_and_parameters(tmp_path, monkeypatch, command, function):
+    """`cdpr identify load-steps` and `load-program` parse and hand on --model and --lc-params alike
+    (load-program stopped with "'Namespace' object has no attribute 'model'" before either existed for it)."""
+    from cdpr_control.control.load_compensation import LoadCompensationParams
+    from cdpr_tools.cli import main
+    from cdpr_tools.identify import load_steps
+
+    calls = []
+    row = {"ok": True, "outcome": "ok", "sag_mm_per_kg": 0.1, "max_abs_z_error_mm": 1.0,
+           "rms_position_error_mm": 1.0, "max_estimate_error_percent": 2.0}
+    monkeypatch.setattr(load_steps, function, lambda *args, **kwargs: calls.append(kwargs) or {"ik_lc": row})
+    lc = tmp_path / "lc.yaml"
+    lc.write_text("load_compensation:\n  ros__parameters:\n    settlement_ratio: 0.3\n    settlement_time: 2.5\n")
+    base = ["identify", command, str(tmp_path / "out"), "--configs", "ik_lc"]
+    assert main(base) == 0 and calls[-1]["model"] is None and calls[-1]["lc_params"] is None
+    assert main(base + ["--model", "ipanema3", "--lc-params", str(lc)]) == 0
+    assert calls[-1]["model"] == "ipanema3"
+    assert calls[-1]["lc_params"] == LoadCompensationParams(tare_at_start=True, settlement_ratio=0.3, settlement_time=2.5)

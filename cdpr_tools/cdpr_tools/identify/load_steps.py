@@ -185,10 +185,11 @@ def sag_per_kg(summary: dict) -> float:
 
 def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40.0,
                     program: str = "payload_moves_ipanema3", lc_params: LoadCompensationParams | None = None,
-                    tail: float = 0.5, ramp: float = 0.3, plant: str = "mismatched", rest: float = 0.5) -> PayloadRun:
+                    tail: float = 0.5, ramp: float = 0.3, plant: str = "mismatched", rest: float = 0.5,
+                    model=None) -> PayloadRun:
     """A program run with ``payload`` kg put on the platform (cosine over ``ramp`` s) ``rest`` s after
     its start (Fig. 4.7; the estimate is tared empty before); ``program`` a shipped program name or
-    a .gcode file."""
+    a .gcode file; ``model`` the load compensation's robot model (as :func:`payload_steps`)."""
     from cdpr_control import programs
     from cdpr_control.motion.gcode import parse_gcode
     from cdpr_control.motion.interpolation import Interpolator
@@ -204,7 +205,7 @@ def payload_program(robot="ipanema3", config: str = "ik_lc", payload: float = 40
         return payload * (0.0 if k < 0 else 1.0 if k >= n_ramp else 0.5 * (1.0 - np.cos(np.pi * (k + 1) / n_ramp)))
 
     return _run(robot, program_source(interp), interp.duration + tail, config, robot.home, payload_at, lc_params,
-                plant=plant)
+                plant=plant, model=model)
 
 
 def plot_steps(runs: dict, path, title: str = "") -> Path:
@@ -331,13 +332,16 @@ def program_summary(run: PayloadRun, payload: float, singularity_margin: float =
 
 
 def run_program_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc"), payloads=(40.0, 80.0),
-                           program: str = "payload_moves_ipanema3", progress=print, plant: str = "mismatched") -> dict:
-    """The moving experiment (Fig. 4.7) per payload and configuration: plot and JSON summary."""
+                           program: str = "payload_moves_ipanema3", progress=print, plant: str = "mismatched",
+                           model=None, lc_params: LoadCompensationParams | None = None) -> dict:
+    """The moving experiment (Fig. 4.7) per payload and configuration: plot and JSON summary.
+    ``model``, ``lc_params``: as :func:`run_experiment`."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    model = load_robot(model) if isinstance(model, (str, Path)) else model
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     summary = {}
@@ -345,7 +349,7 @@ def run_program_experiment(outdir, robot="ipanema3", configs=("ik", "ik_lc"), pa
     for payload in payloads:
         for config in configs:
             progress(f"{program}, {payload:g} kg, {config} ...")
-            run = payload_program(robot, config, payload, program, plant=plant)
+            run = payload_program(robot, config, payload, program, lc_params, plant=plant, model=model)
             key = f"{config}_{payload:g}kg"
             summary[key] = {**program_summary(run, payload), **run_outcome(run, robot)}
             if not summary[key]["ok"]:
