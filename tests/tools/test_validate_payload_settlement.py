@@ -171,3 +171,46 @@ def test_the_mini_at_rest_drifts_no_longer_by_the_plants_start_up_settlement():
     # settle_plant 66-382 µm per cable)
     assert np.abs(rec.settlement).max() < 3e-6, np.abs(rec.settlement).max(axis=0)
     assert abs(cases._sag(rec)) <= cases.static_accuracy(rec, float(spec.x[2]))
+
+
+def _dwell_run(robot, taut, share):
+    """A reference recorder from rest to 2 s after the step's end: every cable at 150 N but, over
+    ``share`` of the periods from 1 s after the step began, the last m - ``taut`` at 0 N; in the
+    first second after the step all but ``taut`` at 0 N (not judged: the sag and the swing's start)."""
+    t = np.arange(1, int((cases.PAYLOAD_REST + cases.PAYLOAD_RAMP + 2.0) * 1000) + 1) * 1e-3
+    f = np.full((len(t), robot.m), 150.0)
+    window = np.flatnonzero(t >= cases.PAYLOAD_REST + 1.0)
+    f[window[: int(share * len(window))], taut:] = 0.0
+    f[(t > cases.PAYLOAD_REST) & (t < cases.PAYLOAD_REST + 1.0), 4:] = 0.0
+    rec = cases.Recorder(robot)
+    rec.rows.update(t=list(t), x=list(np.zeros((len(t), 6))), f=list(f))
+    return rec
+
+
+@pytest.mark.parametrize("taut, share, refused", [
+    (5, 0.6, True),      # five taut cables for most of the dwell: a mechanism
+    (4, 0.95, True),
+    (5, 0.4, False),     # for less than half of it
+    (6, 1.0, False),     # six taut cables fix the pose
+])
+def test_ik_lc_is_refused_where_ik_only_leaves_fewer_than_six_cables_taut_for_most_of_the_dwell(taut, share, refused):
+    robot = load_robot("ipanema3")
+    reason = cases.ik_only_payload_unconstrained(robot, _dwell_run(robot, taut, share), 115.7)
+    if refused:
+        assert f"{100 * share:.0f} % of the dwell" in reason and f"median {taut} of 8" in reason
+        assert "116 kg" in reason and "force control" in reason and ">= 20 N" in reason
+    else:
+        assert reason is None
+
+
+def test_payload_case_refuses_ik_lc_on_an_unconstrained_platform_and_still_runs_force_control(monkeypatch):
+    robot = load_robot("ipanema3")
+    reference = _dwell_run(robot, 4, 0.9)
+    monkeypatch.setattr(cases, "_payload_run", lambda spec, robot_, config, mass, **_: (reference, np.zeros(0), True, None))
+    ran = []
+    monkeypatch.setattr(cases, "_payload_result",
+                        lambda s, robot_, mass, base, sag_reference, note: ran.append(s.variant["controller"]) or "run")
+    spec = CaseSpec("payload", "ipanema3", 0, list(robot.home), False, "mismatched", 1, {"fraction": 0.5})
+    out = cases.payload_case(spec)
+    assert ran == ["force_control"] and out[0] == "run"
+    assert out[1].status == "refused" and "does not constrain the platform" in out[1].note

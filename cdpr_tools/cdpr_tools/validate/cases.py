@@ -970,7 +970,8 @@ def payload_case(spec: CaseSpec) -> list[CaseResult]:
         sag_reference = 1e3 * _sag(reference) if ok_ref else float("nan")
         note_ref = "" if ok_ref else f"the IK-only reference diverged at {reference.diverged_at:.3f} s"
     # IK-only carries the empty platform but not this payload: the watch would hold ik_lc under it
-    refusal = unheld or (ik_only_payload_slack(robot, reference, mass) if ok_ref else None)
+    refusal = unheld or ((ik_only_payload_slack(robot, reference, mass)
+                          or ik_only_payload_unconstrained(robot, reference, mass)) if ok_ref else None)
     return [CaseResult(s, dict(base), {}, "refused", refusal) if refusal and s.variant["controller"] == "ik_lc"
             else _payload_result(s, robot, mass, base, sag_reference, note_ref) for s in specs]
 
@@ -1013,6 +1014,46 @@ def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None
                     f"{t[after][k - n_limit]:.3f} s, where the watch would hold ik_lc; x_d,LC cannot tension a "
                     "cable: carry this payload under force control")
     return None
+
+
+def ik_only_payload_unconstrained(robot, reference: Recorder, mass: float) -> str | None:
+    """Why IK-only control does not constrain the platform under the payload ``mass`` [kg] at this
+    pose (None where it does), from the reference run (IK-only under the same payload on the same
+    plant): fewer than six cables taut (at or above the load compensation's slack share of f_min,
+    ``slack_fraction``, 20 N on the IPAnema 3) for more than UNCONSTRAINED_SHARE of the periods from
+    1 s after the step began (the estimate's window) to the end.
+
+    With fewer than six taut cables K_c = A^T K_l A of (2.22) has rank below six: the cable
+    lengths no longer fix the pose, the platform hangs as a mechanism that only gravity holds, and
+    the compensating offset (4.5)-(4.6) (:func:`cdpr_control.control.load_compensation.secant_offset`)
+    and the forward kinematics' pose, which (4.4) differentiates, are not determined by what the
+    controller measures. Nothing x_d,LC does tensions a cable; force control keeps them at f_min.
+    Measured on the 40-pose grid (docs/validation.md, "Payload after session 18"): at the IPAnema 3's
+    ik_lc poses the reference spends 69-95 % of the dwell on fewer than six taut cables at four
+    poses (three failing: the platform swings by tens of millimetres for the whole dwell; one, home,
+    passing: there the symmetric hang is not excited) and at most 2.4 % at the other four."""
+    from cdpr_control.control.load_compensation import LoadCompensationParams
+
+    t, f = reference.array("t"), reference.array("f")
+    states = reference.rows.get("state", [])
+    if len(states) == len(t) and all(s is not None for s in states):
+        f = np.array([s.f for s in states])              # the forces the controller measures
+    after = t >= PAYLOAD_REST + 1.0
+    if not after.any():
+        return None
+    f_slack = LoadCompensationParams().slack_fraction * np.broadcast_to(
+        np.asarray(robot.cable.f_min, dtype=float), (robot.m,))
+    taut = (f[after] >= f_slack).sum(axis=1)
+    share = float(np.mean(taut < 6))
+    if share <= UNCONSTRAINED_SHARE:
+        return None
+    return (f"IK-only control does not constrain the platform under {mass:.3g} kg at this pose: under it (the IK-only "
+            f"reference, same plant and payload) fewer than six cables are taut (>= {f_slack.min():.3g} N) for "
+            f"{100.0 * share:.0f} % of the dwell (median {int(np.median(taut))} of {robot.m}): the lengths do not fix the "
+            "pose, so neither (4.5)-(4.6) nor the forward kinematics is determined; carry this payload under force control")
+
+
+UNCONSTRAINED_SHARE = 0.5      # of the dwell from 1 s after the step: "most of it"
 
 
 MODEL_REFERENCE_NOTE = ("sag reference: the elastic sag C_x w (4.5)-(4.6) at the run's unloaded forces (IK-only "
