@@ -411,7 +411,7 @@ class LoadCompensationParams:
     torque: bool = False            # also compensate the payload's moment (needs the identified cog)
     cog_min_mass: float = 5.0       # kg, the payload's cog is identified (and published) above this m_c
     T_output: float = 1.0           # s, PT1 on C_x w_c: keeps the compensation loop below the platform modes
-    v_max: float = 0.02             # m/s, rate limit of the translation of x_d,LC
+    v_max: float = 0.1              # m/s, rate limit of the translation of x_d,LC (above the output PT1's rate: docs/load_compensation.md)
     tare_at_start: bool = False     # tare the estimate once (4.4) is in its final form (start at a known payload)
     tare_payload: float = 0.0       # kg, the payload known to be on the platform at a tare
     omega_max: float = 0.1          # rad/s, rate limit of the rotation of x_d,LC
