@@ -989,10 +989,7 @@ def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None
     reason, as force control refuses one beyond its capacity (:func:`dynamic_capacity`)."""
     from cdpr_tools.identify.load_steps import loop_params
 
-    t, f = reference.array("t"), reference.array("f")
-    states = reference.rows.get("state", [])
-    if len(states) == len(t) and all(s is not None for s in states):
-        f = np.array([s.f for s in states])              # the forces the watch sees (friction-compensated sensors)
+    t, f = _measured_forces(reference)                  # what the watch sees
     after = t > PAYLOAD_REST
     if not after.any():
         return None
@@ -1034,10 +1031,7 @@ def ik_only_payload_unconstrained(robot, reference: Recorder, mass: float) -> st
     passing: there the symmetric hang is not excited) and at most 2.4 % at the other four."""
     from cdpr_control.control.load_compensation import LoadCompensationParams
 
-    t, f = reference.array("t"), reference.array("f")
-    states = reference.rows.get("state", [])
-    if len(states) == len(t) and all(s is not None for s in states):
-        f = np.array([s.f for s in states])              # the forces the controller measures
+    t, f = _measured_forces(reference)
     after = t >= PAYLOAD_REST + 1.0
     if not after.any():
         return None
@@ -1054,6 +1048,16 @@ def ik_only_payload_unconstrained(robot, reference: Recorder, mass: float) -> st
 
 
 UNCONSTRAINED_SHARE = 0.5      # of the dwell from 1 s after the step: "most of it"
+
+
+def _measured_forces(rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
+    """(t, f) of a run: the forces the loop measured (friction-compensated sensors, what the watch
+    and the load compensation see) where every period has its state, else the plant's."""
+    t, f = rec.array("t"), rec.array("f")
+    states = rec.rows.get("state", [])
+    if len(states) == len(t) and all(s is not None for s in states):
+        f = np.array([s.f for s in states])
+    return t, f
 
 
 MODEL_REFERENCE_NOTE = ("sag reference: the elastic sag C_x w (4.5)-(4.6) at the run's unloaded forces (IK-only "
