@@ -11,7 +11,7 @@ import pytest
 from cdpr_control.model.robot import load_robot
 from cdpr_control.model.workspace import feasible_poses
 from cdpr_tools.validate import criteria
-from cdpr_tools.validate.cases import CaseSpec, Diverged, Recorder, judge, run_case
+from cdpr_tools.validate.cases import CaseResult, CaseSpec, Diverged, Recorder, judge, run_case
 from cdpr_tools.validate.grid import BORDER_BAND, planned_f_min, sweep_poses
 from cdpr_tools.validate.report import CaseLog, read_cases
 from cdpr_tools.validate.sweep import plan, plants
@@ -168,6 +168,11 @@ def test_an_interrupted_runs_cases_are_reported_again(tmp_path, capsys):
         log.write([judge(program, {"position_error_max_mm": v, "force_below_f_min_N": -1.0}, False) for v in (2.0, 5.0)])
     assert main(["validate", "--from-cases", str(tmp_path / "p" / "cases.jsonl"), "-o", str(tmp_path / "p")]) == 0
     assert "position_error_max_mm mean 3.5, 2 .. 5" in capsys.readouterr().out
+    with CaseLog(tmp_path / "n") as log:       # a refused case is not applicable, not a failure: exit 0
+        log.write([judge(spec, {"estimate_error_percent": 1.0, "sag_cut_percent": 95.0}, False),
+                   CaseResult(spec, {}, {}, "refused", "IK-only control does not constrain the platform under 9 kg")])
+    assert main(["validate", "--from-cases", str(tmp_path / "n" / "cases.jsonl"), "-o", str(tmp_path / "n")]) == 0
+    assert "1/1 applicable passed" in capsys.readouterr().out
 
 
 def test_refused_cases_are_not_applicable_with_their_reason_apart_from_the_failures():
