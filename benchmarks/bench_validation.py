@@ -14,6 +14,7 @@ Writes bench/validation.json. Run: .venv/bin/python benchmarks/bench_validation.
 from __future__ import annotations
 
 import argparse
+import json
 import pathlib
 import platform
 import sys
@@ -82,6 +83,11 @@ def main(argv=None) -> None:
         results = read_cases(args.from_cases)
         meta = {"command": f"{command} (the cases of an earlier sweep)",
                 "wall_s": sum(r.wall_s for r in results), "cpu_s": cpu_seconds(results)}
+        sweep = pathlib.Path(args.from_cases)
+        sweep = (sweep if sweep.is_dir() else sweep.parent) / "validation.json"
+        if sweep.is_file():                    # the sweep's own times (the cases' sum is not its wall time)
+            swept = json.loads(sweep.read_text()).get("meta", {})
+            meta.update({k: swept[k] for k in ("wall_s", "cpu_s", "identification_wall_s", "jobs") if k in swept})
         report = str(args.from_cases)
     else:
         results, doc, _ = validate(_names(args.robot, ROBOTS, "robot"), _names(args.family, FAMILIES, "family"),

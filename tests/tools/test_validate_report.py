@@ -192,3 +192,23 @@ def test_the_program_case_says_where_its_lowest_cable_force_was():
     p, a, b = np.array([float(v) for v in m[4].split(",")]), np.asarray(robot.home[:3]), border.x[:3]
     s = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
     assert np.linalg.norm(p - (a + s * (b - a))) < 0.02            # on the path home -> border -> home
+
+
+def test_bench_area_from_an_earlier_sweep_takes_its_times_from_its_validation_json(recorded, tmp_path, monkeypatch):
+    """benchmarks/bench_validation.py --from-cases: the sweep's wall and CPU time and its identification time
+    from the validation.json beside cases.jsonl (the sum of the cases' wall times is not the sweep's)."""
+    import json
+
+    bench = _bench()
+    monkeypatch.setattr(bench, "OUT", tmp_path / "bench" / "validation.json")
+    with CaseLog(tmp_path / "sweep") as log:
+        log.write(recorded)
+    (tmp_path / "sweep" / "validation.json").write_text(json.dumps(
+        {"meta": {"wall_s": 900.0, "cpu_s": 1700.0, "identification_wall_s": 220.0, "jobs": 2}}))
+    bench.main(["--from-cases", str(tmp_path / "sweep" / "cases.jsonl")])
+    out = json.loads((tmp_path / "bench" / "validation.json").read_text())
+    assert (out["sweep_wall_s"], out["sweep_cpu_s"], out["identification_wall_s"], out["jobs"]) == (900.0, 1700.0, 220.0, 2)
+    (tmp_path / "sweep" / "validation.json").unlink()             # without it: the cases' own times
+    bench.main(["--from-cases", str(tmp_path / "sweep" / "cases.jsonl")])
+    out = json.loads((tmp_path / "bench" / "validation.json").read_text())
+    assert out["identification_wall_s"] is None and out["sweep_wall_s"] == pytest.approx(sum(r.wall_s for r in recorded))
