@@ -994,8 +994,7 @@ def ik_only_payload_slack(robot, reference: Recorder, mass: float) -> str | None
     if not after.any():
         return None
     safety = loop_params(REFERENCE, robot.file.stem).safety
-    f_min, f_max = (np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min,
-                                                                                        robot.cable.f_max))
+    f_min, f_max = _cable_limits(robot)
     edge = f_min - safety.force_band * (f_max - f_min)
     below = f[after] < edge
     n_limit = int(round(safety.force_limit_time / DT))
@@ -1029,14 +1028,11 @@ def ik_only_payload_unconstrained(robot, reference: Recorder, mass: float) -> st
     ik_lc poses the reference spends 69-95 % of the dwell on fewer than six taut cables at four
     poses (three failing: the platform swings by tens of millimetres for the whole dwell; one, home,
     passing: there the symmetric hang is not excited) and at most 2.4 % at the other four."""
-    from cdpr_control.control.load_compensation import LoadCompensationParams
-
     t, f = _measured_forces(reference)
     after = t >= PAYLOAD_REST + 1.0
     if not after.any():
         return None
-    f_slack = LoadCompensationParams().slack_fraction * np.broadcast_to(
-        np.asarray(robot.cable.f_min, dtype=float), (robot.m,))
+    f_slack = _slack_force(robot)
     taut = (f[after] >= f_slack).sum(axis=1)
     share = float(np.mean(taut < 6))
     if share <= UNCONSTRAINED_SHARE:
@@ -1048,6 +1044,18 @@ def ik_only_payload_unconstrained(robot, reference: Recorder, mass: float) -> st
 
 
 UNCONSTRAINED_SHARE = 0.5      # of the dwell from 1 s after the step: "most of it"
+
+
+def _cable_limits(robot) -> tuple[np.ndarray, np.ndarray]:
+    """(f_min, f_max) (m,) [N] of the robot's cables."""
+    return tuple(np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min, robot.cable.f_max))
+
+
+def _slack_force(robot) -> np.ndarray:
+    """(m,) [N]: below it the load compensation takes a cable as slack (its ``slack_fraction`` of f_min)."""
+    from cdpr_control.control.load_compensation import LoadCompensationParams
+
+    return LoadCompensationParams().slack_fraction * _cable_limits(robot)[0]
 
 
 def _measured_forces(rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
@@ -1091,19 +1099,17 @@ def ik_only_slack(robot, reference: Recorder) -> str | None:
     leaves at the pose (thesis 3.1.2, "the cable forces can only be controlled in limited manner by
     the initial pre-tension of the cables in the home position"), and x_d,LC, a pose offset, cannot
     tension a slack cable; the thesis evaluates the compensation near home only (4.1.3)."""
-    from cdpr_control.control.load_compensation import LoadCompensationParams
     from cdpr_tools.identify.load_steps import loop_params
 
     t, f = reference.array("t"), reference.array("f")
     if not len(t):
         return None
-    f_min, f_max = (np.broadcast_to(np.asarray(v, dtype=float), (robot.m,)) for v in (robot.cable.f_min,
-                                                                                        robot.cable.f_max))
+    f_min, f_max = _cable_limits(robot)
     rest = t <= PAYLOAD_REST
     lowest = f[rest].min(axis=0)
     edge = f_min - loop_params(REFERENCE, robot.file.stem).safety.force_band * (f_max - f_min)
     window = f[rest & (t > PAYLOAD_REST - SAG_WINDOW)].mean(axis=0)
-    slack = window < LoadCompensationParams().slack_fraction * f_min
+    slack = window < _slack_force(robot)
     low = np.flatnonzero((lowest < edge) | slack)
     if not len(low):
         return None
