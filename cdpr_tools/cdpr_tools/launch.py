@@ -237,7 +237,10 @@ class Launcher:
         # ends within it, and a SingleThreadedExecutor turn (its wait set rebuilt over every entity,
         # about 1.6 ms) would cost more than the period: the EventsExecutor takes events off a queue.
         lockstep = self.description.parameters.get("sync_mode", "exact") == "exact"
-        executor = (SingleThreadedExecutor if self.intra_process and lockstep else EventsExecutor)(context=context)
+        waits = self.intra_process and lockstep
+        executor = (SingleThreadedExecutor if waits else EventsExecutor)(context=context)
+        # a wait set rebuilt every turn: subscriptions without QoS event handlers (intraprocess.py)
+        IntraProcess.of(context).subscription_events = not waits
         self._graph = context, executor
         for spec in self.description.nodes:
             module, _ = spec.target()

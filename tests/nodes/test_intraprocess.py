@@ -301,3 +301,25 @@ def test_has_subscribers_sees_local_and_outside_subscriptions(spaces):
     wait_for(lambda: has_subscribers(publisher), "the outside subscription to be seen")
     plain = outside.node("ipc_plain", cls=Node).create_publisher(Int64, "/ipc_plain/n", CONTROL)
     assert not has_subscribers(plain)   # a plain rclpy publisher: its DDS count
+
+
+def test_without_subscription_events_local_qos_mismatches_are_reported_once(spaces):
+    """Where an executor rebuilds its wait set every turn (a composed lockstep launch), subscriptions
+    get no QoS event handlers (each a waitable re-added every turn); the registry then warns of a
+    local publisher that DDS would not match, once, in rclpy's words, and of none that it would."""
+    graph = spaces()
+    plain = graph.node("ipc_events")
+    plain.create_subscription(Int64, "/ipc_events/n", lambda msg: None, CONTROL)
+    assert len(list(plain.waitables)) > 0              # rclpy's default: incompatible QoS (and type)
+    IntraProcess.of(graph.context).subscription_events = False
+    node = graph.node("ipc_lean")
+    warned = []
+    with mock.patch.object(node.get_logger(), "warning", side_effect=warned.append):
+        node.create_subscription(Int64, "/ipc_lean/n", lambda msg: None, CONTROL)       # reliable
+        assert list(node.waitables) == []
+        best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        node.create_publisher(Int64, "/ipc_lean/n", best_effort)
+        node.create_publisher(Int64, "/ipc_lean/n", CONTROL)                          # compatible
+        node.create_subscription(Int64, "/ipc_lean/n", lambda msg: None, best_effort)  # takes both
+    assert warned == ["New publisher discovered on topic '/ipc_lean/n', offering incompatible QoS. "
+                      "No messages will be received from it. Last incompatible policy: RELIABILITY"]

@@ -581,7 +581,7 @@ class HybridForceControl:
         distribution's limits, kept while x_d, z_t and the limits repeat) over 1 + CAPACITY_OVERSHOOT;
         :attr:`capacity` keeps the capacity. Not in the thesis (docs/hybrid_force_control.md)."""
         x_d = np.asarray(x_d, dtype=float)
-        f_min, f_max = (np.asarray(v, dtype=float) for v in limits)
+        f_min, f_max = (np.array(v, dtype=float) for v in limits)   # (copies: a node passes read-only arrays)
         self.capacity = self._capacity((x_d.tobytes(), self.z_t.tobytes(), f_min.tobytes(), f_max.tobytes()),
                                        self._capacity_at, x_d, f_min, f_max)
         return self.capacity / (1.0 + CAPACITY_OVERSHOOT)

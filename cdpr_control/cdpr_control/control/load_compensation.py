@@ -487,6 +487,7 @@ class LoadCompensation:
         self.x_lc = np.zeros(6)
         self.rate_limited = np.zeros(6, dtype=bool)
         self.slack_cables = 0                                  # window-mean forces below f_slack
+        self._f_min_low = float(np.min(robot.cable.f_min))    # (f_slack's, every period: np.min costs 3 us)
         self.settlement = SettlementModel(robot, dt)
         self.set_params(params or LoadCompensationParams())
 
@@ -511,7 +512,7 @@ class LoadCompensation:
     @property
     def f_slack(self) -> float:
         """N, measured forces below this count as (partly) slack: slack_fraction of the robot's f_min."""
-        return self.params.slack_fraction * float(np.min(self.robot.cable.f_min))
+        return self.params.slack_fraction * self._f_min_low
 
     def _reference_forces(self) -> np.ndarray:
         """The unloaded forces for the slack cables of :func:`secant_offset`: those of the last window

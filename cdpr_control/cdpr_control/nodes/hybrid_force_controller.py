@@ -53,6 +53,7 @@ from cdpr_control.control.hybrid_force_control import (CONTACT, ERROR, IDLE, OK,
 from cdpr_control.control.ospc import AXES
 
 from cdpr_control.control.params import default, section
+from cdpr_control.control.safety import all_finite
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.conversions import from_vector3, pose_from_msg, wrench_from_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
@@ -119,8 +120,11 @@ class HybridForceControllerNode(CdprNode):
                                  adapted=True)
 
     def _on_distribution(self, msg) -> None:
-        f_min, f_max = np.array(msg.f_min, dtype=float), np.array(msg.f_max, dtype=float)
-        if f_min.shape == f_max.shape == (self.robot.m,) and np.all(np.isfinite(f_min)) and np.all(np.isfinite(f_max)):
+        # kept as received (a payload's read-only arrays, a message's sequences): the stage converts
+        # them only where the pose's capacity matters (HybridForceControl._limited), not every period
+        f_min, f_max = msg.f_min, msg.f_max
+        m = self.robot.m
+        if len(f_min) == m and len(f_max) == m and all_finite(f_min) and all_finite(f_max):
             self.limits = (f_min, f_max)
 
     def _on_hand_over(self, msg) -> None:
