@@ -39,7 +39,7 @@ PACKAGES = ("cdpr_control", "cdpr_sim", "cdpr_tools")
 
 # The child: the tree's own launcher (the API is the same since before the layout of Fig. 3.4).
 CHILD = r"""
-import json, os, random, sys, tempfile, threading, time
+import json, os, random, statistics, sys, tempfile, threading, time
 try:
     from cdpr_tools.file_lock import own_ros_domain
     _domain = own_ros_domain(random.randint(1, 100))
