@@ -4,14 +4,14 @@ On this shared two-core machine the speed of a run moves by 10-25 % between runs
 (docs/performance.md), so two trees measured one after the other differ by the machine as much as
 by the code. Here both trees' composed lockstep graphs (graphs/closed_loop.yaml, IPAnema 3 Mini
 holding home, the default plant) run *at the same time*, each in a process and ROS domain of its
-own, one core each: whatever the machine does to one it does to the other, and the ratio of their
-figures in a round is the comparison. A tree against itself (the default) gives the instrument's
+own, each pinned to a core of its own (the cores swap every round): whatever the machine does to
+one it does to the other, and the ratio of their figures in a round is the comparison. A tree against itself (the default) gives the instrument's
 own spread.
 
 Per tree and round: the real-time factor (simulated over wall time of the window), the process CPU
 per period, and the CPU of the executor's thread per period as the median over 50 ms slices of the
-window (the slices a burst of other work lands in drop out of a median). Which tree starts first
-alternates; a fresh worktree first runs one round that is not counted (numba compiles its kernels
+window (the slices a burst of other work lands in drop out of a median). Which tree starts first,
+and on which core, alternates; a fresh worktree first runs one round that is not counted (numba compiles its kernels
 into the tree's cache).
 
     .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--window S] [--record]
@@ -80,10 +80,13 @@ def worktree(ref: str, into: pathlib.Path) -> pathlib.Path:
     return into
 
 
-def start(tree: pathlib.Path, warmup: float, window: float, record: bool) -> subprocess.Popen:
+def start(tree: pathlib.Path, warmup: float, window: float, record: bool, cpu: int | None) -> subprocess.Popen:
+    """The child graph of ``tree``, its threads pinned to core ``cpu`` (None: anywhere)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(tree / p) for p in PACKAGES)}
+    pin = None if cpu is None else (lambda: os.sched_setaffinity(0, {cpu}))
     return subprocess.Popen([sys.executable, "-c", CHILD, str(warmup), str(window), "1" if record else "0"],
-                            cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=pin)
 
 
 def finish(process: subprocess.Popen, tree: pathlib.Path, timeout: float) -> dict:
@@ -94,10 +97,13 @@ def finish(process: subprocess.Popen, tree: pathlib.Path, timeout: float) -> dic
 
 
 def round_pair(trees: dict, warmup: float, window: float, record: bool, first: str) -> dict:
+    """Both graphs at once; ``first`` starts first and, on a machine of two or more cores, runs on core 0
+    and the other on core 1 (a core each, so that neither's threads wait for the other's)."""
     order = [first] + [name for name in trees if name != first]
+    cores = sorted(os.sched_getaffinity(0))
     processes = {}
-    for name in order:
-        processes[name] = start(trees[name], warmup, window, record)
+    for k, name in enumerate(order):
+        processes[name] = start(trees[name], warmup, window, record, cores[k] if len(cores) >= 2 else None)
     timeout = warmup + window + 180.0
     return {name: finish(processes[name], trees[name], timeout) for name in order}
 
