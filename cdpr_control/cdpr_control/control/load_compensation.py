@@ -771,8 +771,7 @@ class LoadCompensation:
             # x_d,LC off (force control): an identified settlement is still a known length error of
             # the cables, taken out here rather than by the OSPC's integral chasing its creep
             self.x_lc = np.zeros(6) if s is None else settlement_offset(ik, s, x_d[3:])
-            self.output_filter.reset(np.zeros(6))
-            self.rate_limited[:] = False
+            self.rate_limited[:] = False        # (the output filter stays at zero: set_params reset it)
             return self.x_lc.copy()
         if finite:
             try:
