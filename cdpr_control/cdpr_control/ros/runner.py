@@ -18,6 +18,7 @@ import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, ShutdownException, TimeoutException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.exceptions import InvalidHandle
+from rclpy.subscription import Subscription
 from rclpy.waitable import NumberOfEntities
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -84,7 +85,9 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
     timers = [t for node in nodes for t in node.timers]
     services = [s for node in nodes for s in node.services]
     clients = [c for node in nodes for c in node.clients]
-    guards = [g for node in nodes for g in node.guards]
+    # the executor's own guard condition too: triggered when a task it runs (an action's execute
+    # coroutine) can go on, or a node is added; the turn then runs it
+    guards = [g for node in nodes for g in node.guards] + [g for g in (getattr(executor, "_guard", None),) if g]
     waitables = [w for node in nodes for w in node.waitables]
     with contextlib.ExitStack() as stack:   # (each handle stays valid while it is in the wait set)
         def valid(entities: list, handle=lambda e: e.handle) -> list:
@@ -128,6 +131,9 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
                 g.trigger()         # (this wait took the trigger: the executor's turn must see it)
         for s in subscriptions:
             if s.handle.pointer in ready:
+                if getattr(s, "_callback_type", None) is not Subscription.CallbackType.MessageOnly:
+                    turn = True     # (a callback that takes the message info: the executor's way)
+                    continue
                 taken = s.handle.take_message(s.msg_type, s.raw)
                 if taken is not None:
                     s.callback(taken[0])
