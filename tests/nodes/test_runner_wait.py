@@ -13,19 +13,10 @@ from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
 
 from cdpr_control.ros import runner
-from cdpr_control.ros.qos import CONTROL
 from cdpr_tools.ros_graph import new_context
+from test_intraprocess import TIMEOUT, wait_for  # (the same folder's helpers)
 
-TIMEOUT = 20.0  # s for discovery and deliveries on a loaded machine
 DEEP = 1000
-
-
-def wait_for(condition, what: str, timeout: float = TIMEOUT) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what() if callable(what) else what}")
-        time.sleep(0.01)
 
 
 @pytest.fixture
