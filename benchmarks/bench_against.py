@@ -16,6 +16,10 @@ into the tree's cache).
 
     .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--window S] [--record]
 
+With ``--record`` each graph's bag writer (a child process) runs on its graph's core too, where
+``make bench`` (graph) lets it use the other core: the ratio compares the trees, the absolute figures
+are not those of bench_graph.py.
+
 REF is a git revision (default: ``CDPR_BENCH_AGAINST`` or HEAD), checked out in a temporary
 worktree; ``--record`` records every topic in both graphs. Writes bench/against.json
 (bench/against_recording.json with ``--record``).

@@ -444,8 +444,10 @@ class IntraProcessNode(Node):
     rclpy gives every publisher and subscription two by default (incompatible QoS, incompatible type)
     that log a warning; each is an entity every turn of a SingleThreadedExecutor waits on and checks
     against all the others (closed_loop.yaml: 221 of 388 entities; a turn between two slices of the
-    lockstep ring 3.2 -> 2.5 ms without the publishers'). The subscription's handler, kept, reports
-    the same mismatch ("New publisher discovered on topic ..., offering incompatible QoS").
+    lockstep ring 3.2 -> 2.5 ms without the publishers'). The subscription's handler reports the same
+    mismatch ("New publisher discovered on topic ..., offering incompatible QoS"); where the registry's
+    ``subscription_events`` is off (a composed lockstep launch) subscriptions have none either and the
+    registry reports local mismatches itself (IntraProcess._check_qos).
     """
 
     def _intra_process(self) -> IntraProcess | None:

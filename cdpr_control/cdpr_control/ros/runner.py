@@ -15,13 +15,13 @@ import threading
 from typing import Iterator
 
 import rclpy
-from rclpy.executors import Executor, ExternalShutdownException, ShutdownException, TimeoutException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.exceptions import InvalidHandle
+from rclpy.executors import Executor, ExternalShutdownException, ShutdownException, TimeoutException
+from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.waitable import NumberOfEntities
-from rclpy.experimental import EventsExecutor
-from rclpy.signals import SignalHandlerOptions
 
 from cdpr_control.ros.intraprocess import IntraProcess
 
@@ -30,7 +30,8 @@ SPIN_PERIOD = 0.1  # s: longest time between checks of the stop flag
 
 def spin(executor, stop: threading.Event | None = None) -> None:
     """Run callbacks until ``stop`` is set or the executor's context shuts down; in-process
-    deliveries left over by a chain that ran out of its time budget continue between events."""
+    deliveries left over by a chain that ran out of its time budget continue between events. With
+    nothing queued, an rclpy Executor's nodes wait for their next input in :func:`_wait`."""
     context = executor.context
     registry = IntraProcess.of(context)
     registry.owner = threading.get_ident()  # in-process deliveries from other threads wake this one
