@@ -17,7 +17,9 @@ so only figures of one run compare):
 - free-running at wall-clock 1 kHz (``sync_mode: latest``), composed and composed_dds: the
   simulator's step lateness against its schedule and the latency from publishing winch/state to
   receiving the winch/command of that stamp (p50/p99/max), and missed periods (a step without a
-  fresh command, or skipped because the loop fell behind).
+  fresh command, or skipped because the loop fell behind); ``free_running_two_processes``: the same
+  across the process boundary (simulator | controllers), the figures from the simulator's
+  /diagnostics reports (:func:`free_running_from_reports`).
 
 After a warm-up the real-time factor is the simulated time advanced over the wall time of a
 fixed window: composed, read from the simulator node in the process; otherwise a probe node in a
@@ -55,6 +57,8 @@ import sys
 import tempfile
 import threading
 import time
+
+import numpy as np
 
 # a ROS domain of its own, so other graphs on this machine do not feed the probe (set before rclpy)
 from cdpr_tools.file_lock import own_ros_domain  # noqa: E402
@@ -103,7 +107,8 @@ LOOP_TOPICS = ("/winch/state", "/winch/command", "/setpoint", "/cable_forces", "
                "/ground_truth/cable_forces", "/ground_truth/external_wrench")
 OUT = pathlib.Path(__file__).resolve().parents[1] / "bench" / "graph.json"
 TARGETS = {"composed_rtf_min": 3.0, "processes_rtf_min": 1.0, "recording_slowdown_max_pct": 10.0,
-           "free_running_missed_pct_max": 0.1, "free_running_latency_p99_us_max": 500.0}
+           "free_running_missed_pct_max": 0.1, "free_running_latency_p99_us_max": 500.0,
+           "two_processes_rtf_min": 1.5, "free_running_two_processes_latency_p99_us_max": 1000.0}
 
 
 class ClockProbe:
@@ -117,6 +122,7 @@ class ClockProbe:
         self._latest: tuple[float, int] | None = None  # (perf_counter at reception, sim time [ns])
         self.sim = None
         self.missed_deadlines: int | None = None      # the simulator's count, when it reported one
+        self.reports: list[dict] = []                 # the simulator's /diagnostics values, in order
         clock_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
         if clock:
             self.node.create_subscription(Clock, "/clock", self._on_clock, clock_qos)
@@ -142,6 +148,7 @@ class ClockProbe:
             if status.name == SIM_NODE:
                 values = {kv.key: kv.value for kv in status.values}
                 self.missed_deadlines = int(values.get("missed_deadlines", 0))
+                self.reports.append(values)
 
     def wait_running(self, timeout: float) -> None:
         """Until /clock has advanced past t = 0 (the lockstep loop runs)."""
@@ -213,7 +220,7 @@ def sim_node(launch):
 def start_part(select: list[str], arguments: dict) -> subprocess.Popen:
     """``cdpr launch closed_loop.yaml <select>`` composed, in a process of its own."""
     cmd = [sys.executable, "-c", "import sys; from cdpr_tools.cli import main; sys.exit(main(sys.argv[1:]))",
-           "launch", str(GRAPH), *select, *(f"{k}:={v}" for k, v in arguments.items())]
+           "launch", str(GRAPH), *(f"{k}:={v}" for k, v in arguments.items()), *select]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
     return subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -297,6 +304,7 @@ def measure_graph(mode: str, record: bool, intra_process: bool, program: str | N
                 if sim is not None:
                     counts0 = sim.missed_deadlines, sim.overruns, sim.sim.steps
                     samples0 = len(sim.step_lateness.run), len(sim.command_latency.run)
+                reports0 = len(probe.reports)     # (the split's free-running figures: the simulator's reports)
                 deliveries0 = registry.deliveries if registry is not None else None
                 cpu0 = time.process_time(), {k: process_cpu_s(pid) for k, pid in children.items()}
                 loadavg = os.getloadavg()[0]
@@ -314,6 +322,7 @@ def measure_graph(mode: str, record: bool, intra_process: bool, program: str | N
                     counts1 = sim.missed_deadlines, sim.overruns, sim.sim.steps
                     lateness = list(sim.step_lateness.run)[samples0[0]:]
                     latency = list(sim.command_latency.run)[samples0[1]:]
+                reports = probe.reports[reports0:] if split and sync_mode == "latest" else None
                 node_ns = node_periods = None
                 if mode == "composed" and program is None:   # then each node's share, timed (see above)
                     callbacks = CallbackCpu(composed, registry)
@@ -372,7 +381,39 @@ def measure_graph(mode: str, record: bool, intra_process: bool, program: str | N
             "step_lateness": DurationStats.summary(lateness),
             "latency_state_to_command": DurationStats.summary(latency),
         }
+    if reports is not None:
+        result["free_running"] = free_running_from_reports(reports)
     return result
+
+
+def free_running_from_reports(reports: list[dict]) -> dict:
+    """The free-running figures of a simulator in another process, from its /diagnostics reports of
+    the window (one a second: cumulative counts, and the step lateness and state -> command latency
+    of the second since the previous report). The percentiles are those of the worst second (the
+    reports carry no samples): p50 the median over the seconds, p99 and max their maxima."""
+    if len(reports) < 2:
+        raise RuntimeError(f"the simulator sent {len(reports)} reports in the window (need 2)")
+    first, last = reports[0], reports[-1]
+    count = lambda key: int(last[key]) - int(first[key])  # noqa: E731
+    steps, missed, overruns = count("steps"), count("missed_deadlines"), count("overruns")
+
+    def seconds(name: str) -> dict:
+        rows = [r for r in reports[1:] if r.get(f"{name}_count") not in (None, "", "0", 0)]
+        if not rows:
+            return {"p50_us": None, "p99_us": None, "max_us": None, "count": 0}
+        value = lambda r, k: float(r[f"{name}_{k}"])  # noqa: E731
+        return {"p50_us": float(np.median([value(r, "p50_us") for r in rows])),
+                "p99_us": max(value(r, "p99_us") for r in rows), "max_us": max(value(r, "max_us") for r in rows),
+                "count": sum(int(r[f"{name}_count"]) for r in rows), "of": "the worst second's (simulator's reports)"}
+    return {
+        "steps": steps,
+        "missed_periods": missed + overruns,
+        "missed_pct": 100.0 * (missed + overruns) / max(1, steps + overruns),
+        "steps_without_fresh_command": missed,
+        "periods_skipped_behind": overruns,
+        "step_lateness": seconds("step_lateness"),
+        "latency_state_to_command": seconds("command_latency"),
+    }
 
 
 FLOOR_CONFIGS = {  # the skeleton's configurations: name -> measure() arguments, in the order run
@@ -551,6 +592,7 @@ CONFIGS = {  # name -> measure() arguments, in the order run
     "composed_cuboid_recording": dict(mode="composed", program=PROGRAM, record=True),
     "free_running_dds": dict(mode="composed", intra_process=False, sync_mode="latest"),
     "free_running": dict(mode="composed", sync_mode="latest"),
+    "free_running_two_processes": dict(mode="composed", split=True, sync_mode="latest"),
 }
 RECORDING_PAIRS = {"composed": "composed_recording", "composed_dds": "composed_dds_recording",
                    "composed_messages": "composed_messages_recording",
@@ -578,7 +620,7 @@ def main() -> None:
         if args.only and name not in args.only:
             continue
         print(f"[bench_graph] {name} ...", flush=True)
-        w = free_window if name == "free_running" else window
+        w = free_window if name in ("free_running", "free_running_two_processes") else window
         try:
             configs[name] = bounded_measure(kwargs, w) if bounded(kwargs) else measure(**kwargs, window_s=w)
         except (TimeoutError, RuntimeError) as exc:   # recorded, and the other configurations still run

@@ -50,7 +50,22 @@ def parse_arguments(items: list[str]) -> dict[str, str]:
     return values
 
 
+def _arguments_after_selection(args) -> None:
+    """NAME:=VALUE items written after --only/--exclude (which take every word that follows) are
+    launch arguments, as ros2 launch takes them anywhere: a node pattern never holds ':='. A
+    selection left without a node is an error rather than the whole graph."""
+    for option in ("only", "exclude"):
+        items = getattr(args, option)
+        if items and any(":=" in item for item in items):
+            args.arguments += [item for item in items if ":=" in item]
+            patterns = [item for item in items if ":=" not in item]
+            if not patterns:
+                raise ValueError(f"--{option} names no node (only launch arguments NAME:=VALUE followed it)")
+            setattr(args, option, patterns)
+
+
 def run(args) -> int:
+    _arguments_after_selection(args)
     if not Path(args.file).is_file() and args.arguments and ":=" not in args.arguments[0]:
         args.file = str(find_launch_file(args.file, args.arguments.pop(0)))
     description = load_launch_file(args.file, parse_arguments(args.arguments))

@@ -46,12 +46,21 @@ timeout, periods, topics = float(sys.argv[1]), int(sys.argv[2]), json.loads(sys.
 context = new_context()
 node = Node("distributed_probe", context=context, start_parameter_services=False)
 stamps = {topic: [] for topic in topics}
+reports = []    # the simulator's /diagnostics values
+
+def on_diagnostics(m):
+    reports.extend(dict({kv.key: kv.value for kv in s.values}, message=s.message)
+                   for s in m.status if s.name == "/winch_platform_sim")
 
 def keeper(topic):
     return lambda m: stamps[topic].append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
 
 for topic, type_name in topics.items():
     node.create_subscription(message_class(type_name), topic, keeper(topic), CONTROL)
+if len(sys.argv) > 4 and sys.argv[4] == "diagnostics":
+    from cdpr_control.ros.qos import DIAGNOSTICS
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics", on_diagnostics,
+                             DIAGNOSTICS)
 executor = EventsExecutor(context=context)
 executor.add_node(node)
 stop = threading.Event()
@@ -62,7 +71,8 @@ while time.monotonic() < deadline and len(answered()) < periods:
     time.sleep(0.05)
 stop.set()
 time.sleep(0.3)
-print(json.dumps({"answered": sorted(answered()), "counts": {t: len(s) for t, s in stamps.items()}}), flush=True)
+print(json.dumps({"answered": sorted(answered()), "counts": {t: len(s) for t, s in stamps.items()},
+                  "reports": reports}), flush=True)
 """
 
 
@@ -78,8 +88,10 @@ def launch_part(*select: str, prefix=(), env=None) -> subprocess.Popen:
                             text=True, start_new_session=True)
 
 
-def probe(topics: dict, prefix=(), env=None) -> dict:
-    done = subprocess.run([*prefix, sys.executable, "-c", PROBE, str(STARTUP_S), str(PERIODS), json.dumps(topics)],
+def probe(topics: dict, prefix=(), env=None, diagnostics: bool = False) -> dict:
+    """``diagnostics``: also keep the simulator's /diagnostics values (``reports``)."""
+    done = subprocess.run([*prefix, sys.executable, "-c", PROBE, str(STARTUP_S), str(PERIODS), json.dumps(topics),
+                           *(["diagnostics"] if diagnostics else [])],
                           env=env or python_env(), capture_output=True, text=True, timeout=STARTUP_S + 60)
     assert done.returncode == 0, done.stderr[-2000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -169,12 +181,12 @@ def host_env(peer: str) -> dict:
                       FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
 
 
-def split_over_hosts(two_hosts):
+def split_over_hosts(two_hosts, *arguments: str):
     """The simulator on host A, the controllers on host B: (sim, controllers, prefix and env on A)."""
     (host_a, address_a), (host_b, address_b) = two_hosts
     in_a, in_b = ("ip", "netns", "exec", host_a), ("ip", "netns", "exec", host_b)
-    sim = launch_part("--only", "winch_platform_sim", prefix=in_a, env=host_env(address_b))
-    controllers = launch_part("--exclude", "winch_platform_sim", prefix=in_b, env=host_env(address_a))
+    sim = launch_part(*arguments, "--only", "winch_platform_sim", prefix=in_a, env=host_env(address_b))
+    controllers = launch_part(*arguments, "--exclude", "winch_platform_sim", prefix=in_b, env=host_env(address_a))
     return sim, controllers, in_a, host_env(address_b)
 
 
@@ -186,3 +198,22 @@ def test_simulator_and_controllers_on_two_hosts_joined_by_a_veth_pair(two_hosts)
     finally:
         log = stop(sim, controllers)
     check_loop_closed(result, log)
+
+
+def test_free_running_across_two_hosts_reports_its_latency_and_missed_periods(two_hosts):
+    """Free-running at wall-clock 1 kHz (sync_mode latest) across the veth pair: winch states are
+    answered by commands with their stamps, and the simulator reports on /diagnostics, for each
+    second, the latency from a winch state to its command and the periods it missed. (The figures
+    themselves depend on the machine's load: bench_graph.py's free_running_two_processes measures them.)"""
+    sim, controllers, in_a, env_a = split_over_hosts(two_hosts, "sync_mode:=latest")
+    try:
+        result = probe({t: LOOP_TOPICS[t] for t in ("/winch/state", "/winch/command")}, prefix=in_a, env=env_a,
+                       diagnostics=True)
+    finally:
+        log = stop(sim, controllers)
+    answered = result["answered"]
+    assert len(answered) >= PERIODS, f"only {len(answered)} periods answered; launch output:\n{log[-3000:]}"
+    timed = [r for r in result["reports"] if r.get("command_latency_count") not in (None, "", "0")]
+    assert timed, f"no simulator report with a state -> command latency: {result['reports'][-3:]}"
+    assert all(r["message"].startswith("free running") and "missed_deadlines" in r and "overruns" in r
+               and float(r["command_latency_p99_us"]) > 0.0 for r in timed)

@@ -152,6 +152,23 @@ def test_cdpr_launch_finds_a_file_in_a_package_share_and_shows_it():
     assert all(n["parameters"][0].endswith("params/ipanema3.yaml") for n in shown["nodes"])
 
 
+def test_launch_arguments_after_only_are_launch_arguments():
+    """``cdpr launch FILE --only NODE NAME:=VALUE``: --only takes every word that follows, and an argument
+    written after it ran the simulator in lockstep while the rest ran free (sync_mode:=latest lost)."""
+    run = subprocess.run([sys.executable, "-m", "cdpr_tools.cli", "launch", "cdpr_tools", "closed_loop.yaml",
+                          "--only", "winch_platform_sim", "sync_mode:=latest", "robot:=ipanema3", "--show"],
+                         capture_output=True, text=True, env=subprocess_env(), timeout=60)
+    assert run.returncode == 0, run.stderr
+    shown = yaml.safe_load(run.stdout)
+    assert shown["parameters"]["sync_mode"] == "latest"
+    assert [n["module"] for n in shown["nodes"]] == ["cdpr_sim.nodes.winch_platform_sim"]
+    assert shown["nodes"][0]["parameters"][0].endswith("params/ipanema3.yaml")
+    alone = subprocess.run([sys.executable, "-m", "cdpr_tools.cli", "launch", "cdpr_tools", "closed_loop.yaml",
+                            "--exclude", "sync_mode:=latest", "--show"],
+                           capture_output=True, text=True, env=subprocess_env(), timeout=60)
+    assert alone.returncode != 0 and "--exclude names no node" in alone.stderr + alone.stdout
+
+
 @pytest.mark.parametrize("change, message", [
     (lambda t: t + "  - include: {file: other.launch.yaml}\n", r"launch\[5\]: 'include' is not supported by cdpr launch"),
     (lambda t: t.replace("on_exit: shutdown", "respawn: true"), r"launch\[4\] \(node\): 'respawn' is not supported"),

@@ -14,7 +14,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
-from cdpr_control.ros.intraprocess import IntraProcess, IntraProcessNode, IntraProcessPublisher
+from cdpr_control.ros.intraprocess import MATCH_POLL_S, IntraProcess, IntraProcessNode, IntraProcessPublisher
 from cdpr_control.ros.qos import CONTROL, STATUS
 from cdpr_control.ros.runner import spin
 from cdpr_tools.ros_graph import new_context
@@ -125,11 +125,44 @@ def test_nothing_goes_over_dds_without_a_subscriber_outside_the_process(spaces):
         outside.node("ipc_listener", cls=Node).create_subscription(Int64, "/ipc_alone/n", remote.append, CONTROL)
         outside.start()
         wait_for(lambda: publisher.get_subscription_count() == 2, "the outside subscription to match")
+        time.sleep(MATCH_POLL_S)            # (the publisher's count of DDS subscriptions is that old at most)
         publisher.publish(Int64(data=50))
         assert ours() == 1
     wait_for(lambda: remote, "the message over DDS")
     assert [m.data for m in remote] == [50]
     assert [m.data for m in local] == list(range(51))
+
+
+def test_a_publisher_asks_dds_for_its_subscriptions_at_most_every_poll(spaces):
+    """Whether to write to DDS too: rcl's count of matched subscriptions is asked at most every
+    MATCH_POLL_S (17 topics a period asked it at every publication), and again at once when the local
+    subscriptions change."""
+    graph = spaces()
+    node = graph.node("ipc_poll")
+    publisher = node.create_publisher(Int64, "/ipc_poll/n", CONTROL)
+    node.create_subscription(Int64, "/ipc_poll/n", lambda msg: None, CONTROL)
+    real, asked = publisher._Publisher__publisher, []
+
+    class Counting:                     # rcl's publisher, its count calls noted
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        def get_subscription_count(self):
+            asked.append(time.monotonic())
+            return real.get_subscription_count()
+    publisher._Publisher__publisher = Counting()
+    try:
+        start = time.monotonic()
+        for k in range(300):
+            publisher.publish(Int64(data=k))
+        elapsed = time.monotonic() - start
+        assert 1 <= len(asked) <= elapsed / MATCH_POLL_S + 1
+        node.create_subscription(Int64, "/ipc_poll/n", lambda msg: None, CONTROL)
+        before = len(asked)
+        publisher.publish(Int64(data=300))
+        assert len(asked) == before + 1     # the local subscriptions changed: asked again
+    finally:
+        publisher._Publisher__publisher = real
 
 
 def test_local_and_remote_publishers_on_one_topic_reach_a_local_subscriber_once_each(spaces):

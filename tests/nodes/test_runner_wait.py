@@ -1,6 +1,6 @@
-"""runner.spin's wait on a SingleThreadedExecutor (runner._wait): DDS messages are dispatched without
-the executor's turn; timers, services, callbacks that take the message info and the executor's
-tasks still get it."""
+"""runner.spin's wait on a SingleThreadedExecutor (runner._wait): DDS messages and plain timer callbacks
+are dispatched without the executor's turn; services, coroutine timers, callbacks that take the message
+info and the executor's tasks still get it."""
 from __future__ import annotations
 
 import threading
@@ -8,6 +8,7 @@ import time
 
 import pytest
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.task import Future
 from rclpy.node import Node
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
@@ -64,10 +65,26 @@ def test_messages_are_dispatched_without_the_executors_turn(spun):
     assert len(turns) > before           # the executor's way for a callback that takes the info
 
 
-def test_timers_services_and_tasks_get_the_executors_turn(spun):
+def test_timers_run_without_the_executors_turn(spun):
+    """Between two slices of a lockstep ring and while waiting, a plain timer callback is called here:
+    the watch timers of the nodes' stamp syncs expire every slice and made every slice a turn."""
     node, other, executor, thread, turns = spun
     ticks = []
     node.create_timer(0.01, lambda: ticks.append(1))
+    thread.start()
+    wait_for(lambda: len(ticks) >= 3, lambda: f"the timer to tick 3 times, ticked {len(ticks)}")
+    before, ticked = len(turns), len(ticks)
+    wait_for(lambda: len(ticks) >= ticked + 10, lambda: f"the timer to tick 10 times more, ticked {len(ticks) - ticked}")
+    assert len(turns) == before
+
+
+def test_services_coroutine_timers_and_tasks_get_the_executors_turn(spun):
+    node, other, executor, thread, turns = spun
+    ticks = []
+
+    async def tick():
+        ticks.append(1)
+    node.create_timer(0.01, tick)
     node.create_service(Trigger, "/wait/trigger", lambda request, response: (
         setattr(response, "success", True), response)[1])
     done = []
@@ -75,7 +92,7 @@ def test_timers_services_and_tasks_get_the_executors_turn(spun):
     async def task():
         done.append(1)
     thread.start()
-    wait_for(lambda: len(ticks) >= 5, lambda: f"the timer to tick 5 times, ticked {len(ticks)}")
+    wait_for(lambda: len(ticks) >= 5, lambda: f"the coroutine timer to tick 5 times, ticked {len(ticks)}")
     client = other.create_client(Trigger, "/wait/trigger")
     assert client.wait_for_service(timeout_sec=TIMEOUT)
     future = client.call_async(Trigger.Request())
@@ -85,3 +102,22 @@ def test_timers_services_and_tasks_get_the_executors_turn(spun):
     assert future.done() and future.result().success
     executor.create_task(task)           # wakes the executor's guard condition
     wait_for(lambda: done, "the task to run")
+
+
+def test_a_task_in_progress_is_polled(spun):
+    """A task that awaits a future (an action's execute coroutine awaiting its program) goes on only
+    when a turn of the executor polls it: setting the future triggers nothing. The lockstep ring's
+    slices and the timers that expire meanwhile must not leave it waiting (a program's result never
+    reached its client)."""
+    node, other, executor, thread, turns = spun
+    ticks, done = [], []
+    node.create_timer(0.01, lambda: ticks.append(1))
+    result = Future()
+
+    async def execute():
+        done.append(await result)
+    thread.start()
+    executor.create_task(execute)
+    wait_for(lambda: len(ticks) >= 3, lambda: f"the timer to tick 3 times, ticked {len(ticks)}")
+    result.set_result("finished")       # (from this thread, without an executor: no guard is triggered)
+    wait_for(lambda: done == ["finished"], "the task to finish")

@@ -123,3 +123,28 @@ def test_a_second_older_stream_on_an_input_never_takes_turns_with_the_real_one(l
     assert all(b_value == 1.0 for _, _, b_value in runs)
     assert node.stale == []
     assert all("behind the clock" in reason for _, reason in node.faults) and len(node.faults) == 199
+
+
+@pytest.mark.parametrize("mode", ["exact", "latest"])
+def test_an_input_turns_stale_in_the_first_period_past_its_deadline(mode):
+    """The deadlines are looked at only once an input could have passed its own (StampSync._calm_until):
+    an input that stops is still reported stale in the first period more than input_deadline periods
+    after its last stamp, each later period ticks on_stale, and its next message makes it fresh."""
+    node = FakeNode(sim_time=False)
+    ticks = []
+    sync = StampSync(node, {"a": (JointState, "a"), "b": (JointState, "b")}, "a", lambda bucket, t: None,
+                     mode=mode, on_stale=ticks.append)
+    for k in range(1, 31):                  # both inputs, periods 1..30
+        node.receivers["a"](state(k * PERIOD)), node.receivers["b"](state(k * PERIOD))
+    for k in range(31, 81):                 # b stops: 50 periods within the deadline
+        node.receivers["a"](state(k * PERIOD))
+        assert sync.stale == () and node.stale == []
+    node.receivers["a"](state(81 * PERIOD))     # 51 periods after b's last stamp
+    assert sync.stale == ("b",) and node.stale == [{"b": 51.0}] and ticks == [81 * PERIOD]
+    node.receivers["a"](state(82 * PERIOD))
+    assert ticks == [81 * PERIOD, 82 * PERIOD]
+    node.receivers["b"](state(82 * PERIOD))     # b is back
+    assert sync.stale == () and node.stale[-1] == {}
+    for k in range(83, 140):                # fresh again: stale again only past the new deadline
+        node.receivers["a"](state(k * PERIOD))
+    assert sync.stale == ("b",) and node.stale[-1] == {"b": 51.0}

@@ -1078,10 +1078,15 @@ class HybridForceStage:
     def k_t(self) -> float:
         return self.control.k_contact or self.control.params.K_p
 
+    @property
+    def takes_over(self) -> bool:
+        """Whether :meth:`take_over` acts in this state (D and R): a caller may skip computing F_a."""
+        return self.control.state in (CONTACT, RELEASE)
+
     def take_over(self, F_a: float) -> None:
         """F_a [N] along z_t from the cable force controller's integral part (taken in D and R only,
         :meth:`HybridForceControl.absorb`)."""
-        if self.control.state in (CONTACT, RELEASE):
+        if self.takes_over:
             self.control.absorb(F_a / self.k_t)
 
     def update(self, F_d0, w, cfc_on: bool, x_d=None, limits=None) -> tuple[HPFCState, np.ndarray]:

@@ -167,7 +167,8 @@ class HybridForceControllerNode(CdprNode):
         later = []
         for msg in self.hand_overs:        # in lockstep the one of period k - 1; each taken once
             if stamp_ns(msg) < t_ns:
-                stage.take_over(float(z_t @ np.asarray(msg.output[:3], dtype=float)))
+                if stage.takes_over:       # (F_a only where it is taken: not in most periods)
+                    stage.take_over(float(z_t @ np.asarray(msg.output[:3], dtype=float)))
             else:
                 later.append(msg)
         self.hand_overs = later

@@ -10,6 +10,7 @@ the project spins with :func:`spin`, which also gives it a stop flag and lets Ct
 from __future__ import annotations
 
 import contextlib
+import inspect
 import signal
 import threading
 from typing import Iterator
@@ -30,8 +31,9 @@ SPIN_PERIOD = 0.1  # s: longest time between checks of the stop flag
 
 def spin(executor, stop: threading.Event | None = None) -> None:
     """Run callbacks until ``stop`` is set or the executor's context shuts down; in-process
-    deliveries left over by a chain that ran out of its time budget continue between events. With
-    nothing queued, an rclpy Executor's nodes wait for their next input in :func:`_wait`."""
+    deliveries left over by a chain that ran out of its time budget continue between events. An
+    rclpy Executor's nodes wait for their next input in :func:`_wait` (without waiting where a chain
+    is queued: between two of its slices)."""
     context = executor.context
     registry = IntraProcess.of(context)
     registry.owner = threading.get_ident()  # in-process deliveries from other threads wake this one
@@ -40,10 +42,8 @@ def spin(executor, stop: threading.Event | None = None) -> None:
         while context.ok() and not (stop is not None and stop.is_set()):
             try:
                 pending = registry.pending()
-                if pending and isinstance(executor, Executor):
-                    _run_ready(executor)
-                elif isinstance(executor, Executor):
-                    _wait(executor, SPIN_PERIOD)
+                if isinstance(executor, Executor):
+                    _wait(executor, 0.0 if pending else SPIN_PERIOD)
                 else:
                     executor.spin_once(timeout_sec=0.0 if pending else SPIN_PERIOD)
             except ExternalShutdownException:
@@ -71,15 +71,18 @@ def _run_ready(executor: Executor) -> None:
 
 def _wait(executor: Executor, timeout_sec: float) -> None:
     """Wait up to ``timeout_sec`` for the next input of ``executor``'s nodes and run it: DDS messages are
-    taken and handed to their subscriptions' callbacks here; a ready timer, service, client, guard
-    condition or waitable (an action server) gets a turn of the executor, which finds it ready again.
+    taken and handed to their subscriptions' callbacks, and expired timers' plain callbacks called,
+    here; a ready service, client, guard condition or waitable (an action server), a coroutine timer,
+    a callback that takes the message info, or a task in progress (an action's execute coroutine,
+    which only a turn polls) gets a turn of the executor, which finds them ready again.
 
     A turn of a SingleThreadedExecutor builds its wait set in Python over every entity of every node
-    (1.7-2.4 ms for closed_loop.yaml's nodes, docs/performance.md), and a composed lockstep graph fed
-    over DDS (its simulator or drives in another process) waits so for every period's winch state:
-    this wait adds the entities' handles to an rcl wait set directly and dispatches the messages it
-    finds, where the executor would run one callback a turn. (rclpy 7.1 has no per-entity ready
-    callbacks outside its EventsExecutor, whose timers starve beside a lockstep ring.)
+    and dispatches each ready callback through a task (1.5-2.4 ms for closed_loop.yaml's nodes,
+    docs/performance.md). A composed lockstep graph waits so between every two 50 ms slices of its
+    ring (where its nodes' stamp-sync watch timers have expired), and for every period's winch state
+    where it is fed over DDS (its simulator or drives in another process): this wait adds the
+    entities' handles to an rcl wait set directly. (rclpy 7.1 has no per-entity ready callbacks
+    outside its EventsExecutor, whose timers starve beside a lockstep ring.)
     """
     nodes = executor.get_nodes()
     subscriptions = [s for node in nodes for s in node.subscriptions]
@@ -90,16 +93,20 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
     # coroutine) can go on, or a node is added; the turn then runs it
     guards = [g for node in nodes for g in node.guards] + [g for g in (getattr(executor, "_guard", None),) if g]
     waitables = [w for node in nodes for w in node.waitables]
-    with contextlib.ExitStack() as stack:   # (each handle stays valid while it is in the wait set)
-        def valid(entities: list, handle=lambda e: e.handle) -> list:
-            kept = []
-            for entity in entities:
-                try:
-                    stack.enter_context(handle(entity))
-                except InvalidHandle:       # destroyed meanwhile (as the executor skips it)
-                    continue
-                kept.append(entity)
-            return kept
+    entered = []                            # (each handle stays valid while it is in the wait set)
+
+    def valid(entities: list, handle=lambda e: e.handle) -> list:
+        kept = []
+        for entity in entities:
+            h = handle(entity)
+            try:
+                h.__enter__()               # (contextlib's ExitStack took a quarter of this wait)
+            except InvalidHandle:           # destroyed meanwhile (as the executor skips it)
+                continue
+            entered.append(h)
+            kept.append(entity)
+        return kept
+    try:
         subscriptions, timers, services, clients, guards = (valid(e) for e in (subscriptions, timers, services,
                                                                                 clients, guards))
         waitables = valid(waitables, lambda w: w)
@@ -107,7 +114,8 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
         for waitable in waitables:
             n += waitable.get_num_entities()
         context = executor.context.handle
-        stack.enter_context(context)
+        context.__enter__()
+        entered.append(context)
         wait_set = _rclpy.WaitSet(n.num_subscriptions, n.num_guard_conditions, n.num_timers, n.num_clients,
                                   n.num_services, n.num_events, context)
         for s in subscriptions:
@@ -125,11 +133,23 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
         wait_set.wait(int(timeout_sec * 1e9))
         ready = set(wait_set.get_ready_entities("subscription"))
         triggered = set(wait_set.get_ready_entities("guard_condition"))
-        turn = bool(triggered or wait_set.get_ready_entities("timer") or wait_set.get_ready_entities("service")
-                    or wait_set.get_ready_entities("client") or any(w.is_ready(wait_set) for w in waitables))
+        expired = set(wait_set.get_ready_entities("timer"))
+        # tasks in progress (an action's execute coroutine) are polled by each turn of the executor
+        turn = bool(triggered or wait_set.get_ready_entities("service") or wait_set.get_ready_entities("client")
+                    or any(w.is_ready(wait_set) for w in waitables) or getattr(executor, "_tasks", None))
         for g in guards:
             if g.handle.pointer in triggered:
                 g.trigger()         # (this wait took the trigger: the executor's turn must see it)
+        for t in timers:
+            if t.handle.pointer in expired and t.handle.is_timer_ready():   # (rcl: a cancelled timer may be in it)
+                if inspect.iscoroutinefunction(t.callback) or not t.callback_group.beginning_execution(t):
+                    turn = True     # (a coroutine, or a group that cannot run it now: the executor's way)
+                    continue
+                try:
+                    t.handle.call_timer()
+                    t.callback()
+                finally:
+                    t.callback_group.ending_execution(t)
         for s in subscriptions:
             if s.handle.pointer in ready:
                 if getattr(s, "_callback_type", None) is not Subscription.CallbackType.MessageOnly:
@@ -138,6 +158,9 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
                 taken = s.handle.take_message(s.msg_type, s.raw)
                 if taken is not None:
                     s.callback(taken[0])
+    finally:
+        for h in reversed(entered):
+            h.__exit__(None, None, None)
     if turn:
         _run_ready(executor)
 
