@@ -100,7 +100,7 @@ def _wait(executor: Executor, timeout_sec: float) -> None:
         for entity in entities:
             h = handle(entity)
             try:
-                h.__enter__()               # (contextlib's ExitStack took a quarter of this wait)
+                h.__enter__()               # (directly: through contextlib's ExitStack, a quarter of this wait)
             except InvalidHandle:           # destroyed meanwhile (as the executor skips it)
                 continue
             entered.append(h)
