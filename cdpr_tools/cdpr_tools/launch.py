@@ -184,8 +184,12 @@ class Launcher:
     ...     launch.wait()            # until Ctrl-C, stop(), or the graph ends by itself
     """
 
-    def __init__(self, description: LaunchDescription, mode: str | None = None, intra_process: bool = True):
+    def __init__(self, description: LaunchDescription, mode: str | None = None, intra_process: bool = True,
+                 stop_timeout: float = STOP_TIMEOUT):
         self.description = description
+        # s a child may take to exit after SIGINT (ros2 launch's sigterm_timeout): a loaded machine
+        # may need more than the default for a child that still builds its node or exits its interpreter
+        self.stop_timeout = stop_timeout
         self.intra_process = intra_process  # composed: in-process delivery (False: DDS only, the old transport)
         self.mode = mode or description.mode
         if self.mode not in MODES:
@@ -195,6 +199,9 @@ class Launcher:
         self.recorder: BagRecorder | None = None
         self.errors: list[str] = []
         self._stop = threading.Event()
+        # a recorder of its own spins until the graph's processes have ended: what they publish while
+        # stopping is recorded too
+        self._recorder_stop = threading.Event()
         self._done = threading.Event()
         self._threads: list[threading.Thread] = []
         self._contexts: list[Context] = []
@@ -290,7 +297,8 @@ class Launcher:
             return
         executor = EventsExecutor(context=context)
         executor.add_node(self.recorder)
-        self._threads.append(threading.Thread(target=self._run_executor, args=(executor, "recorder"),
+        self._threads.append(threading.Thread(target=self._run_executor,
+                                              args=(executor, "recorder", self._recorder_stop),
                                               name="cdpr-launch-recorder", daemon=True))
 
     def _hold_until_recorded(self, timeout: float = RECORDER_TIMEOUT) -> None:
@@ -319,9 +327,9 @@ class Launcher:
         self._contexts.append(context)
         return context
 
-    def _run_executor(self, executor, what: str) -> None:
+    def _run_executor(self, executor, what: str, stop: threading.Event | None = None) -> None:
         try:
-            spin(executor, self._stop)
+            spin(executor, stop or self._stop)
         except Exception as exc:  # a callback raised: report it and end the launch
             self._print(what, traceback.format_exc().rstrip())
             self.errors.append(f"{what}: {type(exc).__name__}: {exc}")
@@ -350,8 +358,10 @@ class Launcher:
         """Block until the graph ends by itself or :meth:`stop` is called; False on timeout."""
         return self._done.wait(timeout)
 
-    def stop(self, timeout: float = STOP_TIMEOUT) -> None:
-        """Stop everything cleanly (idempotent); children that ignore SIGINT get SIGTERM, then SIGKILL."""
+    def stop(self, timeout: float | None = None) -> None:
+        """Stop everything cleanly (idempotent); children that ignore SIGINT for ``timeout`` (default:
+        ``stop_timeout``) get SIGTERM, then SIGKILL."""
+        timeout = self.stop_timeout if timeout is None else timeout
         if self._stopped:
             return
         self._stopped = True
@@ -367,6 +377,7 @@ class Launcher:
                     self._print(label, f"did not stop within {timeout:g} s, sending {sig.name}")
                     _signal(process, sig)
             timeout = 3.0
+        self._recorder_stop.set()
         executors = {t.name: t for t in self._threads if t.name in ("cdpr-launch-graph", "cdpr-launch-recorder")}
         for thread in self._threads:
             if thread.is_alive():

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import yaml
 
-from cdpr_tools.launch import MODES, Launcher, RecordSpec, select_nodes
+from cdpr_control.analysis.arguments import positive
+from cdpr_tools.launch import MODES, STOP_TIMEOUT, Launcher, RecordSpec, select_nodes
 from cdpr_tools.launch_file import find_launch_file, load_launch_file
 from cdpr_control.ros.runner import stop_on_signals
 
@@ -36,6 +37,9 @@ def add_parser(sub) -> None:
     p.add_argument("--exclude", nargs="+", metavar="NODE", help="start every node but these")
     p.add_argument("--no-intra-process", dest="intra_process", action="store_false",
                    help="composed: deliver every message over DDS, as between processes (for comparison)")
+    p.add_argument("--stop-timeout", type=positive, default=STOP_TIMEOUT, metavar="S",
+                   help=f"seconds a process may take to exit after Ctrl-C before it gets SIGTERM (default {STOP_TIMEOUT:g}; "
+                        "ros2 launch's sigterm_timeout)")
     p.add_argument("--show", action="store_true", help="print the resolved launch description, start nothing")
     p.set_defaults(run=run)
 
@@ -79,7 +83,7 @@ def run(args) -> int:
     mode = args.mode or description.mode
     if args.show:
         return show(description, mode)
-    launcher = Launcher(description, mode, intra_process=args.intra_process)
+    launcher = Launcher(description, mode, intra_process=args.intra_process, stop_timeout=args.stop_timeout)
     with stop_on_signals(threading.Event()) as stop:  # SIGINT and SIGTERM stop cleanly, also while stopping
         try:
             launcher.start()

@@ -158,7 +158,8 @@ class FaultGraph(Recording):
         self.collector = self.spinner.add(Collector, topics=TOPICS, qos=QoSProfile(depth=10000))
         self.probe = self.spinner.add(Node, node_name="fault_probe")
         self.publishers: dict = {}
-        self.launcher = Launcher(description, mode=mode)
+        # (one process per node: a loaded machine may take more than the default 10 s to stop one)
+        self.launcher = Launcher(description, mode=mode, stop_timeout=120.0)
         try:
             self.launcher.start()
             self.wait_running()

@@ -21,6 +21,7 @@ class SlowStop(Node):
     def tick(self) -> None:
         self.timer.cancel()
         self.blocking.set()
+        print("slow_stop: pausing", flush=True)     # (one process per node: the launcher prints it)
         time.sleep(self.pause)
         self.publisher.publish(String(data=self.get_fully_qualified_name()))
         self.finished.set()

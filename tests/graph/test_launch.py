@@ -14,6 +14,10 @@ from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, RecordSpec,
 from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.share import package_share
 
+# s a child may take to exit after SIGINT: under a load of about 6 on two cores a node still being
+# built, or exiting its interpreter, took more than the launcher's default 10 s (CI, session 20)
+STOPPING = 120.0
+
 GRAPH = """
 launch:
   - arg: {{name: rate, default: "100.0"}}
@@ -211,7 +215,7 @@ def test_composed_graph_runs_in_process_and_records(tmp_path, listen):
 
 def test_processes_graph_runs_and_stops_cleanly(tmp_path, listen, capfd):
     collector = listen.add(Collector, topics={"/proc/heard": Int32})
-    launcher = Launcher(load_recorded(tmp_path, "processes", "/proc"), mode="processes")
+    launcher = Launcher(load_recorded(tmp_path, "processes", "/proc"), mode="processes", stop_timeout=STOPPING)
     output: list[str] = []
     with launcher:
         assert set(launcher.processes) == {"proc/talker_x", "proc/listener"}
@@ -231,7 +235,8 @@ def test_cdpr_launch_stops_cleanly_on_sigint(tmp_path, listen, mode):
     ns = f"/sig_{mode}"
     collector = listen.add(Collector, topics={f"{ns}/heard": Int32})
     launch = subprocess.Popen([sys.executable, "-m", "cdpr_tools.cli", "launch", str(write_graph(tmp_path, mode, ns)),
-                               "--mode", mode, "--record", str(tmp_path / f"{mode}_bag")],
+                               "--mode", mode, "--record", str(tmp_path / f"{mode}_bag"),
+                               "--stop-timeout", str(STOPPING)],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=subprocess_env())
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(launch.stdout), daemon=True)
@@ -245,7 +250,7 @@ def test_cdpr_launch_stops_cleanly_on_sigint(tmp_path, listen, mode):
         start = collector.count(f"{ns}/heard")
         wait_for(lambda: collector.count(f"{ns}/heard") >= start + 5, timeout=30, what=f"the {mode} graph")
         launch.send_signal(signal.SIGINT)
-        assert launch.wait(30) == 0, "".join(lines)
+        assert launch.wait(STOPPING + 60) == 0, "".join(lines)
     finally:
         if launch.poll() is None:
             launch.kill()
@@ -297,12 +302,13 @@ def test_the_shipped_graph_runs_in_both_modes(listen, mode, sync_mode):
     from sensor_msgs.msg import JointState
     from visualization_msgs.msg import MarkerArray
 
-    collector = listen.add(Collector, topics={"/winch/state": JointState, "/visualization/markers": MarkerArray})
+    collector = listen.add(Collector, topics={"/winch/state": JointState, "/winch/command": JointState,
+                                              "/visualization/markers": MarkerArray})
     description = load_launch_file(package_share("cdpr_tools") / "graphs" / "closed_loop.yaml",
                                    {"sync_mode": sync_mode})
-    with Launcher(description, mode=mode) as launcher:
-        wait_for(lambda: collector.count("/winch/state") > 200 and collector.count("/visualization/markers") > 2,
-                 timeout=120, what=f"the {mode} graph to loop and draw")
+    with Launcher(description, mode=mode, stop_timeout=STOPPING) as launcher:
+        wait_for(lambda: collector.count("/winch/state") > 200 and collector.count("/winch/command") > 200
+                 and collector.count("/visualization/markers") > 2, timeout=120, what=f"the {mode} graph to loop and draw")
         assert not launcher.wait(0)  # still running
         if mode == "composed":  # a wait set rebuilt every turn (lockstep) holds no QoS event handlers
             handlers = sum(isinstance(w, EventHandler) for node in launcher.nodes for w in node.waitables)

@@ -204,6 +204,38 @@ def test_composed_recorder_takes_message_objects(tmp_path):
     check_readers(tmp_path / "run", 300)
 
 
+def test_a_recorder_stopped_behind_its_publishers_records_what_dds_holds_for_it(tmp_path):
+    """A recorder in another process (here another context: another DDS participant) that no executor
+    spins any more - on a loaded machine its thread lags - still records, when it is destroyed, the
+    messages DDS delivered to it. (CI: a launch of two processes recorded 0 of 287 messages of a
+    topic whose writer had matched the recorder: its thread had not run since.)"""
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    talker_context, recorder_context = new_context(), new_context()
+    try:
+        node = IntraProcessNode("talker", context=talker_context)
+        pub = node.create_publisher(JointState, "/waiting", QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        recorder = BagRecorder(context=recorder_context, parameter_overrides=[
+            Parameter("output", value=str(tmp_path / "run")), Parameter("topics", value=["/waiting"])])
+        deadline = time.monotonic() + 60
+        while not recorder.recorded_topics or pub.get_subscription_count() == 0:   # DDS discovery, both ways
+            assert time.monotonic() < deadline, "the recorder did not discover and match /waiting"
+            recorder.selection.discover()
+            time.sleep(0.01)
+        sent = [joints(k) for k in range(50)]
+        for msg in sent:
+            pub.publish(msg)
+        assert pub.wait_for_all_acked(Duration(seconds=60))    # in the recorder's reader history
+        assert recorder.writer.message_count == 0              # nothing spun it
+        recorder.destroy_node()
+        node.destroy_node()
+    finally:
+        talker_context.try_shutdown()
+        recorder_context.try_shutdown()
+    assert [m.msg for m in BagReader(tmp_path / "run").messages()] == sent
+
+
 def test_bags_are_zstd_compressed_by_default_and_every_reader_reads_them(tmp_path):
     """The writer process compresses each chunk with zstd unless told otherwise (issue 27: 982 MiB
     for 174 s of the loop uncompressed); mcap, mcap_ros2, rosbags and the project's reader read it."""

@@ -125,8 +125,24 @@ class BagRecorder(IntraProcessNode):
     def recorded_topics(self) -> list[str]:
         return sorted(self._recording)
 
+    def take_waiting(self) -> int:
+        """Record the messages DDS holds for this recorder that no executor took (count returned).
+
+        Call it once nothing spins the recorder any more: on a loaded machine its thread may lag the
+        publishers by many messages when a launch stops, and they would be lost with the
+        subscriptions. Each subscription's history holds up to ``queue_depth`` of them, in order."""
+        count = 0
+        for subscription in self._recording.values():
+            with subscription.handle:
+                while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)) is not None:
+                    subscription.callback(taken[0])
+                    count += 1
+        return count
+
     def destroy_node(self) -> None:
-        """Stop subscribing, then close the bag (summary, metadata.yaml) and wait for the writer."""
+        """Record what is still waiting, stop subscribing, then close the bag (summary,
+        metadata.yaml) and wait for the writer. Call it once nothing spins the recorder."""
+        self.take_waiting()
         for subscription in self._recording.values():
             self.destroy_subscription(subscription)
         self._recording.clear()
