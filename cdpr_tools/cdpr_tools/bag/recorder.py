@@ -65,6 +65,7 @@ class BagRecorder(IntraProcessNode):
                                        max_bag_size=self.get_parameter("max_bag_size").value,
                                        max_bag_duration=self.get_parameter("max_bag_duration").value)
         self._recording: dict[str, object] = {}  # topic -> subscription
+        self._from_dds: dict[str, object] = {}   # topic -> on_message, for topics only DDS brings (take_waiting)
         self._failure_logged = False
         self.selection = TopicSelection(self, "record", DISCOVERY_PERIOD, self._subscribe)
         # (steady clock: with use_sim_time the node's clock stands while the graph does)
@@ -106,6 +107,8 @@ class BagRecorder(IntraProcessNode):
             raw = True
         self._recording[topic] = self.create_subscription(
             msg_class, topic, on_message, adapted_qos(self, topic, self.depth), raw=raw, tap=True, adapted=not raw)
+        if raw:
+            self._from_dds[topic] = on_message
         self.get_logger().info(f"subscribed to {topic} [{type_name}]")
         return True
 
@@ -130,12 +133,21 @@ class BagRecorder(IntraProcessNode):
 
         Call it once nothing spins the recorder any more: on a loaded machine its thread may lag the
         publishers by many messages when a launch stops, and they would be lost with the
-        subscriptions. Each subscription's history holds up to ``queue_depth`` of them, in order."""
+        subscriptions. Each subscription's history holds up to ``queue_depth`` of them, in order.
+        Only topics that no node of this process published when the recorder subscribed and none
+        publishes now: a local publisher's messages are recorded inside its publish, and their DDS
+        copies would be recorded twice. They go straight to the recorder's callback, not through the
+        in-process queue, which may hold deliveries to nodes destroyed meanwhile."""
+        registry = IntraProcess.of(self.context)
         count = 0
-        for subscription in self._recording.values():
+        for topic, on_message in self._from_dds.items():
+            entry = registry.topics.get(topic)
+            if entry is not None and entry.publishers:
+                continue
+            subscription = self._recording[topic]
             with subscription.handle:
-                while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)) is not None:
-                    subscription.callback(taken[0])
+                while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+                    on_message(taken[0])
                     count += 1
         return count
 
@@ -146,6 +158,7 @@ class BagRecorder(IntraProcessNode):
         for subscription in self._recording.values():
             self.destroy_subscription(subscription)
         self._recording.clear()
+        self._from_dds.clear()
         self.writer.close()
         self.get_logger().info(f"bag {self.writer.path}: {self.writer.message_count} messages")
         super().destroy_node()
