@@ -148,11 +148,12 @@ def schemes():
     series.tables(beta)
     out["model/friction PulleySeries.tables (numpy reference)"] = (series_miss, lambda: series.tables(beta))
     from cdpr_control.model.memo import Memo
-    v = kernels.vector
 
-    def fk_ik_miss():        # model/forward_kinematics' _ik_fields memo; kernels._packed hits (the same x_d)
-        return x.tobytes(), tuple(map(v, kernels.inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta")))
-    out["model/forward_kinematics _ik_fields (kernels._packed hit)"] = (fk_ik_miss, lambda: x.tobytes() != key)
+    def fields_views_miss():  # kernels.inverse_kinematics_fields: the four views the FK takes, made again
+        kernels._packed(robot, x)[1].clear()
+        return kernels.inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta")
+    out["kernels inverse_kinematics_fields views (q, A^T, c^T, beta; kernels._packed hit)"] = (
+        fields_views_miss, lambda: kernels.inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta"))
     memo, inline_key = Memo(), [key, None]
     memo(key, pose_from_msg, pose)
 

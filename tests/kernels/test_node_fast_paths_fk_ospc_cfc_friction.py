@@ -157,7 +157,7 @@ def test_forward_kinematics_keeps_x_d_of_a_repeated_pose(robot):
 
     def forget(node):
         node._x_d.clear()
-        node.estimator.solver._ik_fields.clear()
+        kernels._packed_memo.clear()
 
     kept, fresh = _run_pair(lambda: ForwardKinematicsNode(parameter_overrides=_overrides()), periods, forget)
     for out in (kept, fresh):                       # the wall-clock solve time aside
@@ -168,7 +168,8 @@ def test_forward_kinematics_keeps_x_d_of_a_repeated_pose(robot):
 
 def test_forward_kinematics_solver_keeps_the_ik_of_a_repeated_x_d(robot):
     """ForwardKinematics.elastic (compiled, frozen pulleys): the pulley IK at x_d kept for the same
-    bytes of x_d (also after the caller changed its array in place) gives a fresh solver's numbers."""
+    bytes of x_d (kernels' shared IK of the last pose, also after the caller changed its array in
+    place) gives a fresh solver's numbers."""
     if not kernels.ENABLED:
         pytest.skip("CDPR_KERNELS=0: the numpy reference takes no kept IK")
     rng = np.random.default_rng(14)

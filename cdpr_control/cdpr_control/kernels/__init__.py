@@ -127,36 +127,45 @@ def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
     :func:`inverse_kinematics` of one pose x (6,), the same numbers: a stage that needs two of them
     (the force set-point A^T, the friction beta) saves building the other ten views (about 6 us of
     its 10). They are C-contiguous rows (as the kernels take them) of an array that the next call
-    for the same robot and pose returns again (see :func:`_packed`): read them, never write."""
+    for the same robot and pose returns again, the same view objects (see :func:`_packed`): read
+    them, never write."""
     if ENABLED:
-        P = _packed(robot, x)
+        P, views = _packed(robot, x)
         if P is not None:
-            return tuple(P[_FIELD_ROWS[name]] for name in names)
+            fields = []
+            for name in names:
+                view = views.get(name)
+                if view is None:     # a field not asked for at this pose yet: its view, once per pose
+                    view = views[name] = P[_FIELD_ROWS[name]]
+                fields.append(view)
+            return tuple(fields)
     ik = inverse_kinematics(robot, x)
     return tuple(ik.c.T if name == "cT" else getattr(ik, name) for name in names)
 
 
-# (robot, packed IK) of the last _packed call's robot and pose bytes (the robot kept in the value:
-# its id cannot be taken by another robot while the memo holds it)
+# (robot, packed IK, its views by field) of the last _packed call's robot and pose bytes (the robot
+# kept in the value: its id cannot be taken by another robot while the memo holds it)
 _packed_memo = Memo()
 
 
-def _packed(robot, x) -> np.ndarray | None:
-    """model.ik_packed of one pose (None where R does not fit its layout, m < 3). The last result is
-    kept and returned again for the same robot and pose: the stages of a composed graph (friction
-    compensation, forward kinematics, force set-point, load compensation) all take the IK of the
-    period's x_d, which one computation then serves."""
+def _packed(robot, x) -> tuple[np.ndarray | None, dict]:
+    """model.ik_packed of one pose (None where R does not fit its layout, m < 3) and the views of its
+    fields made so far. The last result is kept and returned again for the same robot and pose: the
+    stages of a period (friction compensation, forward kinematics, force set-point, load
+    compensation, in ControlLoop and in the nodes of a composed graph alike) all take the IK of the
+    period's x_d, which one computation then serves; each view is made once per pose (a slice
+    costs about 0.7 us, a look-up 0.1)."""
     x = vector(x)
-    return _packed_memo((id(robot), x.tobytes()), _compute_packed, robot, x)[1]
+    return _packed_memo((id(robot), x.tobytes()), _compute_packed, robot, x)[1:]
 
 
 def _compute_packed(robot, x) -> tuple:
     d = robot_data(robot)
     if d.a.shape[0] < 3:
-        return robot, None
+        return robot, None, {}
     P = np.empty((_ROWS + 3, d.a.shape[0]))
     ik_packed(x, d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
-    return robot, P
+    return robot, P, {}
 
 
 def _per_channel(n, v) -> np.ndarray:

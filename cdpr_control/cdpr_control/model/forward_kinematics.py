@@ -26,7 +26,6 @@ from scipy.linalg.lapack import dposv
 from cdpr_control.model import cable
 from cdpr_control import kernels
 from cdpr_control.model.dynamics import gravity_wrench
-from cdpr_control.model.memo import Memo
 from cdpr_control.model.kinematics import inverse_kinematics, kardan_rate_matrix, rotation_matrix, skew
 from cdpr_control.model.stiffness import operational_stiffness
 
@@ -102,9 +101,6 @@ class ForwardKinematics:
         self._S[1, 2], self._S[2, 1] = -1.0, 1.0
         self._b_norm = np.linalg.norm(robot.b, axis=1)
         self._lever = float(np.mean(self._b_norm))
-        # the pulley IK fields at x_d of the last compiled frozen solve, as the kernel takes them,
-        # kept for the same x_d (bytes): the set-point repeats while holding, the IK with it
-        self._ik_fields = Memo()   # (q, A^T, c^T, β) of x_d's bytes (_elastic_frozen_compiled; to the kernel: writeable)
 
     # --- public solves ------------------------------------------------------------------------
 
@@ -214,17 +210,14 @@ class ForwardKinematics:
         d = kernels.robot_data(robot)
         v, x = kernels.vector, np.empty(6)
         x_d = v(x_d)
-        if ik_d is None:      # the four fields the kernel takes, without building the others
-            q, AT, cT, beta = self._ik_fields(x_d.tobytes(), self._ik_fields_of, x_d)
+        if ik_d is None:      # the four fields the kernel takes (C-contiguous rows), without building the others
+            q, AT, cT, beta = kernels.inverse_kinematics_fields(robot, x_d, "q", "AT", "cT", "beta")
         else:
             q, AT, cT, beta = v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta)
         code, iterations, norm = kernels.elastic_frozen(
             x_d, q, AT, cT, beta, d.b, d.r_p, v(theta), v(f), d.l_0,
             d.k0, d.k1, d.k2, self.xtol, self.max_iterations, x)
         return FKResult(x, code == 0, _TERMINATIONS[code], iterations, norm)
-
-    def _ik_fields_of(self, x_d) -> tuple:
-        return tuple(map(kernels.vector, kernels.inverse_kinematics_fields(self.robot, x_d, "q", "AT", "cT", "beta")))
 
     def _residual_rounding(self, k_l, c, x_d):
         """(m,) rounding error of the elastic residual Psi_i = k_l,i (|c_i - r - R b_i| - q_free_i)
@@ -309,9 +302,6 @@ def _elastic_frozen_numpy(fk: ForwardKinematics, theta, f, x_d, ik_d) -> FKResul
     return fk._elastic_numpy(theta, f, x_d, ik_d, "frozen")
 
 
-def _elastic_frozen_compiled(fk: ForwardKinematics, theta, f, x_d, ik_d) -> FKResult:
-    return fk._elastic_frozen_compiled(theta, f, x_d, ik_d)
-
-
-# the elastic FK with frozen pulleys (3.7)-(3.9), section 3.2
-elastic_frozen = kernels.law("elastic_frozen", _elastic_frozen_numpy, _elastic_frozen_compiled)
+# the elastic FK with frozen pulleys (3.7)-(3.9), section 3.2 (the compiled flavour: the method itself,
+# a call frame less in every period than a function wrapping it)
+elastic_frozen = kernels.law("elastic_frozen", _elastic_frozen_numpy, ForwardKinematics._elastic_frozen_compiled)
