@@ -20,7 +20,7 @@ from cdpr_tools.launch import Launcher, select_nodes
 from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.program_client import run_program
 
-from .graph import Collector, Spinner, wait_for
+from .graph import STOPPING, Collector, Spinner, wait_for
 
 ROBOT = "ipanema3_mini"
 PERIOD_NS = 1_000_000
@@ -158,8 +158,7 @@ class FaultGraph(Recording):
         self.collector = self.spinner.add(Collector, topics=TOPICS, qos=QoSProfile(depth=10000))
         self.probe = self.spinner.add(Node, node_name="fault_probe")
         self.publishers: dict = {}
-        # (one process per node: a loaded machine may take more than the default 10 s to stop one)
-        self.launcher = Launcher(description, mode=mode, stop_timeout=120.0)
+        self.launcher = Launcher(description, mode=mode, stop_timeout=STOPPING)
         try:
             self.launcher.start()
             self.wait_running()

@@ -18,6 +18,9 @@ from cdpr_tools.ros_graph import new_context
 
 TESTS_DIR = Path(__file__).resolve().parents[1]
 DISCOVERY = 15.0  # s: generous, the test machine is shared and loaded
+# s a launched child may take to exit after SIGINT (Launcher's stop_timeout): under a load of about 6
+# on two cores a node still being built, or exiting its interpreter, took more than the default 10 s
+STOPPING = 120.0
 
 
 class Spinner:

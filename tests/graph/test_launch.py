@@ -8,15 +8,11 @@ import pytest
 import yaml
 from std_msgs.msg import Int32
 
-from cdpr_test_nodes.graph import Collector, Spinner, subprocess_env, wait_for
+from cdpr_test_nodes.graph import STOPPING, Collector, Spinner, subprocess_env, wait_for
 from cdpr_tools.bag import BagReader
 from cdpr_tools.launch import LaunchDescription, Launcher, NodeSpec, RecordSpec, node_class, ros_arguments
 from cdpr_tools.launch_file import load_launch_file
 from cdpr_tools.share import package_share
-
-# s a child may take to exit after SIGINT: under a load of about 6 on two cores a node still being
-# built, or exiting its interpreter, took more than the launcher's default 10 s (CI, session 20)
-STOPPING = 120.0
 
 GRAPH = """
 launch:

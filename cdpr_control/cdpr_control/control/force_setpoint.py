@@ -434,12 +434,8 @@ class ForceSetpoint:
             # in contact the measured wrench holds the contact reaction, which an identification reads
             # as payload: the feed-forward and its filters stay as they were before the contact
             in_contact = contact is not None and contact[0] != "I"
-            if in_contact:
-                w_ff = self.w_ff if self.payload_filter.y is not None else None
-            elif w_model is None and self.payload_filter.y is None:
-                w_ff = None                   # no payload, none before: what _feed_forward returns
-            else:
-                w_ff = self._feed_forward(x_d, w_dyn, w_model)
+            w_ff = (self.w_ff if self.payload_filter.y is not None else None) if in_contact \
+                else self._feed_forward(x_d, w_dyn, w_model)
             if w_ff is None:
                 self.w_d = self.smith.update_filtered(w, w_dyn, self.w_dist_max,    # (3.26), disturbance
                                                       self.wrench_filter)           # filtered, saturated
