@@ -115,27 +115,32 @@ def finish(method, AT, w, f, ok, f_min, f_max, f_ref, iterations, t0, status_ok=
 
 
 def _finish_one(method, AT, w, f, ok, f_min, f_max, f_ref, iterations, t0, status_ok, tol):
-    """:func:`finish` for one pose, with as few numpy calls as possible (the 1 kHz path)."""
-    r = AT @ f
+    """:func:`finish` for one pose, with as few numpy calls as possible (the 1 kHz path).
+
+    ``ndarray.dot`` rather than ``@``: the same BLAS call and numbers, at half the call's cost for
+    arrays this small (0.6 against 1.2-1.3 us, numpy 2.4)."""
+    AT = AT if type(AT) is np.ndarray else np.asarray(AT, dtype=float)
+    w = w if type(w) is np.ndarray else np.asarray(w, dtype=float)
+    r = AT.dot(f)
     r += w
-    residual = math.sqrt(r @ r)
+    residual = math.sqrt(r.dot(r))
     if not math.isfinite(residual):
         ok = False
         f = np.minimum(np.maximum(f_ref, f_min), f_max)
-        r = AT @ f
+        r = AT.dot(f)
         r += w
-        residual = math.sqrt(r @ r) if np.isfinite(r).all() else math.inf
+        residual = math.sqrt(r.dot(r)) if np.isfinite(r).all() else math.inf
     v = f_min - f
     np.maximum(v, f - f_max, out=v)
     worst = max(v.tolist())                               # faster than v.max() for m = 8
     feasible = ok and worst <= tol and (
-        residual <= RESIDUAL_RTOL * math.sqrt(w @ w)      # cheap sufficient test first
-        or residual <= RESIDUAL_RTOL * (math.sqrt(w @ w) + math.sqrt(float(np.vdot(AT, AT)) * (f @ f))))
+        residual <= RESIDUAL_RTOL * math.sqrt(w.dot(w))   # cheap sufficient test first
+        or residual <= RESIDUAL_RTOL * (math.sqrt(w.dot(w)) + math.sqrt(float(np.vdot(AT, AT)) * f.dot(f))))
     if feasible:
         if worst > 0.0:
             f = np.minimum(np.maximum(f, f_min), f_max)
         v.fill(0.0)
-        status = Status.FEASIBLE if status_ok == Status.FEASIBLE else Status(status_ok)
+        status = Status.FEASIBLE if status_ok is Status.FEASIBLE else Status(status_ok)
     else:
         np.maximum(v, 0.0, out=v)
         status = Status.INFEASIBLE
