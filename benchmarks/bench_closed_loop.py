@@ -82,10 +82,10 @@ def run(robot, compiled: bool, params=None) -> tuple[dict, list]:
             wall0 = time.perf_counter()
             for k in range(STEPS):
                 x_d, xd, xdd = circle(robot, k)
-                (beta,), t0 = timed(kernels.inverse_kinematics_fields, robot, x_d, "beta")   # as ControlLoop.step
-                f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, beta)
-                (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d)
-                dist, t3 = timed(loop.force.update, x_d, xd, xdd, w)
+                ik_d, t0 = timed(kernels.setpoint_ik, robot, x_d)   # as ControlLoop.step
+                f, t1 = timed(loop.friction.update, out.F_s, out.theta, out.thetadot, ik_d.beta)
+                (x, w), t2 = timed(loop.estimator.update, out.theta, f, x_d, ik_d)
+                dist, t3 = timed(loop.force.update, x_d, xd, xdd, w, AT=ik_d.AT)
                 dq, t4 = timed(loop.cfc.update, dist.f, f, out.theta, dist.f_min, dist.f_max, x_d=x_d)
                 x_ospc, t5 = timed(loop.ospc.update, x_d, x)
                 _, t_safety = timed(loop.monitor.check, out.t, f=f, f_min=robot.cable.f_min,

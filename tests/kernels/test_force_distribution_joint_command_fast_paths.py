@@ -72,15 +72,17 @@ def test_joint_command_update_with_one_offset_is_the_general_path(robot):  # noq
     assert jc.held and np.all(np.abs(jc.velocity) <= np.abs(velocity))
 
 
-def test_force_setpoint_keeps_its_model_wrench_only_while_the_setpoint_repeats(robot):  # noqa: F811
-    """ForceSetpoint keeps w_dyn (2.33) and A^T (2.10) while the set-point repeats: the same results,
-    bit for bit, as a stage that computes them every period, also where the set-point changes in
-    one of its 18 values or a zero changes its sign."""
+def test_force_setpoint_with_the_loops_AT_equals_the_one_that_takes_its_own(robot):  # noqa: F811
+    """ControlLoop hands the force set-point A^T (2.10) of its kernels.setpoint_ik; a node's stage
+    takes A^T itself: the same results, bit for bit, where the IK of the set-point is computed
+    afresh for the stage that takes its own, and the set-point moves, holds or flips a zero's sign.
+    A^T of another pose handed over gives other forces: the stage uses what it is handed."""
     rng = np.random.default_rng(5)
     params = ForceSetpointParams(tension_level=0.2)
-    a, b = ForceSetpoint(robot, DT, params), ForceSetpoint(robot, DT, params)
+    a, b, c = (ForceSetpoint(robot, DT, params) for _ in range(3))
     weight = np.r_[robot.platform.mass * robot.gravity, 0, 0, 0]
     x_d, xdot_d, xddot_d = robot.home.copy(), np.zeros(6), np.zeros(6)
+    other = kernels.setpoint_ik(robot, robot.home + np.array([0.05, 0.0, 0.02, 0.0, 0.0, 0.0])).AT.copy()
     for k in range(60):
         if k % 4 == 1:                                     # one value of the set-point changes
             v = (x_d, xdot_d, xddot_d)[k % 3].copy()
@@ -90,11 +92,13 @@ def test_force_setpoint_keeps_its_model_wrench_only_while_the_setpoint_repeats(r
             xdot_d = np.where(xdot_d == 0.0, -xdot_d, xdot_d)     # -0.0 for 0.0: the same value
         w = -weight + rng.normal(0, 0.5, 6)
         w_model = payload_wrench(robot, x_d, xdot_d, xddot_d, 0.5)
-        ra = a.update(x_d, xdot_d, xddot_d, w, w_model=w_model)
-        b._model_memo.clear()                              # b: computed every period
+        ra = a.update(x_d, xdot_d, xddot_d, w, w_model=w_model, AT=kernels.setpoint_ik(robot, x_d).AT)
+        kernels._packed_memo.clear()                       # b: the IK of x_d computed afresh
         rb = b.update(x_d.copy(), xdot_d.copy(), xddot_d.copy(), w, w_model=w_model)
         assert same_bits(a.w_d, b.w_d) and same_bits(ra.f, rb.f), f"period {k}"
         assert (ra.status, ra.residual, ra.iterations) == (rb.status, rb.residual, rb.iterations)
+        rc = c.update(x_d, xdot_d, xddot_d, w, w_model=w_model, AT=other)
+        assert not np.allclose(rc.f, ra.f), f"period {k}"
 
 
 # --- the nodes: values kept while the set-point repeats ------------------------------------------

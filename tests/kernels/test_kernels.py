@@ -137,16 +137,36 @@ def test_elastic_forward_kinematics_kernel_equals_the_reference(robot):
     for x_d in random_poses(robot, 40, rng):
         theta, f = _measurement(robot, rng, x_d)
         results = [solver.elastic(theta, f, x_d, ik_d=kernels.inverse_kinematics(robot, x_d)),
-                   solver.elastic(theta, f, x_d)]
+                   solver.elastic(theta, f, x_d), solver.elastic(theta, f, x_d, ik_d=kernels.setpoint_ik(robot, x_d))]
         with kernels.numpy_reference():
             results += [solver.elastic(theta, f, x_d, ik_d=kinematics.inverse_kinematics(robot, x_d)),
-                        solver.elastic(theta, f, x_d)]
-        assert results[2].termination == CONVERGED
-        for fast, ref in zip(results[:2], results[2:]):
+                        solver.elastic(theta, f, x_d), solver.elastic(theta, f, x_d, ik_d=kernels.setpoint_ik(robot, x_d))]
+        assert results[3].termination == CONVERGED
+        for fast, ref in zip(results[:3], results[3:]):
             assert (fast.converged, fast.termination, fast.iterations) == (ref.converged, ref.termination,
                                                                            ref.iterations)
             np.testing.assert_allclose(fast.x, ref.x, rtol=0, atol=1e-12)
             np.testing.assert_allclose(fast.residual_norm, ref.residual_norm, rtol=1e-6, atol=1e-9)
+
+
+def test_the_setpoint_ik_is_the_fields_of_the_ik_in_both_flavours(robot):
+    """kernels.setpoint_ik (ControlLoop's IK of x_d, shared by its stages) holds the same numbers as
+    the full IK, bit for bit in each flavour; compiled, as the C-contiguous float64 arrays the
+    kernels take (a view with other strides would compile another specialization or copy)."""
+    rng = np.random.default_rng(23)
+    for x_d in random_poses(robot, 20, rng):
+        for mode in (contextlib.nullcontext(), kernels.numpy_reference()):
+            with mode:
+                ik, full = kernels.setpoint_ik(robot, x_d), kernels.inverse_kinematics(robot, x_d)
+            for a, b in ((ik.q, full.q), (ik.AT, full.AT), (ik.cT, full.c.T), (ik.c, full.c), (ik.beta, full.beta)):
+                assert a.shape == b.shape and a.tobytes() == np.ascontiguousarray(b).tobytes()
+        ik = kernels.setpoint_ik(robot, x_d)
+        assert all(v.dtype == np.float64 and v.flags.c_contiguous for v in ik)
+        # the FK's solution with it handed over is the one it finds taking the IK itself, bit for bit
+        solver = ForwardKinematics(robot, xtol=1e-9, max_iterations=30)
+        theta, f = _measurement(robot, rng, x_d)
+        handed, own = solver.elastic(theta, f, x_d, ik_d=ik), solver.elastic(theta, f, x_d)
+        assert handed.x.tobytes() == own.x.tobytes() and handed.iterations == own.iterations
 
 
 def test_elastic_forward_kinematics_kernel_with_inconsistent_measurements(robot):

@@ -205,7 +205,6 @@ class ForceSetpoint:
         self.reserve_applied = 0.0               # N, the reserve the last set-point kept (_with_reserve)
         self.reserve_forces = np.zeros(robot.m)  # N, what it added to the plain distribution's forces then
         self.margin_lp = MarginLP(6, robot.m)    # largest_margin, warm from period to period (_with_reserve)
-        self._model_memo = Memo()                # (w_dyn, A^T) of the set-point's bytes and kernels.ENABLED (_model)
         self._payload_memo = Memo()              # R c, g - a_c of the set-point's and cog's bytes (payload_wrench)
         self.z_t = np.array([0.0, 0.0, 1.0])     # task z axis of the hybrid force controller, kept in R
         self._task_axis = Memo()                 # z_t of F_d,0's bytes (_contact_wrench)
@@ -259,19 +258,6 @@ class ForceSetpoint:
         elif self.level != target:
             step = rate * self.dt
             self._set_level(self.level + float(np.clip(target - self.level, -step, step)))
-
-    def _model(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
-        """(w_dyn (2.33) of x_d, ẋ_d, ẍ_d; A^T (2.10) at x_d): the arrays of the last period again
-        (read, never written) while the set-point repeats (holding, a pause of a program)."""
-        x_d, xdot_d, xddot_d = np.asarray(x_d, dtype=float), np.asarray(xdot_d, dtype=float), \
-            np.asarray(xddot_d, dtype=float)
-        return self._model_memo((x_d.tobytes(), xdot_d.tobytes(), xddot_d.tobytes(), kernels.ENABLED),
-                                self._model_of, x_d, xdot_d, xddot_d)
-
-    def _model_of(self, x_d, xdot_d, xddot_d) -> tuple[np.ndarray, np.ndarray]:
-        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
-        AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")    # (2.10)
-        return w_dyn, AT
 
     def payload_wrench(self, x_d, xdot_d, xddot_d, mass: float, cog) -> np.ndarray:
         """The model wrench of a payload (a point mass [kg] at cog (3,) [m], platform frame) at the
@@ -410,8 +396,11 @@ class ForceSetpoint:
             return None
         return expected_contact_wrench_of(state, F_d0, F_vec, self.z_t)
 
-    def update(self, x_d, xdot_d, xddot_d, w, w_model=None, contact=None) -> DistributionResult:
+    def update(self, x_d, xdot_d, xddot_d, w, w_model=None, contact=None, AT=None) -> DistributionResult:
         """Desired pose, twist, acceleration and the measured wrench -> the distribution f_d.
+
+        AT: A^T (2.10) at x_d when the caller has it (ControlLoop's :func:`cdpr_control.kernels.setpoint_ik`),
+        else taken here (:func:`cdpr_control.kernels.inverse_kinematics_fields`) of the same computation.
 
         w_model: a known wrench beyond the platform's own (an identified payload, load_compensation):
         it is not part of the saturated disturbance of (3.24), and the model-only set-point (3.1)
@@ -421,7 +410,9 @@ class ForceSetpoint:
         """
         if self.f_ref_override is None:
             self._ramp_level()
-        w_dyn, AT = self._model(x_d, xdot_d, xddot_d)
+        w_dyn = kernels.platform_wrench(self.robot, x_d, xdot_d, xddot_d)   # (2.33), A^T f = -w
+        if AT is None:
+            AT, = kernels.inverse_kinematics_fields(self.robot, x_d, "AT")    # (2.10)
         if contact is not None and self.wrench_filter.y is not None:
             # (not into the filter's first sample, which would start it at the full contact force:
             # the expected contact force enters through the filter, from zero)

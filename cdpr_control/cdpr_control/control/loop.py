@@ -182,11 +182,11 @@ class ControlLoop:
         robot = self.robot
         if self.command.theta_d is None:
             self.command.reset(theta, self.params.start_ramp)
-        # the IK of x_d as the nodes take it: each stage its fields (kernels.inverse_kinematics_fields),
-        # of one computation a period that the stages share (and none while x_d repeats: holding)
-        beta, = kernels.inverse_kinematics_fields(robot, x_d, "beta")
-        f = self.friction.update(F_s, theta, thetadot, beta)
-        x, w = self.estimator.update(theta, f, x_d)
+        # the IK of x_d that the stages share, taken once (a node's stage takes its fields itself, of
+        # the same computation: kernels.inverse_kinematics_fields; none while x_d repeats: holding)
+        ik_d = kernels.setpoint_ik(robot, x_d)
+        f = self.friction.update(F_s, theta, thetadot, ik_d.beta)
+        x, w = self.estimator.update(theta, f, x_d, ik_d)
         outputs = {}
         if self.offset_stages:
             inputs = LoopInputs(t, x_d, xdot_d, xddot_d, theta, f, x, w)
@@ -204,7 +204,7 @@ class ControlLoop:
             contact = (hpfc.state, hpfc.F_d0, hpfc.F_vec)     # its expected contact force in the wrench
         self.force.set_user_wrench(w_user)
         dist = self.force.update(x_d, xdot_d, xddot_d, w, w_model=sum(w_models) if w_models else None,
-                                 contact=contact)
+                                 contact=contact, AT=ik_d.AT)
         self._limits = (dist.f_min, dist.f_max)
         p = self.params
         force_control = p.mode == "force_control"

@@ -56,7 +56,8 @@ class PoseEstimator:
     def update(self, theta, f, x_d, ik_d=None) -> tuple[np.ndarray, np.ndarray]:
         """-> (x, w): the pose estimate and the wrench of the measured forces about its origin.
 
-        ik_d: inverse_kinematics(robot, x_d) when the caller has it (saves the pulley IK at x_d).
+        ik_d: the IK of x_d when the caller has it (:func:`cdpr_control.kernels.setpoint_ik`, as
+        ControlLoop hands it over), else taken here of the same computation.
         """
         if self.calibration.update(f, theta) or self.dq_0 is None:            # (3.7) at calibration
             c = self.calibration

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,11 +57,11 @@ from cdpr_control.kernels.setpoint import smith_step
 
 ENABLED: bool = os.environ.get("CDPR_KERNELS", "1") != "0"
 
-__all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "cable_lengths", "cable_stiffness", "compiled_pi_update",
+__all__ = ["CFC_CONSTANTS", "ENABLED", "LAWS", "Law", "RobotData", "SetpointIK", "cable_lengths", "cable_stiffness", "compiled_pi_update",
            "cfc_constants", "compiled_cfc_internal_period", "compiled_cfc_period", "compiled_internal_pi_update",
            "compiled_nullspace_projector", "compiled_joint_command_period", "compiled_widened_saturation", "elastic_cable_state", "elastic_frozen",
            "force_watch_period", "friction_platform_force", "friction_sensor_force", "inverse_kinematics", "inverse_kinematics_fields",
-           "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data",
+           "joint_command_step", "law", "measured_wrench", "numpy_reference", "platform_wrench", "robot_data", "setpoint_ik",
            "vector", "warm_up"]
 
 
@@ -141,6 +142,30 @@ def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
             return tuple(fields)
     ik = inverse_kinematics(robot, x)
     return tuple(ik.c.T if name == "cT" else getattr(ik, name) for name in names)
+
+
+class SetpointIK(NamedTuple):
+    """The fields of the IK of a period's set-point x_d (2.3)-(2.10) that its stages share:
+    q (m,), A^T (6, m), c^T (3, m) (the leave points as columns) and β (m,), C-contiguous float64
+    as the kernels take them (:func:`setpoint_ik`). ControlLoop takes them once a period and hands
+    them to the friction compensation (β), the forward kinematics (all four) and the force set-point
+    (A^T); a node's stage takes what it needs itself (:func:`inverse_kinematics_fields`), of the
+    same computation."""
+
+    q: np.ndarray
+    AT: np.ndarray
+    cT: np.ndarray
+    beta: np.ndarray
+
+    @property
+    def c(self) -> np.ndarray:
+        """(m, 3) the leave points as rows, as :class:`cdpr_control.model.kinematics.InverseKinematics`."""
+        return self.cT.T
+
+
+def setpoint_ik(robot, x) -> SetpointIK:
+    """The :class:`SetpointIK` of the pose x (6,): :func:`inverse_kinematics_fields` of its four fields."""
+    return SetpointIK(*inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta"))
 
 
 # (robot, packed IK, its views by field) of the last _packed call's robot and pose bytes (the robot

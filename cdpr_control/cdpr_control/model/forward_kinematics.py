@@ -163,8 +163,9 @@ class ForwardKinematics:
 
         pulleys='frozen' (section 3.2): c_i and beta_i from the pulley IK at x_d, then
         IK(x) = |c_i - r - R b_i| + beta_i r_p; exact only when x = x_d, the error is second order
-        in |x - x_d|. ik_d: inverse_kinematics(robot, x_d) when the caller has it already (the
-        controller computes it for theta_d), saving the one pulley IK of 'frozen'.
+        in |x - x_d|. ik_d: the IK of x_d when the caller has it already, as
+        :func:`cdpr_control.kernels.setpoint_ik` (ControlLoop's, shared by the period's stages) or
+        an :class:`~cdpr_control.model.kinematics.InverseKinematics`, saving the one pulley IK of 'frozen'.
         pulleys='full': the pulley IK in every iteration (exact, several times slower).
         Robots without swivelling pulleys use their fixed anchors either way.
         """
@@ -211,7 +212,9 @@ class ForwardKinematics:
         v, x = kernels.vector, np.empty(6)
         x_d = v(x_d)
         if ik_d is None:      # the four fields the kernel takes (C-contiguous rows), without building the others
-            q, AT, cT, beta = kernels.inverse_kinematics_fields(robot, x_d, "q", "AT", "cT", "beta")
+            q, AT, cT, beta = kernels.setpoint_ik(robot, x_d)
+        elif type(ik_d) is kernels.SetpointIK:
+            q, AT, cT, beta = ik_d
         else:
             q, AT, cT, beta = v(ik_d.q), v(ik_d.AT), v(ik_d.c.T), v(ik_d.beta)
         code, iterations, norm = kernels.elastic_frozen(
