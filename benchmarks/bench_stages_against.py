@@ -18,7 +18,8 @@ are the medians over the runs.
 
     .venv/bin/python benchmarks/bench_stages_against.py [--against REF] [--runs N] [--steps N]
 
-REF is a git revision (default: ``CDPR_BENCH_AGAINST`` or HEAD). Writes bench/stages_against.json.
+REF is a git revision (default: ``CDPR_BENCH_AGAINST`` or HEAD; this tree is the working tree, so
+against HEAD without changes it shows the instrument's own spread). Writes bench/stages_against.json.
 Both trees' periods run one after the other, so each finds the cache after the other's period and
 simulator step: the absolute figures are above bench_closed_loop's, the ratio is the comparison.
 """
