@@ -32,7 +32,8 @@ LOOP_TOPICS = {      # one message per control period each
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
 }
 # A probe in a process of its own: counts the stamps of the loop topics until PERIODS winch states
-# were answered, then prints a JSON summary. argv: timeout [s], periods, topics (JSON name -> type).
+# were answered (and, with "diagnostics", a simulator report timed a command), then prints a JSON
+# summary. argv: timeout [s], periods, topics (JSON name -> type)[, "diagnostics"].
 PROBE = r"""
 import json, sys, threading, time
 from rclpy.experimental import EventsExecutor
@@ -66,8 +67,11 @@ executor.add_node(node)
 stop = threading.Event()
 threading.Thread(target=spin, args=(executor, stop), daemon=True).start()
 answered = lambda: set(stamps["/winch/state"]) & set(stamps["/winch/command"])
+# with the diagnostics: also until a report (one a second) covers a second in which commands came back
+# (the first reports can come before the controllers answer, and 200 periods free-running take 0.2 s)
+timed = lambda: len(sys.argv) <= 4 or any(r.get("command_latency_count") not in (None, "", "0") for r in reports)
 deadline = time.monotonic() + timeout
-while time.monotonic() < deadline and len(answered()) < periods:
+while time.monotonic() < deadline and (len(answered()) < periods or not timed()):
     time.sleep(0.05)
 stop.set()
 time.sleep(0.3)
