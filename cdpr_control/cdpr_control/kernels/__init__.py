@@ -146,8 +146,9 @@ def inverse_kinematics_fields(robot, x, *names: str) -> tuple[np.ndarray, ...]:
 
 class SetpointIK(NamedTuple):
     """The fields of the IK of a period's set-point x_d (2.3)-(2.10) that its stages share:
-    q (m,), A^T (6, m), c^T (3, m) (the leave points as columns) and β (m,), C-contiguous float64
-    as the kernels take them (:func:`setpoint_ik`). ControlLoop takes them once a period and hands
+    q (m,), A^T (6, m), c^T (3, m) (the leave points as columns) and β (m,) (:func:`setpoint_ik`);
+    compiled, C-contiguous float64 rows of the packed IK as the kernels take them (on the numpy
+    reference the full IK's arrays, c^T a view of its c). ControlLoop takes them once a period and hands
     them to the friction compensation (β), the forward kinematics (all four) and the force set-point
     (A^T); a node's stage takes what it needs itself (:func:`inverse_kinematics_fields`), of the
     same computation."""
