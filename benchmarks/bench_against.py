@@ -27,6 +27,7 @@ worktree; ``--record`` records every topic in both graphs. Writes bench/against.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pathlib
@@ -78,10 +79,19 @@ print(json.dumps({"rtf": (s1 - s0) * 1e-3 / (t1 - t0), "periods": s1 - s0,
 """
 
 
-def worktree(ref: str, into: pathlib.Path) -> pathlib.Path:
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(into), ref],
-                   check=True, capture_output=True, text=True)
-    return into
+@contextlib.contextmanager
+def checked_out(ref: str):
+    """The git revision ``ref`` in a temporary worktree: (its path, its short commit), removed after."""
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", ref], check=True,
+                            capture_output=True, text=True).stdout.strip()
+    with tempfile.TemporaryDirectory(prefix="bench_against_") as tmp:
+        path = pathlib.Path(tmp) / "other"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(path), ref],
+                       check=True, capture_output=True, text=True)
+        try:
+            yield path, commit
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)], capture_output=True)
 
 
 def start(tree: pathlib.Path, warmup: float, window: float, record: bool, cpu: int | None) -> subprocess.Popen:
@@ -126,23 +136,17 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=5.0)
     parser.add_argument("--record", action="store_true", help="both graphs record every topic")
     args = parser.parse_args()
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.against], check=True,
-                            capture_output=True, text=True).stdout.strip()
-    with tempfile.TemporaryDirectory(prefix="bench_against_") as tmp:
-        other = worktree(args.against, pathlib.Path(tmp) / "other")
-        try:
-            trees = {"this": ROOT, "other": other}
-            print("warm-up round (numba compiles into the trees' caches) ...", flush=True)
-            round_pair(trees, args.warmup, 5.0, args.record, "other")
-            rounds = []
-            for k in range(args.rounds):
-                rounds.append(round_pair(trees, args.warmup, args.window, args.record, ["this", "other"][k % 2]))
-                r = rounds[-1]
-                print(f"round {k + 1}: RTF this {r['this']['rtf']:.3f} other {r['other']['rtf']:.3f}; loop thread "
-                      f"us/period this {r['this']['loop_thread_us_per_period']:.0f} "
-                      f"other {r['other']['loop_thread_us_per_period']:.0f}", flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(other)], capture_output=True)
+    with checked_out(args.against) as (other, commit):
+        trees = {"this": ROOT, "other": other}
+        print("warm-up round (numba compiles into the trees' caches) ...", flush=True)
+        round_pair(trees, args.warmup, 5.0, args.record, "other")
+        rounds = []
+        for k in range(args.rounds):
+            rounds.append(round_pair(trees, args.warmup, args.window, args.record, ["this", "other"][k % 2]))
+            r = rounds[-1]
+            print(f"round {k + 1}: RTF this {r['this']['rtf']:.3f} other {r['other']['rtf']:.3f}; loop thread "
+                  f"us/period this {r['this']['loop_thread_us_per_period']:.0f} "
+                  f"other {r['other']['loop_thread_us_per_period']:.0f}", flush=True)
     rtf, cpu = ratios(rounds, "rtf"), ratios(rounds, "loop_thread_us_per_period")
     result = {
         "machine": platform.machine(), "cpu_count": os.cpu_count(), "against": args.against, "against_commit": commit,

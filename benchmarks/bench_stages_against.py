@@ -37,9 +37,8 @@ import subprocess
 import sys
 import tempfile
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-OUT = ROOT / "bench"
-TAGS = ("this", "other")
+from bench_against import OUT, ROOT, checked_out  # this folder, the script's own
+
 ROBOTS = ("ipanema3_mini", "ipanema3")
 SKIP = 200                          # periods left out at the start (the start-up ramp, first calls)
 
@@ -79,12 +78,6 @@ for tag, h in trees.items():
                 "controller_us": float(np.median(T.sum(axis=1)))}
 print(json.dumps(out))
 """
-
-
-def worktree(ref: str, into: pathlib.Path) -> pathlib.Path:
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(into), ref],
-                   check=True, capture_output=True, text=True)
-    return into
 
 
 def renamed_copy(tree: pathlib.Path, tag: str, pkgs: pathlib.Path) -> None:
@@ -136,27 +129,20 @@ def main() -> None:
     args = parser.parse_args()
     if args.runs < 1 or args.steps <= SKIP:
         parser.error(f"--runs must be at least 1 and --steps above {SKIP}")
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.against], check=True,
-                            capture_output=True, text=True).stdout.strip()
-    with tempfile.TemporaryDirectory(prefix="bench_stages_against_") as tmp:
-        other = worktree(args.against, pathlib.Path(tmp) / "other")
-        try:
-            pkgs = pathlib.Path(tmp) / "pkgs"
-            pkgs.mkdir()
-            renamed_copy(ROOT, "this", pkgs)
-            renamed_copy(other, "other", pkgs)
-            print("warm-up run (numba compiles both copies into their caches) ...", flush=True)
-            run_child(pkgs, ROBOTS[0], SKIP + 10)
-            runs = {robot: [] for robot in ROBOTS}
-            for k in range(args.runs):
-                for robot in ROBOTS:
-                    runs[robot].append(run_child(pkgs, robot, args.steps))
-                    r = runs[robot][-1]
-                    print(f"run {k + 1} {robot}: stages this {r['this']['controller_us']:.1f} us, other "
-                          f"{r['other']['controller_us']:.1f} us, ratio "
-                          f"{r['this']['controller_us'] / r['other']['controller_us']:.3f}", flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(other)], capture_output=True)
+    with checked_out(args.against) as (other, commit), tempfile.TemporaryDirectory(prefix="bench_stages_") as tmp:
+        pkgs = pathlib.Path(tmp)
+        renamed_copy(ROOT, "this", pkgs)
+        renamed_copy(other, "other", pkgs)
+        print("warm-up run (numba compiles both copies into their caches) ...", flush=True)
+        run_child(pkgs, ROBOTS[0], SKIP + 10)
+        runs = {robot: [] for robot in ROBOTS}
+        for k in range(args.runs):
+            for robot in ROBOTS:
+                runs[robot].append(run_child(pkgs, robot, args.steps))
+                r = runs[robot][-1]
+                print(f"run {k + 1} {robot}: stages this {r['this']['controller_us']:.1f} us, other "
+                      f"{r['other']['controller_us']:.1f} us, ratio "
+                      f"{r['this']['controller_us'] / r['other']['controller_us']:.3f}", flush=True)
     result = {
         "machine": platform.machine(), "cpu_count": os.cpu_count(), "against": args.against, "against_commit": commit,
         "what": "ControlLoop's stages along bench_closed_loop's circle on the default plant, both trees "
