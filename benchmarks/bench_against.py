@@ -1,28 +1,32 @@
-"""The composed graph of this tree against another tree's, both running at the same time.
+"""The composed graph of this tree against another tree's, taking turns on one core.
 
-On this shared two-core machine the speed of a run moves by 10-25 % between runs a minute apart
-(docs/performance.md), so two trees measured one after the other differ by the machine as much as
-by the code. Here both trees' composed lockstep graphs (graphs/closed_loop.yaml, IPAnema 3 Mini
-holding home, the default plant) run *at the same time*, each in a process and ROS domain of its
-own, each pinned to a core of its own (the cores swap every round): whatever the machine does to
-one it does to the other, and the ratio of their figures in a round is the comparison. A tree against itself (the default) gives the instrument's
-own spread.
+On this shared two-core machine the speed of a run moves by 10-25 % between runs a minute apart,
+and the two cores' speeds move apart by up to 50 % within a minute (docs/performance.md), so two
+trees measured one after the other, or at the same time on a core each, differ by the machine as
+much as by the code. Here both trees' composed lockstep graphs (graphs/closed_loop.yaml, IPAnema 3
+Mini holding home, the default plant) run in a process and ROS domain of their own, both pinned to
+*one* core, and take turns: one runs for ``--turn`` seconds while the other is stopped (SIGSTOP to
+its process group), then the other. Each pair of neighbouring turns gives a ratio; the pair's order
+alternates (ABBA), so a steady drift cancels.
 
-Per tree and round: the real-time factor (simulated over wall time of the window), the process CPU
-per period, and the CPU of the executor's thread per period as the median over 50 ms slices of the
-window (the slices a burst of other work lands in drop out of a median). Which tree starts first,
-and on which core, alternates; a fresh worktree first runs one round that is not counted (numba compiles its kernels
-into the tree's cache).
+- Turns are short (0.25 s) because the core's speed moves within seconds: the loop thread's CPU
+  time per period of one tree went from 1130 to 1880 us between neighbouring 2 s turns (session 23).
+- Two processes of the same code differ by a few per cent (memory layout), so a round is a fresh
+  pair of processes, which one starts first and the core alternate between rounds, and the
+  interval resamples whole rounds.
+- A tree against itself (the default) gives the instrument's own spread.
 
-    .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--window S] [--record]
+Per tree and turn: the real-time factor (simulated over wall time of the turn, its first
+``SETTLE_S`` left out) and the CPU time of the executor's thread per period. A fresh worktree first
+runs one round that is not counted (numba compiles its kernels into the tree's cache).
 
-With ``--record`` each graph's bag writer (a child process) runs on its graph's core too, where
-``make bench`` (graph) lets it use the other core: the ratio compares the trees, the absolute figures
-are not those of bench_graph.py.
+    .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record]
+
+With ``--record`` each graph's bag writer (a child process) runs on the same core and stops with
+its graph: the ratio compares the trees, the absolute figures are not those of bench_graph.py.
 
 REF is a git revision (default: ``CDPR_BENCH_AGAINST`` or HEAD), checked out in a temporary
-worktree; ``--record`` records every topic in both graphs. Writes bench/against.json
-(bench/against_recording.json with ``--record``).
+worktree. Writes bench/against.json (bench/against_recording.json with ``--record``).
 """
 from __future__ import annotations
 
@@ -32,6 +36,9 @@ import json
 import os
 import pathlib
 import platform
+import random
+import select
+import signal
 import statistics
 import subprocess
 import sys
@@ -41,10 +48,16 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 OUT = ROOT / "bench"
 PACKAGES = ("cdpr_control", "cdpr_sim", "cdpr_tools")
+SAMPLE_S = 0.05     # the child's sampling period [s] (a turn of 0.25 s holds about five samples)
+SETTLE_S = 0.03     # the start of a turn left out [s]: the graph resumes where it stopped
+START_S = 600.0     # longest wait for a child's graph to start [s] (a fresh tree compiles its kernels)
 
-# The child: the tree's own launcher (the API is the same since before the layout of Fig. 3.4).
+# The child: the tree's own launcher (the API is the same since before the layout of Fig. 3.4). It
+# says it is ready once its simulator stepped 200 periods (a fresh tree's kernels compile in the first
+# ones), then samples (time, simulator steps, CPU time of the graph's thread) until its stdin gives a line;
+# while it is stopped it takes no sample, and the parent's turns say which samples count.
 CHILD = r"""
-import json, os, random, statistics, sys, tempfile, threading, time
+import json, os, random, sys, tempfile, threading, time
 try:
     from cdpr_tools.file_lock import own_ros_domain
     _domain = own_ros_domain(random.randint(1, 100))
@@ -54,28 +67,24 @@ from cdpr_tools.demo_cmd import GRAPH
 from cdpr_tools.launch import Launcher, RecordSpec
 from cdpr_tools.launch_file import load_launch_file
 
-warmup, window, record = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3] == "1"
+record, sample = sys.argv[1] == "1", float(sys.argv[2])
 description = load_launch_file(GRAPH, {"robot": "ipanema3_mini", "sync_mode": "exact"})
+stop = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.readline(), stop.set()), daemon=True).start()
+samples = []
 with tempfile.TemporaryDirectory() as tmp:
     if record:
         description.record = RecordSpec(output=os.path.join(tmp, "bag"))
     with Launcher(description, mode="composed", intra_process=True) as launch:
         sim = next(n for n in launch.nodes if n.get_name() == "winch_platform_sim")
-        time.sleep(warmup)
         thread = next(t for t in threading.enumerate() if t.name == "cdpr-launch-graph")
         clock = time.pthread_getcpuclockid(thread.ident)
-        s0, t0, c0 = sim.sim.steps, time.perf_counter(), time.process_time()
-        slices, last = [], (s0, time.clock_gettime_ns(clock))
-        while time.perf_counter() < t0 + window:
-            time.sleep(0.05)
-            now = sim.sim.steps, time.clock_gettime_ns(clock)
-            if now[0] > last[0]:
-                slices.append((now[1] - last[1]) / (now[0] - last[0]) * 1e-3)
-            last = now
-        s1, t1, c1 = sim.sim.steps, time.perf_counter(), time.process_time()
-print(json.dumps({"rtf": (s1 - s0) * 1e-3 / (t1 - t0), "periods": s1 - s0,
-                  "cpu_us_per_period": (c1 - c0) / max(s1 - s0, 1) * 1e6,
-                  "loop_thread_us_per_period": statistics.median(slices) if slices else None}))
+        while sim.sim.steps < 200:           # running (a fresh tree compiles its kernels in the first periods)
+            time.sleep(sample)
+        print("ready", flush=True)
+        while not stop.wait(sample):
+            samples.append((time.perf_counter(), sim.sim.steps, time.clock_gettime_ns(clock)))
+print(json.dumps(samples))
 """
 
 
@@ -94,74 +103,145 @@ def checked_out(ref: str):
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)], capture_output=True)
 
 
-def start(tree: pathlib.Path, warmup: float, window: float, record: bool, cpu: int | None) -> subprocess.Popen:
-    """The child graph of ``tree``, its threads pinned to core ``cpu`` (None: anywhere)."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(tree / p) for p in PACKAGES)}
-    pin = None if cpu is None else (lambda: os.sched_setaffinity(0, {cpu}))
-    return subprocess.Popen([sys.executable, "-c", CHILD, str(warmup), str(window), "1" if record else "0"],
-                            cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=pin)
+class Graph:
+    """One tree's composed graph in a child process of its own group, pinned to core ``cpu``."""
+
+    def __init__(self, tree: pathlib.Path, record: bool, cpu: int):
+        self.tree = tree
+        self.errors = tempfile.TemporaryFile(mode="w+")    # not a pipe: a full pipe would block the graph
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(tree / p) for p in PACKAGES)}
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", CHILD, "1" if record else "0", str(SAMPLE_S)], cwd=tree, env=env,
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.errors, text=True,
+            start_new_session=True,         # its own process group: SIGSTOP reaches its bag writer too
+            preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
+
+    def ready(self) -> None:
+        readable, _, _ = select.select([self.process.stdout], [], [], START_S)
+        if not readable or self.process.stdout.readline().strip() != "ready":
+            self.failed("did not start")
+
+    def signal(self, number: int) -> None:
+        os.killpg(self.process.pid, number)
+
+    def samples(self) -> list:
+        self.signal(signal.SIGCONT)
+        out, _ = self.process.communicate("stop\n", timeout=180.0)
+        if self.process.returncode != 0 or not out.strip():
+            self.failed(f"exited {self.process.returncode}")
+        return json.loads(out.strip().splitlines()[-1])
+
+    def failed(self, what: str):
+        self.errors.seek(0)
+        if self.process.poll() is None:
+            self.signal(signal.SIGCONT)
+            self.process.kill()
+        raise RuntimeError(f"the graph of {self.tree} {what}:\n{self.errors.read()[-3000:]}")
 
 
-def finish(process: subprocess.Popen, tree: pathlib.Path, timeout: float) -> dict:
-    out, err = process.communicate(timeout=timeout)
-    if process.returncode != 0 or not out.strip():
-        raise RuntimeError(f"the graph of {tree} failed (exit {process.returncode}):\n{err[-3000:]}")
-    return json.loads(out.strip().splitlines()[-1])
+def turn_figures(samples: list, t0: float, t1: float) -> dict | None:
+    """RTF and loop-thread CPU per period over the samples of one turn [t0, t1], its start left out."""
+    inside = [s for s in samples if t0 + SETTLE_S <= s[0] <= t1]
+    if len(inside) < 2 or inside[-1][1] <= inside[0][1]:
+        return None
+    (ta, sa, ca), (tb, sb, cb) = inside[0], inside[-1]
+    return {"rtf": (sb - sa) * 1e-3 / (tb - ta), "loop_thread_us_per_period": (cb - ca) / (sb - sa) * 1e-3}
 
 
-def round_pair(trees: dict, warmup: float, window: float, record: bool, first: str) -> dict:
-    """Both graphs at once; ``first`` starts first and, on a machine of two or more cores, runs on core 0
-    and the other on core 1 (a core each, so that neither's threads wait for the other's)."""
+def run_round(trees: dict, record: bool, cpu: int, turns: int, turn: float, warmup: float, first: str) -> dict:
+    """Both graphs pinned to core ``cpu`` (``first`` started first): after ``warmup`` s together,
+    ``turns`` pairs of turns of ``turn`` s each, the pair's order alternating (ABBA). Per pair: each
+    tree's figures and the ratio."""
     order = [first] + [name for name in trees if name != first]
-    cores = sorted(os.sched_getaffinity(0))
-    processes = {}
-    for k, name in enumerate(order):
-        processes[name] = start(trees[name], warmup, window, record, cores[k] if len(cores) >= 2 else None)
-    timeout = warmup + window + 180.0
-    return {name: finish(processes[name], trees[name], timeout) for name in order}
+    graphs = {name: Graph(trees[name], record, cpu) for name in order}
+    try:
+        for graph in graphs.values():
+            graph.ready()
+        time.sleep(warmup)
+        for graph in graphs.values():
+            graph.signal(signal.SIGSTOP)
+        spans = []
+        for k in range(turns):
+            pair = ("this", "other") if k % 2 == 0 else ("other", "this")
+            for name in pair:
+                graphs[name].signal(signal.SIGCONT)
+                t0 = time.perf_counter()
+                time.sleep(turn)
+                graphs[name].signal(signal.SIGSTOP)
+                spans.append((k, name, t0, time.perf_counter()))
+        samples = {name: graph.samples() for name, graph in graphs.items()}
+    except BaseException:
+        for graph in graphs.values():
+            if graph.process.poll() is None:
+                graph.signal(signal.SIGCONT)
+                graph.process.kill()
+        raise
+    pairs = [{} for _ in range(turns)]
+    for k, name, t0, t1 in spans:
+        pairs[k][name] = turn_figures(samples[name], t0, t1)
+    pairs = [p for p in pairs if p["this"] and p["other"]]
+    return {"cpu": cpu, "first": first, "pairs": pairs, "rtf_ratio": ratios(pairs, "rtf"),
+            "loop_thread_cpu_ratio": ratios(pairs, "loop_thread_us_per_period")}
 
 
-def ratios(rounds: list[dict], key: str) -> list[float]:
-    """this tree's figure over the other's, per round (RTF: above 1 is faster; CPU: below 1 is cheaper)."""
-    return [r["this"][key] / r["other"][key] for r in rounds if r["this"][key] and r["other"][key]]
+def ratios(pairs: list[dict], key: str) -> list[float]:
+    """this tree's figure over the other's, per pair of turns (RTF: above 1 is faster; CPU: below 1 is cheaper)."""
+    return [p["this"][key] / p["other"][key] for p in pairs]
+
+
+def interval(rounds: list[list[float]], level: float = 0.95, resamples: int = 4000) -> tuple[float, float]:
+    """Bootstrap interval of the median ratio, resampling whole rounds (the pairs of one round share
+    its two processes, whose memory layouts differ by a few per cent: they are not independent).
+    A fixed seed: the same figures give the same interval."""
+    rng = random.Random(0)
+    medians = sorted(statistics.median([x for r in rng.choices(rounds, k=len(rounds)) for x in r])
+                     for _ in range(resamples))
+    tail = int(resamples * (1.0 - level) / 2.0)
+    return medians[tail], medians[-tail - 1]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", default=os.environ.get("CDPR_BENCH_AGAINST", "HEAD"),
                         help="git revision of the other tree (default: CDPR_BENCH_AGAINST or HEAD)")
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--window", type=float, default=20.0, help="measured seconds of wall time per round")
-    parser.add_argument("--warmup", type=float, default=5.0)
+    parser.add_argument("--rounds", type=int, default=8, help="rounds (each a fresh pair of graphs; the core alternates)")
+    parser.add_argument("--turns", type=int, default=24, help="pairs of turns per round")
+    parser.add_argument("--turn", type=float, default=0.25, help="wall time of one turn [s]")
+    parser.add_argument("--warmup", type=float, default=3.0, help="both graphs running before the turns [s]")
     parser.add_argument("--record", action="store_true", help="both graphs record every topic")
     args = parser.parse_args()
+    cores = sorted(os.sched_getaffinity(0))
     with checked_out(args.against) as (other, commit):
         trees = {"this": ROOT, "other": other}
         print("warm-up round (numba compiles into the trees' caches) ...", flush=True)
-        round_pair(trees, args.warmup, 5.0, args.record, "other")
+        run_round(trees, args.record, cores[0], 2, 1.0, args.warmup, "other")
         rounds = []
         for k in range(args.rounds):
-            rounds.append(round_pair(trees, args.warmup, args.window, args.record, ["this", "other"][k % 2]))
+            cpu = cores[k % len(cores)]
+            rounds.append(run_round(trees, args.record, cpu, args.turns, args.turn, args.warmup,
+                                    ("this", "this", "other", "other")[k % 4]))
             r = rounds[-1]
-            print(f"round {k + 1}: RTF this {r['this']['rtf']:.3f} other {r['other']['rtf']:.3f}; loop thread "
-                  f"us/period this {r['this']['loop_thread_us_per_period']:.0f} "
-                  f"other {r['other']['loop_thread_us_per_period']:.0f}", flush=True)
-    rtf, cpu = ratios(rounds, "rtf"), ratios(rounds, "loop_thread_us_per_period")
+            print(f"round {k + 1} (core {cpu}, {r['first']} first): RTF ratio median {statistics.median(r['rtf_ratio']):.3f} "
+                  f"({len(r['pairs'])} pairs, {min(r['rtf_ratio']):.3f}..{max(r['rtf_ratio']):.3f}); loop thread "
+                  f"CPU ratio median {statistics.median(r['loop_thread_cpu_ratio']):.3f}", flush=True)
+    rtf = [x for r in rounds for x in r["rtf_ratio"]]
+    cpu = [x for r in rounds for x in r["loop_thread_cpu_ratio"]]
+    rtf_rounds, cpu_rounds = [r["rtf_ratio"] for r in rounds], [r["loop_thread_cpu_ratio"] for r in rounds]
     result = {
         "machine": platform.machine(), "cpu_count": os.cpu_count(), "against": args.against, "against_commit": commit,
         "graph": "graphs/closed_loop.yaml, ipanema3_mini holding home, default plant, composed lockstep"
                  + (", recording every topic" if args.record else ""),
-        "window_s": args.window, "rounds": rounds,
-        "rtf_ratio": rtf, "rtf_ratio_median": statistics.median(rtf),
-        "loop_thread_cpu_ratio": cpu, "loop_thread_cpu_ratio_median": statistics.median(cpu),
+        "turn_s": args.turn, "turns": args.turns, "rounds": rounds,
+        "rtf_ratio_median": statistics.median(rtf), "rtf_ratio_interval_95": interval(rtf_rounds),
+        "loop_thread_cpu_ratio_median": statistics.median(cpu), "loop_thread_cpu_ratio_interval_95": interval(cpu_rounds),
     }
     OUT.mkdir(exist_ok=True)
     out = OUT / ("against_recording.json" if args.record else "against.json")
     out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"this tree against {args.against} ({commit}): RTF x{result['rtf_ratio_median']:.3f}, "
-          f"loop thread CPU per period x{result['loop_thread_cpu_ratio_median']:.3f} (medians of {len(rounds)} "
-          f"rounds); {out.relative_to(ROOT)}")
+    lo, hi = result["rtf_ratio_interval_95"]
+    print(f"this tree against {args.against} ({commit}): RTF x{result['rtf_ratio_median']:.3f} "
+          f"(95 % interval {lo:.3f}..{hi:.3f}; {len(rtf)} pairs of turns in {len(rounds)} rounds), loop thread CPU per "
+          f"period x{result['loop_thread_cpu_ratio_median']:.3f}; {out.relative_to(ROOT)}")
 
 
 if __name__ == "__main__":

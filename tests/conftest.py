@@ -35,6 +35,27 @@ import pytest  # noqa: E402
 
 
 _NEXT_DOMAIN = [SESSION_DOMAIN % 100 + 1]
+_LOGGING_HOLDER = []
+
+
+@pytest.fixture(scope="session", autouse=True)
+def ros_logging_held_for_the_session():
+    """rclpy configures the process's logging (rcl_logging_configure) when the first context of the
+    process starts, and finalises it (rcl_logging_fini) when the last one shuts down. A test process
+    starts and shuts down hundreds of contexts one after the other, so it finalised and configured
+    logging hundreds of times, each time with DDS threads of earlier contexts possibly still winding
+    down. One `make test` (session 22) hung in that finalisation, in a fixture's teardown
+    (Context.try_shutdown -> Context._logging_fini, the worker's only other thread execnet's).
+    A context of the session's own, started here and never shut down, keeps logging configured from
+    the first test to the process's exit: no test's teardown finalises it. It creates no node, so
+    no DDS participant (rmw_fastrtps makes one with a context's first node)."""
+    from rclpy.context import Context
+
+    if not _LOGGING_HOLDER:
+        context = Context()
+        context.init(args=[])
+        _LOGGING_HOLDER.append(context)
+    yield
 
 
 @pytest.fixture(scope="module", autouse=True)
