@@ -10,15 +10,16 @@ its process group), then the other. Each pair of neighbouring turns gives a rati
 alternates (ABBA), so a steady drift cancels.
 
 - Turns are short (0.25 s) because the core's speed moves within seconds: the loop thread's CPU
-  time per period of one tree went from 1130 to 1880 us between neighbouring 2 s turns (session 23).
+  time per period of one tree went from 1264 to 1872 us between its neighbouring 2 s turns (session 23).
 - Two processes of the same code differ by a few per cent (memory layout), so a round is a fresh
   pair of processes, which one starts first and the core alternate between rounds, and the
   interval resamples whole rounds.
 - A tree against itself (the default) gives the instrument's own spread.
 
 Per tree and turn: the real-time factor (simulated over wall time of the turn, its first
-``SETTLE_S`` left out) and the CPU time of the executor's thread per period. A fresh worktree first
-runs one round that is not counted (numba compiles its kernels into the tree's cache).
+``SETTLE_S`` left out) and the CPU time of the executor's thread per period. A child reports ready
+once its simulator has stepped 200 periods (a fresh worktree compiles its kernels in the first
+ones), and a first round that is not counted leaves both trees' caches warm.
 
     .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record]
 
