@@ -132,11 +132,15 @@ class Graph:
             self.failed(f"exited {self.process.returncode}")
         return json.loads(out.strip().splitlines()[-1])
 
+    def kill(self) -> None:
+        """The whole group (a stopped bag writer left behind would stay stopped for good)."""
+        with contextlib.suppress(ProcessLookupError):
+            self.signal(signal.SIGKILL)
+        self.process.wait()
+
     def failed(self, what: str):
+        self.kill()
         self.errors.seek(0)
-        if self.process.poll() is None:
-            self.signal(signal.SIGCONT)
-            self.process.kill()
         raise RuntimeError(f"the graph of {self.tree} {what}:\n{self.errors.read()[-3000:]}")
 
 
@@ -173,14 +177,14 @@ def run_round(trees: dict, record: bool, cpu: int, turns: int, turn: float, warm
         samples = {name: graph.samples() for name, graph in graphs.items()}
     except BaseException:
         for graph in graphs.values():
-            if graph.process.poll() is None:
-                graph.signal(signal.SIGCONT)
-                graph.process.kill()
+            graph.kill()
         raise
     pairs = [{} for _ in range(turns)]
     for k, name, t0, t1 in spans:
         pairs[k][name] = turn_figures(samples[name], t0, t1)
     pairs = [p for p in pairs if p["this"] and p["other"]]
+    if not pairs:
+        raise RuntimeError(f"no turn in which both graphs stepped (core {cpu}): is a graph stuck?")
     return {"cpu": cpu, "first": first, "pairs": pairs, "rtf_ratio": ratios(pairs, "rtf"),
             "loop_thread_cpu_ratio": ratios(pairs, "loop_thread_us_per_period")}
 
