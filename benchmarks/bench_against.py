@@ -18,8 +18,8 @@ alternates (ABBA), so a steady drift cancels.
 
 Per tree and turn: the real-time factor (simulated over wall time of the turn, its first
 ``SETTLE_S`` left out) and the CPU time of the executor's thread per period. A child reports ready
-once its simulator has stepped 200 periods (a fresh worktree compiles its kernels in the first
-ones), and a first round that is not counted leaves both trees' caches warm.
+once its simulator has stepped 200 periods: a fresh worktree compiles its kernels in the first
+ones (into its cache, so only the first round waits for that).
 
     .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record]
 
@@ -218,8 +218,6 @@ def main() -> None:
     cores = sorted(os.sched_getaffinity(0))
     with checked_out(args.against) as (other, commit):
         trees = {"this": ROOT, "other": other}
-        print("warm-up round (numba compiles into the trees' caches) ...", flush=True)
-        run_round(trees, args.record, cores[0], 2, 1.0, args.warmup, "other")
         rounds = []
         for k in range(args.rounds):
             cpu = cores[k % len(cores)]

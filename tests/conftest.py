@@ -35,7 +35,6 @@ import pytest  # noqa: E402
 
 
 _NEXT_DOMAIN = [SESSION_DOMAIN % 100 + 1]
-_LOGGING_HOLDER = []
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -47,15 +46,13 @@ def ros_logging_held_for_the_session():
     down. One `make test` (session 22) hung in that finalisation, in a fixture's teardown
     (Context.try_shutdown -> Context._logging_fini, the worker's only other thread execnet's).
     A context of the session's own, started here and never shut down, keeps logging configured from
-    the first test to the process's exit: no test's teardown finalises it. It creates no node, so
+    the first test to the session's end: no test's teardown finalises it. It creates no node, so
     no DDS participant (rmw_fastrtps makes one with a context's first node)."""
     from rclpy.context import Context
 
-    if not _LOGGING_HOLDER:
-        context = Context()
-        context.init(args=[])
-        _LOGGING_HOLDER.append(context)
-    yield
+    context = Context()
+    context.init(args=[])
+    yield context
 
 
 @pytest.fixture(scope="module", autouse=True)
