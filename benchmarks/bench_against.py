@@ -68,7 +68,65 @@ from cdpr_tools.demo_cmd import GRAPH
 from cdpr_tools.launch import Launcher, RecordSpec
 from cdpr_tools.launch_file import load_launch_file
 
-record, sample = sys.argv[1] == "1", float(sys.argv[2])
+# Time every in-process delivery: totals[subscriber node <- topic] = [ns, deliveries]. The tree's own
+# drain loop with a clock around each callback (the same loop in every tree since 784c4eb); a delivery
+# longer than LONG_NS is left out (a SIGSTOP fell into it).
+def time_deliveries(totals):
+    import importlib
+    for name in ("cdpr_control.ros.intraprocess", "cdpr_control.nodes.intraprocess"):
+        try:
+            ip = importlib.import_module(name)
+            break
+        except ImportError:
+            pass
+    labels, add, clock, LONG_NS = {}, ip.IntraProcess.add_subscription, time.perf_counter_ns, 5_000_000
+
+    def add_subscription(self, local):
+        labels[local.callback] = f"{local.node.get_name()} <- {local.topic.name}"
+        add(self, local)
+
+    def _drain(self, budget=ip.BUDGET_S):
+        queue, urgent, deadline = self.queue, self.urgent, time.perf_counter() + budget
+        try:
+            while True:
+                try:
+                    callback, msg = urgent.popleft() if urgent else queue.popleft()
+                except IndexError:
+                    with self.lock:
+                        if not queue and not urgent:
+                            self.busy = False
+                            return
+                    continue
+                self.deliveries += 1
+                t0 = clock()
+                callback(msg)
+                dt = clock() - t0
+                if dt < LONG_NS:
+                    label = labels.get(callback) or getattr(callback, "__qualname__", "other")
+                    entry = totals.get(label)
+                    if entry is None:
+                        totals[label] = [dt, 1]
+                    else:
+                        entry[0] += dt
+                        entry[1] += 1
+                if (queue or urgent) and time.perf_counter() > deadline:
+                    with self.lock:
+                        self.busy = False
+                        if not self.pumped:
+                            self.wake()
+                    return
+        except BaseException:
+            with self.lock:
+                self.busy = False
+            raise
+
+    ip.IntraProcess.add_subscription, ip.IntraProcess._drain = add_subscription, _drain
+
+
+record, sample, per_delivery = sys.argv[1] == "1", float(sys.argv[2]), sys.argv[3] == "1"
+totals = {}
+if per_delivery:
+    time_deliveries(totals)
 description = load_launch_file(GRAPH, {"robot": "ipanema3_mini", "sync_mode": "exact"})
 stop = threading.Event()
 threading.Thread(target=lambda: (sys.stdin.readline(), stop.set()), daemon=True).start()
@@ -84,7 +142,8 @@ with tempfile.TemporaryDirectory() as tmp:
             time.sleep(sample)
         print("ready", flush=True)
         while not stop.wait(sample):
-            samples.append((time.perf_counter(), sim.sim.steps, time.clock_gettime_ns(clock)))
+            samples.append((time.perf_counter(), sim.sim.steps, time.clock_gettime_ns(clock))
+                           + (({k: tuple(v) for k, v in totals.items()},) if per_delivery else ()))
 print(json.dumps(samples))
 """
 
@@ -107,12 +166,12 @@ def checked_out(ref: str):
 class Graph:
     """One tree's composed graph in a child process of its own group, pinned to core ``cpu``."""
 
-    def __init__(self, tree: pathlib.Path, record: bool, cpu: int):
+    def __init__(self, tree: pathlib.Path, record: bool, cpu: int, per_delivery: bool = False):
         self.tree = tree
         self.errors = tempfile.TemporaryFile(mode="w+")    # not a pipe: a full pipe would block the graph
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(tree / p) for p in PACKAGES)}
         self.process = subprocess.Popen(
-            [sys.executable, "-c", CHILD, "1" if record else "0", str(SAMPLE_S)], cwd=tree, env=env,
+            [sys.executable, "-c", CHILD, "1" if record else "0", str(SAMPLE_S), "1" if per_delivery else "0"], cwd=tree, env=env,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.errors, text=True,
             start_new_session=True,         # its own process group: SIGSTOP reaches its bag writer too
             preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
@@ -149,16 +208,22 @@ def turn_figures(samples: list, t0: float, t1: float) -> dict | None:
     inside = [s for s in samples if t0 + SETTLE_S <= s[0] <= t1]
     if len(inside) < 2 or inside[-1][1] <= inside[0][1]:
         return None
-    (ta, sa, ca), (tb, sb, cb) = inside[0], inside[-1]
-    return {"rtf": (sb - sa) * 1e-3 / (tb - ta), "loop_thread_us_per_period": (cb - ca) / (sb - sa) * 1e-3}
+    (ta, sa, ca, *da), (tb, sb, cb, *db) = inside[0], inside[-1]
+    figures = {"rtf": (sb - sa) * 1e-3 / (tb - ta), "loop_thread_us_per_period": (cb - ca) / (sb - sa) * 1e-3}
+    if db:          # --deliveries: each subscriber's in-process deliveries, us per period
+        before = da[0]
+        figures["deliveries_us_per_period"] = {
+            label: (ns - before.get(label, (0, 0))[0]) / (sb - sa) * 1e-3 for label, (ns, _) in db[0].items()}
+    return figures
 
 
-def run_round(trees: dict, record: bool, cpu: int, turns: int, turn: float, warmup: float, first: str) -> dict:
+def run_round(trees: dict, record: bool, cpu: int, turns: int, turn: float, warmup: float, first: str,
+              per_delivery: bool = False) -> dict:
     """Both graphs pinned to core ``cpu`` (``first`` started first): after ``warmup`` s together,
     ``turns`` pairs of turns of ``turn`` s each, the pair's order alternating (ABBA). Per pair: each
     tree's figures and the ratio."""
     order = [first] + [name for name in trees if name != first]
-    graphs = {name: Graph(trees[name], record, cpu) for name in order}
+    graphs = {name: Graph(trees[name], record, cpu, per_delivery) for name in order}
     try:
         for graph in graphs.values():
             graph.ready()
@@ -194,6 +259,34 @@ def ratios(pairs: list[dict], key: str) -> list[float]:
     return [p["this"][key] / p["other"][key] for p in pairs]
 
 
+def delivery_table(rounds: list[dict], by_node: bool = True) -> list[dict]:
+    """Per subscribing node (``by_node``; else per node and topic) with --deliveries: the median over
+    all pairs of turns of each tree's us per period and of their difference (this - other), largest
+    difference first. A node computes its period in the delivery that completes its inputs, which
+    may be another topic in the other tree: compare nodes, not topics. "(outside the deliveries)"
+    is the loop thread's CPU per period less the deliveries' sum: the executor, timers, the lockstep
+    runner (CPU time against the deliveries' wall time: near, not equal)."""
+    outside = "(outside the deliveries)"
+    rows = {}
+    for r in rounds:
+        for pair in r["pairs"]:
+            figures = {}
+            for name in ("this", "other"):
+                d = {}
+                for label, us in pair[name]["deliveries_us_per_period"].items():
+                    key = label.split(" <- ")[0] if by_node else label
+                    d[key] = d.get(key, 0.0) + us
+                d[outside] = pair[name]["loop_thread_us_per_period"] - sum(d.values())
+                figures[name] = d
+            for label in figures["this"].keys() | figures["other"].keys():
+                a, b = figures["this"].get(label, 0.0), figures["other"].get(label, 0.0)
+                rows.setdefault(label, []).append((a, b, a - b))
+    table = [{"delivery": label, "this_us": statistics.median(x[0] for x in v),
+              "other_us": statistics.median(x[1] for x in v), "difference_us": statistics.median(x[2] for x in v)}
+             for label, v in rows.items()]
+    return sorted(table, key=lambda row: -abs(row["difference_us"]))
+
+
 def interval(rounds: list[list[float]], level: float = 0.95, resamples: int = 4000) -> tuple[float, float]:
     """Bootstrap interval of the median ratio, resampling whole rounds (the pairs of one round share
     its two processes, whose memory layouts differ by a few per cent: they are not independent).
@@ -214,6 +307,8 @@ def main() -> None:
     parser.add_argument("--turn", type=float, default=0.25, help="wall time of one turn [s]")
     parser.add_argument("--warmup", type=float, default=3.0, help="both graphs running before the turns [s]")
     parser.add_argument("--record", action="store_true", help="both graphs record every topic")
+    parser.add_argument("--deliveries", action="store_true",
+                        help="also time each subscriber's in-process deliveries (what differs, node by node)")
     args = parser.parse_args()
     cores = sorted(os.sched_getaffinity(0))
     with checked_out(args.against) as (other, commit):
@@ -222,7 +317,7 @@ def main() -> None:
         for k in range(args.rounds):
             cpu = cores[k % len(cores)]
             rounds.append(run_round(trees, args.record, cpu, args.turns, args.turn, args.warmup,
-                                    ("this", "this", "other", "other")[k % 4]))
+                                    ("this", "this", "other", "other")[k % 4], args.deliveries))
             r = rounds[-1]
             print(f"round {k + 1} (core {cpu}, {r['first']} first): RTF ratio median {statistics.median(r['rtf_ratio']):.3f} "
                   f"({len(r['pairs'])} pairs, {min(r['rtf_ratio']):.3f}..{max(r['rtf_ratio']):.3f}); loop thread "
@@ -238,6 +333,12 @@ def main() -> None:
         "rtf_ratio_median": statistics.median(rtf), "rtf_ratio_interval_95": interval(rtf_rounds),
         "loop_thread_cpu_ratio_median": statistics.median(cpu), "loop_thread_cpu_ratio_interval_95": interval(cpu_rounds),
     }
+    if args.deliveries:
+        result["deliveries"] = delivery_table(rounds, by_node=False)
+        result["nodes"] = delivery_table(rounds)
+        print(f"{'us per period (medians over the pairs)':60s} {'this':>8s} {'other':>8s} {'this-other':>10s}")
+        for row in result["nodes"]:
+            print(f"{row['delivery'][:60]:60s} {row['this_us']:8.1f} {row['other_us']:8.1f} {row['difference_us']:+10.1f}")
     OUT.mkdir(exist_ok=True)
     out = OUT / ("against_recording.json" if args.record else "against.json")
     out.write_text(json.dumps(result, indent=2) + "\n")

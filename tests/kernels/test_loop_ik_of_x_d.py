@@ -55,3 +55,24 @@ def test_a_moving_set_point_computes_one_ik_of_x_d_a_period(ik_calls):
         return home + np.array([1e-3 * t, 0.0, 0.0, 0.0, 0.0, 0.0]), np.r_[1e-3, np.zeros(5)], np.zeros(6)
     run(robot, line, PERIODS * 1e-3, before_step=_per_period(ik_calls))
     assert ik_calls[2:] == [1] * (PERIODS - 1), ik_calls
+
+
+def test_robots_of_one_file_share_the_ik_of_x_d(ik_calls):
+    """Each node of a composed graph loads its own robot object: robots of equal constants share one
+    RobotData and so the period's IK of x_d (three nodes computed it three times a period while it
+    was keyed on the robot object, session 24); a robot of other constants does not."""
+    robots = [load_robot("ipanema3_mini") for _ in range(3)]
+    assert robots[0] is not robots[1]
+    assert kernels.robot_data(robots[0]) is kernels.robot_data(robots[1]) is kernels.robot_data(robots[2])
+    x_d = robots[0].home + np.array([0.01, -0.02, 0.03, 0.0, 0.01, 0.0])
+    kernels._packed_memo.clear()
+    fields = [kernels.inverse_kinematics_fields(robot, x_d, "AT")[0] for robot in robots]
+    assert ik_calls == [1]
+    assert fields[0] is fields[1] is fields[2]
+    with kernels.numpy_reference():
+        np.testing.assert_allclose(fields[0], kernels.inverse_kinematics(robots[2], x_d).AT, rtol=0, atol=1e-12)
+    other = load_robot("ipanema3")
+    assert kernels.robot_data(other) is not kernels.robot_data(robots[0])
+    kernels.inverse_kinematics_fields(other, other.home, "AT")
+    kernels.inverse_kinematics_fields(robots[0], other.home, "AT")      # the same pose, another robot
+    assert ik_calls == [3]

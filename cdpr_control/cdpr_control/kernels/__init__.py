@@ -169,29 +169,30 @@ def setpoint_ik(robot, x) -> SetpointIK:
     return SetpointIK(*inverse_kinematics_fields(robot, x, "q", "AT", "cT", "beta"))
 
 
-# (robot, packed IK, its views by field) of the last _packed call's robot and pose bytes (the robot
-# kept in the value: its id cannot be taken by another robot while the memo holds it)
+# (RobotData, packed IK, its views by field) of the last _packed call's robot constants and pose
+# bytes (the RobotData kept in the value: its id cannot be taken by another while the memo holds it)
 _packed_memo = Memo()
 
 
 def _packed(robot, x) -> tuple[np.ndarray | None, dict]:
     """model.ik_packed of one pose (None where R does not fit its layout, m < 3) and the views of its
-    fields made so far. The last result is kept and returned again for the same robot and pose: the
-    stages of a period (friction compensation, forward kinematics, force set-point, load
+    fields made so far. The last result is kept and returned again for the same robot constants and
+    pose: the stages of a period (friction compensation, forward kinematics, force set-point, load
     compensation, in ControlLoop and in the nodes of a composed graph alike) all take the IK of the
-    period's x_d, which one computation then serves; each view is made once per pose (a slice
-    costs about 0.7 us, a look-up 0.1)."""
-    x = vector(x)
-    return _packed_memo((id(robot), x.tobytes()), _compute_packed, robot, x)[1:]
+    period's x_d, which one computation then serves. Keyed on the :func:`robot_data`, which robots of
+    equal constants share: each node of a composed graph has a robot object of its own (keyed on the
+    robot, the graph's three callers at x_d computed it three times a period, session 24). Each view
+    is made once per pose (a slice costs about 0.7 us, a look-up 0.1)."""
+    x, d = vector(x), robot_data(robot)
+    return _packed_memo((id(d), x.tobytes()), _compute_packed, d, x)[1:]
 
 
-def _compute_packed(robot, x) -> tuple:
-    d = robot_data(robot)
+def _compute_packed(d: RobotData, x) -> tuple:
     if d.a.shape[0] < 3:
-        return robot, None, {}
+        return d, None, {}
     P = np.empty((_ROWS + 3, d.a.shape[0]))
     ik_packed(x, d.a, d.b, d.R_A, d.r_p, d.pulleys, P)
-    return robot, P, {}
+    return d, P, {}
 
 
 def _per_channel(n, v) -> np.ndarray:

@@ -52,10 +52,15 @@ def vector(v) -> np.ndarray:
 
 
 _CACHE: dict[int, tuple] = {}
+# one RobotData per distinct robot: each node of a composed graph loads its own robot object from the
+# same file, and the period's results keyed on the RobotData (the IK of x_d, kernels._packed) then
+# serve every node of the process
+_BY_VALUE: dict[tuple, RobotData] = {}
 
 
 def robot_data(robot) -> RobotData:
-    """The :class:`RobotData` of ``robot``, built on first use and cached per robot object."""
+    """The :class:`RobotData` of ``robot``, built on first use and cached per robot object; robots
+    of equal constants share one (the same object: ``robot_data(a) is robot_data(b)``)."""
     entry = _CACHE.get(id(robot))
     if entry is None or entry[0] is not robot:
         def arr(v):
@@ -65,5 +70,11 @@ def robot_data(robot) -> RobotData:
                          bool(robot.swivelling_pulleys), arr(robot.l_0), float(c.k0), float(c.k1),
                          float(c.k2), float(p.mass), arr(p.center_of_gravity), arr(p.inertia),
                          arr(robot.gravity))
+        data = _BY_VALUE.setdefault(_value_key(data), data)
         entry = _CACHE[id(robot)] = (robot, data)
     return entry[1]
+
+
+def _value_key(data: RobotData) -> tuple:
+    """The exact values of every constant (bytes: -0.0 and 0.0 differ, as they may for a kernel)."""
+    return tuple((v.shape, v.tobytes()) if isinstance(v, np.ndarray) else (type(v), v) for v in data)
