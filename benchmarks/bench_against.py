@@ -21,7 +21,12 @@ Per tree and turn: the real-time factor (simulated over wall time of the turn, i
 once its simulator has stepped 200 periods: a fresh worktree compiles its kernels in the first
 ones (into its cache, so only the first round waits for that).
 
-    .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record]
+    .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record] [--deliveries]
+
+With ``--deliveries`` each child also times every in-process delivery (its tree's own drain loop
+with a clock around each callback), and the summary gives per node the us per period of both trees
+in the same turns: which node's period grew, where the ratio alone says only that something did
+(session 24 found the period's IK of x_d computed three times a period with it).
 
 With ``--record`` each graph's bag writer (a child process) runs on the same core and stops with
 its graph: the ratio compares the trees, the absolute figures are not those of bench_graph.py.

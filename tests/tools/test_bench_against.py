@@ -41,3 +41,28 @@ def test_ratios_and_the_interval_over_rounds():
     assert lo < 1.0 <= hi
     assert bench_against.interval(rounds) == (lo, hi)            # a fixed seed
     assert bench_against.interval([[1.0, 1.0]] * 4) == (1.0, 1.0)
+
+
+def test_deliveries_per_period_and_per_node():
+    # --deliveries: each sample carries the running totals {subscriber <- topic: (ns, deliveries)}
+    a = (1.0, 100, 100_000_000, {"fd <- /setpoint": (1_000_000, 100), "fd <- /wrench": (5_000_000, 100)})
+    b = (1.2, 300, 300_000_000, {"fd <- /setpoint": (1_400_000, 300), "fd <- /wrench": (15_000_000, 300),
+                                 "jc <- /fd": (2_000_000, 200)})
+    figures = bench_against.turn_figures([a, b], 1.0 - bench_against.SETTLE_S, 1.2)
+    assert figures["deliveries_us_per_period"] == pytest.approx(
+        {"fd <- /setpoint": 2.0, "fd <- /wrench": 50.0, "jc <- /fd": 10.0})   # a subscriber new in the turn: from 0
+    # a node computes in the delivery that completes its inputs, another topic in the other tree:
+    # the node table sums its topics; what the deliveries leave of the thread's CPU is "outside"
+    this = {"rtf": 1.0, "loop_thread_us_per_period": 100.0,
+            "deliveries_us_per_period": {"fd <- /setpoint": 60.0, "fd <- /wrench": 1.0, "jc <- /fd": 9.0}}
+    other = {"rtf": 1.0, "loop_thread_us_per_period": 90.0,
+             "deliveries_us_per_period": {"fd <- /setpoint": 1.0, "fd <- /wrench": 50.0, "jc <- /fd": 9.0}}
+    rounds = [{"pairs": [{"this": this, "other": other}]}]
+    nodes = {row["delivery"]: row for row in bench_against.delivery_table(rounds)}
+    assert nodes["fd"]["difference_us"] == pytest.approx(10.0)
+    assert nodes["jc"]["difference_us"] == pytest.approx(0.0)
+    assert nodes["(outside the deliveries)"]["this_us"] == pytest.approx(30.0)
+    assert nodes["(outside the deliveries)"]["other_us"] == pytest.approx(30.0)
+    assert bench_against.delivery_table(rounds)[0]["delivery"] == "fd"          # the largest difference first
+    topics = {row["delivery"]: row for row in bench_against.delivery_table(rounds, by_node=False)}
+    assert topics["fd <- /setpoint"]["difference_us"] == pytest.approx(59.0)
