@@ -34,8 +34,8 @@ from cdpr_control.control.ospc import AXES
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, bare, pose_from_msg, pose_to_msg,
-    twist_from_msg, twist_to_msg, wrench_from_msg)
+from cdpr_control.ros.conversions import (accel_to_msg, bare, pose_to_msg, setpoint_from_msg, setpoint_pose,
+    twist_to_msg, wrench_from_msg)
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL, STATUS
 from cdpr_control.ros.sync import StampSync
@@ -133,7 +133,7 @@ class AdmittanceControllerNode(CdprNode):
             self._idle(sp, t_ns)
             return
         w = wrench_from_msg(msgs["wrench"].wrench)
-        x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+        x_d, xdot_d, xddot_d = setpoint_from_msg(sp)
         if not all(np.all(np.isfinite(v)) for v in (w, x_d, xdot_d, xddot_d)):
             # never guide on garbage: brake to rest from the last good state, ignoring the input
             if self.params.values["hand_guiding"]:
@@ -172,7 +172,7 @@ class AdmittanceControllerNode(CdprNode):
         out._header, out._pose, out._velocity, out._acceleration = header, sp.pose, _ZERO_TWIST, _ZERO_ACCEL
         out._force, out._line = sp.force, 0
         self.setpoint_pub.publish(out)
-        x_0, x_d = self._origin(), pose_from_msg(sp.pose).tolist()
+        x_0, x_d = self._origin(), setpoint_pose(sp).tolist()
         self.state_pub.publish(self.message_factory(ControllerState)(
             header=header, controller="admittance_controller", enabled=False, names=list(AXES),
             reference=x_0, feedback=_ZEROS, error=[a - b for a, b in zip(x_d, x_0)],

@@ -38,7 +38,7 @@ from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import pose_from_msg
+from cdpr_control.ros.conversions import setpoint_pose
 from cdpr_control.ros.mode import follow_mode
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, declare, startup_calibration
 from cdpr_control.ros.qos import CONTROL
@@ -185,7 +185,7 @@ class CableForceControllerNode(CdprNode):
             F_d0, F_vec = hpfc.reference[:3], hpfc.feedback[:3]
             # x_d only where the stage uses it (not idle with the ramp-out done: the most frequent
             # case by far); its pose StampSync found finite
-            x_d = (pose_from_msg(sp.pose) if self.contact.needs_setpoint(state) or self.stage.params.internal_integral
+            x_d = (setpoint_pose(sp) if self.contact.needs_setpoint(state) or self.stage.params.internal_integral
                    else None)
             if not (all_finite(F_d0) and (x_d is None or all_finite(x_d.tolist()))):
                 F_d0 = x_d = F_vec = None

@@ -32,8 +32,6 @@ k + 1, as ``ControlLoop.step``'s ``w_user`` with :class:`cdpr_sim.closed_loop.Ha
 """
 from __future__ import annotations
 
-import struct
-
 import numpy as np
 from cdpr_msgs.msg import ControllerState, ForceDistribution, OperationalSetpoint
 from cdpr_msgs.srv import SetTensionLevel
@@ -45,11 +43,9 @@ from cdpr_control.force_distribution import BACKENDS, METHODS, Status
 from cdpr_control.control.force_setpoint import ForceSetpoint, ForceSetpointParams
 from cdpr_control.control.hybrid_force_control import parse_state
 from cdpr_control.control.params import section
-from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
-    wrench_to_msg)
+from cdpr_control.ros.conversions import setpoint_from_msg, wrench_from_msg, wrench_to_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
@@ -63,9 +59,6 @@ FORCE_CONTROLLER = ParamSpec("force_controller", "", "hybrid force controller wh
 GUIDING_CONTROLLER = ParamSpec("guiding_controller", "", "admittance controller whose user wrench w_Adm "
                                "(5.9) keeps the hand's reserve on the cable forces while it guides; empty: none",
                                read_only=True)
-# the raw values of a set-point (pose, twist, acceleration): compared as bytes, so that a repeated
-# period is recognised exactly (a tuple would take -0.0 for 0.0)
-_SETPOINT_KEY = struct.Struct("19d").pack
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 _INFEASIBLE, _OVERLOADED = Status.INFEASIBLE, Status.OVERLOADED
 
@@ -114,7 +107,6 @@ class ForceDistributionNode(CdprNode):
             inputs["guide"] = (ControllerState, f"{guiding_controller}/state")
         self.sync = StampSync(self, inputs, primary="wrench", callback=self._cycle, mode=self.sync_mode,
                               optional=tuple(n for n in ("payload", "hpfc", "guide") if n in inputs))
-        self._arrays = Memo()    # (x_d, ẋ_d, ẍ_d) of the last set-point's raw values (to the kernels: writeable)
 
     def _validate(self, v: dict) -> None:
         p = section(ForceSetpointParams, v)
@@ -141,16 +133,6 @@ class ForceDistributionNode(CdprNode):
         response.f_ref = self.stage.distributor.f_ref.tolist()
         return response
 
-    def _setpoint(self, sp) -> tuple:
-        """(x_d, ẋ_d, ẍ_d) of the set-point message; the arrays of the last period again (read,
-        never written) when its values are."""
-        pose, velocity, acceleration = sp.pose, sp.velocity, sp.acceleration
-        p, o = pose._position, pose._orientation
-        v, om, a, al = velocity._linear, velocity._angular, acceleration._linear, acceleration._angular
-        key = _SETPOINT_KEY(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
-                            a._x, a._y, a._z, al._x, al._y, al._z)
-        return self._arrays(key, _setpoint_arrays, pose, velocity, acceleration)
-
     @staticmethod
     def _contact(hpfc) -> tuple:
         """(state letter, F_d,0, F_vec) of the hybrid force controller's state message."""
@@ -168,7 +150,7 @@ class ForceDistributionNode(CdprNode):
         return np.asarray(guide.feedback, dtype=float)
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        x_d, xdot_d, xddot_d = self._setpoint(msgs["setpoint"])
+        x_d, xdot_d, xddot_d = setpoint_from_msg(msgs["setpoint"])
         payload = msgs.get("payload")
         w_model = None
         if payload is not None:
@@ -197,10 +179,6 @@ class ForceDistributionNode(CdprNode):
             f_max=res.f_max, w_d=wrench_to_msg(self.stage.w_d), method=res.method, status=int(res.status),
             max_violation=max_violation, residual=float(res.residual), iterations=int(res.iterations),
             solve_time=float(res.solve_time))
-
-
-def _setpoint_arrays(pose, velocity, acceleration) -> tuple:
-    return pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
 
 
 def main(args=None):

@@ -27,11 +27,10 @@ from sensor_msgs.msg import JointState
 from cdpr_control.model import forward_kinematics as fk
 from cdpr_control.control.pose_estimator import PoseEstimator
 from cdpr_control.control.safety import all_finite
-from cdpr_control.model.memo import Memo
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import pose_from_msg, pose_key, pose_to_msg, wrench_to_msg
+from cdpr_control.ros.conversions import pose_to_msg, setpoint_pose, wrench_to_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec, calibration_params, startup_calibration
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
@@ -64,7 +63,6 @@ class ForwardKinematicsNode(CdprNode):
         self.params = ParameterSet(self, parameters(self.robot),
                                    lambda v: startup_calibration(self.robot, v), self._apply)
         self.estimator.calibration = startup_calibration(self.robot, self.params.values)
-        self._x_d = Memo()          # (x_d, finite) of the last set-point pose (x_d to the kernels: writeable)
         self.pose_pub = self.create_publisher(PoseStamped, "platform/pose", CONTROL)
         self.wrench_pub = self.create_publisher(WrenchStamped, "platform/wrench", CONTROL)
         self.diag_pub = self.create_publisher(ForwardKinematicsDiagnostics, "forward_kinematics/diagnostics", CONTROL)
@@ -87,18 +85,13 @@ class ForwardKinematicsNode(CdprNode):
         e.solver.max_iterations = int(v["max_iterations"])
         e.solver.xtol = float(v["xtol"])
 
-    def _setpoint_pose(self, pose) -> tuple[np.ndarray, bool]:
-        """(x_d, whether it is finite) of the set-point's pose; the same array again (read, never
-        written) while the pose repeats (holding, a pause)."""
-        return self._x_d(pose_key(pose), _setpoint_values, pose)
-
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         position, forces = msgs["theta"].position, msgs["f"].f
-        x_d, x_d_finite = self._setpoint_pose(msgs["setpoint"].pose)
+        x_d = setpoint_pose(msgs["setpoint"])
         header = self.header(t_ns)
         m = self.robot.m
         if len(position) != m or len(forces) != m or not (all_finite(position) and all_finite(forces)
-                                                          and x_d_finite):
+                                                          and all_finite(x_d)):
             self.diag_pub.publish(builder(ForwardKinematicsDiagnostics)(
                 header=header, formulation="elastic", termination=ForwardKinematicsDiagnostics.INVALID_INPUT,
                 converged=False))
@@ -118,11 +111,6 @@ class ForwardKinematicsNode(CdprNode):
             self.report(DiagnosticStatus.WARN, f"not converged ({result.termination})", stamp_ns=t_ns)
         self.pose_pub.publish(builder(PoseStamped)(header=header, pose=pose_to_msg(x)))
         self.wrench_pub.publish(builder(WrenchStamped)(header=header, wrench=wrench_to_msg(w)))
-
-
-def _setpoint_values(pose) -> tuple[np.ndarray, bool]:
-    x_d = pose_from_msg(pose)
-    return x_d, all_finite(x_d)
 
 
 def main(args=None):

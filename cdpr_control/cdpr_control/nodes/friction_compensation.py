@@ -23,10 +23,9 @@ from cdpr_control.control.friction_compensation import FrictionCompensation, Fri
 from cdpr_control import kernels
 from cdpr_control.control.params import section
 from cdpr_control.control.safety import all_finite
-from cdpr_control.model.memo import Memo
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import pose_from_msg, pose_key
+from cdpr_control.ros.conversions import setpoint_pose
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
@@ -55,7 +54,6 @@ class FrictionCompensationNode(CdprNode):
         # the last two winch commands as they came, (t, θ_d) (None before them): θ̇_d is their
         # difference quotient, computed in the periods that use it (velocity_source desired)
         self._commands: tuple = (None, None)
-        self._beta = Memo()     # β_np of the last set-point pose, held while it repeats (to the kernels: writeable)
         self.params = ParameterSet(self, parameters(self.robot), self._validate, self._apply)
         self.publisher = self.create_publisher(CableForces, "cable_forces", CONTROL)
         self.f_min, self.f_max = self.robot.cable.f_min.tolist(), self.robot.cable.f_max.tolist()   # the robot's limits
@@ -92,17 +90,6 @@ class FrictionCompensationNode(CdprNode):
             return t, theta_d, np.zeros_like(theta_d)
         return t, theta_d, (theta_d - np.asarray(last[1], dtype=float)) / (t - last[0])
 
-    def _wrap_angles(self, pose) -> np.ndarray:
-        """β_np (2.6) of the set-point pose from the IK; the array of the last period again (read,
-        never written) while the pose repeats (holding, a pause): the same pose, the same numbers."""
-        pose_bytes = pose_key(pose)
-        key = None if pose_bytes is None else (pose_bytes, kernels.ENABLED)   # (a flavour switch recomputes)
-        return self._beta(key, self._wrap_angles_of, pose)
-
-    def _wrap_angles_of(self, pose) -> np.ndarray:
-        beta, = kernels.inverse_kinematics_fields(self.robot, pose_from_msg(pose), "beta")
-        return beta
-
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         state = msgs["state"]
         effort = state.effort
@@ -115,7 +102,10 @@ class FrictionCompensationNode(CdprNode):
             _, theta, thetadot = command
         else:
             theta, thetadot = np.asarray(state.position, dtype=float), np.asarray(state.velocity, dtype=float)
-        f = self.stage.update(F_s, theta, thetadot, self._wrap_angles(msgs["setpoint"].pose))
+        # β_np (2.6) of x_d: the period's IK of x_d, which the forward kinematics, the force set-point
+        # and load compensation take too (kernels.inverse_kinematics_fields)
+        beta, = kernels.inverse_kinematics_fields(self.robot, setpoint_pose(msgs["setpoint"]), "beta")
+        f = self.stage.update(F_s, theta, thetadot, beta)
         self.publisher.publish(self.message_factory(CableForces)(header=self.header(t_ns), f=f, f_min=self.f_min,
                                                                  f_max=self.f_max))
 

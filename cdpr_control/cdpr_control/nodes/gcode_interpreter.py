@@ -67,7 +67,9 @@ from cdpr_control.motion.program_check import check_program
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import accel_to_msg, pose_from_msg, pose_to_msg, twist_to_msg, vector3
+from cdpr_control.ros.adapted import Payload
+from cdpr_control.ros.conversions import (accel_to_msg, pose_from_msg, pose_to_msg, setpoint_from_msg, setpoint_values,
+    twist_to_msg, vector3)
 from cdpr_control.ros.intraprocess import IntraProcess
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL, DIAGNOSTICS, STATUS
@@ -516,20 +518,28 @@ class GCodeInterpreterNode(CdprNode):
         self.forwarder.poll()
 
     def _publish_setpoint(self, stamp: int) -> None:
+        """The set-point of the period: where type adaptation is on, a payload carrying x_d, ẋ_d, ẍ_d
+        as its subscribers convert them (conversions.setpoint_from_msg: nine nodes read them, one
+        conversion serves them all)."""
+        make = self.message_factory(OperationalSetpoint)
         if self.guided is not None:
             g = self.guided
-            msg = builder(OperationalSetpoint)(
-                header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
-                acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
+            msg = make(header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
+                       acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
+            values = setpoint_from_msg(g) if isinstance(msg, Payload) else None
         else:
-            msg = builder(OperationalSetpoint)(header=self.header(stamp, self.frame_id), **self._setpoint_fields())
+            fields, values = self._setpoint_fields()
+            msg = make(header=self.header(stamp, self.frame_id), **fields)
+        if isinstance(msg, Payload):
+            msg._adapted_values_ = values
         self._last_setpoint = msg
         self.setpoint_pub.publish(msg)
 
-    def _setpoint_fields(self) -> dict:
-        """The set-point's pose, twist, acceleration, force and line. While they do not change
-        (holding a pose, a dwell) the messages of the last period are used again (subscribers do not
-        modify what they receive), which spares the conversions."""
+    def _setpoint_fields(self) -> tuple[dict, tuple]:
+        """The set-point's pose, twist, acceleration, force and line, and x_d, ẋ_d, ẍ_d as its
+        subscribers read them (conversions.setpoint_values). While they do not change (holding a
+        pose, a dwell) those of the last period are used again (subscribers do not modify what they
+        receive), which spares the conversions."""
         q, xd, xdd, line = self.q, self.xd, self.xdd, self.line
         return self._setpoint_body((q.tobytes(), xd.tobytes(), xdd.tobytes(), line), _setpoint_body, q, xd, xdd, line)
 
@@ -562,10 +572,11 @@ class GCodeInterpreterNode(CdprNode):
         return super().destroy_node()
 
 
-def _setpoint_body(q, xd, xdd, line) -> dict:
+def _setpoint_body(q, xd, xdd, line) -> tuple[dict, tuple]:
     twist, accel = twist_from_pose_rates(q[:6], xd, xdd)
-    return dict(pose=pose_to_msg(q[:6]), velocity=twist_to_msg(twist), acceleration=accel_to_msg(accel),
-                force=vector3(q[6:]), line=int(line))
+    fields = dict(pose=pose_to_msg(q[:6]), velocity=twist_to_msg(twist), acceleration=accel_to_msg(accel),
+                  force=vector3(q[6:]), line=int(line))
+    return fields, setpoint_values(fields["pose"], fields["velocity"], fields["acceleration"])
 
 
 def main(args=None):

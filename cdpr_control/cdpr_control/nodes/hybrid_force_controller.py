@@ -55,7 +55,7 @@ from cdpr_control.control.ospc import AXES
 from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import from_vector3, pose_from_msg, wrench_from_msg
+from cdpr_control.ros.conversions import from_vector3, setpoint_pose, wrench_from_msg
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync, stamp_ns
@@ -147,7 +147,7 @@ class HybridForceControllerNode(CdprNode):
         """Why contact would be refused at the last set-point (None: it would not, or not known)."""
         if self.last_setpoint is None or self.limits is None or self.robot is None:
             return None
-        F_d0, x_d = from_vector3(self.last_setpoint.force), pose_from_msg(self.last_setpoint.pose)
+        F_d0, x_d = from_vector3(self.last_setpoint.force), setpoint_pose(self.last_setpoint)
         probe = HybridForceStage(self.robot, self.dt, params, enabled=True).control
         s = probe.update(F_d0, np.zeros(6), x_d, self.limits)
         return refusal_message(s, x_d, probe.minimum_contact_force()) if s.refused else None
@@ -174,7 +174,7 @@ class HybridForceControllerNode(CdprNode):
         self.hand_overs = later
         setpoint = msgs["setpoint"]
         c = stage.control           # x_d only where the capacity may limit F_d (not idle and disabled)
-        x_d = pose_from_msg(setpoint.pose) if c.enabled or c.state != IDLE else None
+        x_d = setpoint_pose(setpoint) if c.enabled or c.state != IDLE else None
         s, output = stage.update(from_vector3(setpoint.force), wrench_from_msg(msgs["wrench"].wrench),
                                  self.cfc_on, x_d, self.limits)
         # the fields' arithmetic in floats: element by element what numpy's would give, without

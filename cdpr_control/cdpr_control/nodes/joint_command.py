@@ -51,9 +51,8 @@ from cdpr_control.control.params import default
 from cdpr_control.control.offset_inputs import OffsetConfig, OffsetInputs, OffsetSample
 from cdpr_control.control.safety import (FORCE_WATCH, STALE_INPUT, WORKSPACE, Fault, ForceWatch, SafetyConfig,
                                           SafetyMonitor, braking)
-from cdpr_control.model.memo import Memo
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import pose_from_msg, pose_key
+from cdpr_control.ros.conversions import pose_from_msg, setpoint_pose
 from cdpr_control.ros.mode import mode_publisher, publish_mode
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
@@ -135,7 +134,6 @@ class JointCommandNode(CdprNode):
         self.infeasible = 0                          # periods in a row without a feasible f_d
         self._standing = False                       # a hold for a stale input has braked to a stand
         self._last_cycle_ns = -1                     # stamp of the newest period commanded
-        self._x_d = Memo()       # x_d of the last set-point pose, held while it repeats (to the IK kernel: writeable)
         self.watched_topics: dict[str, str] = {}
         self.watched_stamps = StampJumps(self.input_deadline, self.input_deadline * int(round(self.dt * 1e9)))
         for name, msg_type, topic in (("theta", JointState, "winch/state"), ("f", CableForces, "cable_forces"),
@@ -217,7 +215,7 @@ class JointCommandNode(CdprNode):
             return                                   # no measurement yet: nothing safe to start from
         if self.command.theta_d is None:
             self.command.reset(np.asarray(theta_msg.position), self.params.values["start_ramp"])
-        x_d = self._setpoint_pose(msgs["setpoint"].pose)
+        x_d = setpoint_pose(msgs["setpoint"])
         force_control = self.mode == "force_control"
         samples = {name: self._offset_sample(msgs.get(key)) for name, key in self.offset_keys} \
             if force_control else {}
@@ -253,11 +251,6 @@ class JointCommandNode(CdprNode):
         if tripped is not None:
             faults.insert(0, tripped)
         return f
-
-    def _setpoint_pose(self, pose) -> np.ndarray:
-        """x_d of the set-point's pose; the array of the last period again (read, never written) when
-        the pose repeats (holding, a pause)."""
-        return self._x_d(pose_key(pose), pose_from_msg, pose)
 
     def _hold_cycle(self, t_ns: int) -> None:
         """A period whose required input is stale (its producer stopped): brake on the path, so that

@@ -42,7 +42,7 @@ from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.control.params import section
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import accel_from_msg, pose_from_msg, twist_from_msg, vector3
+from cdpr_control.ros.conversions import setpoint_from_msg, vector3
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
 from cdpr_control.ros.sync import StampSync
@@ -124,7 +124,7 @@ class LoadCompensationNode(CdprNode):
 
     def _cycle(self, msgs: dict, t_ns: int) -> None:
         sp = msgs["setpoint"]
-        x_d, xdot_d, xddot_d = pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+        x_d, xdot_d, xddot_d = setpoint_from_msg(sp)
         f = np.asarray(msgs["f"].f, dtype=float)
         x = None
         if "pose" in msgs:        # the estimated position: (4.4) takes its z alone (LoadCompensation.identify)

@@ -23,11 +23,10 @@ from cdpr_control.control.hybrid_force_control import FORCE_CONTROLLED, parse_st
 from cdpr_control.control.ospc import AXES, OperationalSpacePositionController, OSPCParams
 from cdpr_control.control.params import default, section
 from cdpr_control.control.safety import all_finite
-from cdpr_control.model.memo import Memo
 from cdpr_control.control.preconditions import check_force_control, planned_home_forces
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import from_vector3, pose_from_msg, pose_key
+from cdpr_control.ros.conversions import from_vector3, pose_from_msg, setpoint_pose
 from cdpr_control.ros.mode import follow_mode
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec, declare
 from cdpr_control.ros.qos import CONTROL
@@ -57,9 +56,6 @@ class OSPCNode(CdprNode):
         self.enabled = True
         self.precondition: str | None = None
         self.names = list(AXES)                     # shared by the published messages (never modified)
-        # x_d of the last set-point pose (read-only), its list and whether it is finite: held while
-        # the pose repeats (holding, a pause), as the numbers of the same pose are the same
-        self._x_d = Memo(read_only=True)
         force_controller = declare(self, FORCE_CONTROLLER)
         self._instabilities: dict = {}              # gain set -> the stability analysis' verdict
         self._live = False                          # (the start-up set is not analysed: see _validate)
@@ -109,13 +105,9 @@ class OSPCNode(CdprNode):
     def _on_mode(self, ik_only: bool) -> None:
         self.controller.pi.hold = ik_only           # bumpless: no wind-up while not applied
 
-    def _setpoint(self, pose) -> tuple[np.ndarray, list, bool]:
-        """(x_d, x_d as a list, whether it is finite) of the set-point's pose; the same objects again
-        (read, never written) while the pose repeats."""
-        return self._x_d(pose_key(pose), _reference, pose)
-
     def _cycle(self, msgs: dict, t_ns: int) -> None:
-        x_d, reference, reference_finite = self._setpoint(msgs["setpoint"].pose)
+        x_d = setpoint_pose(msgs["setpoint"])
+        reference = x_d.tolist()
         x = pose_from_msg(msgs["pose"].pose)
         hpfc = msgs.get("hpfc")
         if hpfc is not None and parse_state(hpfc.controller) in FORCE_CONTROLLED:
@@ -127,7 +119,7 @@ class OSPCNode(CdprNode):
         feedback = x.tolist()
         if not self.enabled and self.precondition:
             self.report(DiagnosticStatus.WARN, self.precondition, stamp_ns=t_ns)
-        if self.enabled and all_finite(feedback) and reference_finite:
+        if self.enabled and all_finite(feedback) and all_finite(reference):
             pi = self.controller.pi
             output = {"output": self.controller.update(x_d, x), "integrator": pi.integrator,
                       "saturated": pi.saturated.tolist()}
@@ -137,12 +129,6 @@ class OSPCNode(CdprNode):
         self.publisher.publish(self.message_factory(ControllerState)(
             header=self.header(t_ns), controller="ospc", enabled=self.enabled, names=self.names,
             reference=reference, feedback=feedback, error=[a - b for a, b in zip(reference, feedback)], **output))
-
-
-def _reference(pose) -> tuple[np.ndarray, list, bool]:
-    x_d = pose_from_msg(pose)
-    reference = x_d.tolist()
-    return x_d, reference, all_finite(reference)
 
 
 def main(args=None):

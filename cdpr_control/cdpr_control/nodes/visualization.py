@@ -31,7 +31,7 @@ from cdpr_control.model import scene as sc
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.conversions import pose_from_msg, wrench_from_msg
+from cdpr_control.ros.conversions import pose_from_msg, setpoint_pose, wrench_from_msg
 from cdpr_control.ros.intraprocess import has_subscribers
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL
@@ -79,7 +79,7 @@ class VisualizationNode(CdprNode):
         x = pose_from_msg(pose.pose)
         forces, setpoint, wrench = (self.latest.get(k) for k in ("forces", "setpoint", "wrench"))
         f = np.asarray(forces.f, float) if forces is not None and len(forces.f) == self.robot.m else None
-        view = sc.scene(self.robot, x, f=f, x_d=None if setpoint is None else pose_from_msg(setpoint.pose),
+        view = sc.scene(self.robot, x, f=f, x_d=None if setpoint is None else setpoint_pose(setpoint),
                         w=None if wrench is None else wrench_from_msg(wrench.wrench), force_scale=self.force_scale)
         if not np.all(np.isfinite(view.cables)):
             return  # a pose outside the model (cable inside a pulley): nothing sensible to draw

@@ -18,6 +18,12 @@ publication (:meth:`Payload.to_msg`, lazily, cached on the payload):
   either. An ``adapted`` callback must therefore only read fields, which holds for a message too;
 - payload and message compare equal when the message built from the payload equals the other.
 
+A publisher may also attach to a payload the values its subscribers convert its nested messages
+to (``_adapted_values_``, read-only arrays): the set-point's x_d, ẋ_d, ẍ_d, which nine nodes read
+(:func:`cdpr_control.ros.conversions.setpoint_from_msg`), are converted once per publication
+rather than once per subscriber. The message built from the payload is the same; a subscriber in
+another process converts it itself, to the same numbers.
+
 So the cable forces f go from the simulator to the joint command as the numpy arrays the stages
 compute, where the message path converts them between ``array.array`` and numpy on each of the
 four hops (issue 26). The arrays are copies taken at construction (the publisher keeps its own)
@@ -61,7 +67,8 @@ def set_enabled(on: bool) -> None:
 class Payload:
     """Base of the generated payload classes: ``msg_type`` is the ROS message class it stands for."""
 
-    __slots__ = ("_adapted_msg_",)      # rosidl field names never end in "_": no clash with a field
+    # rosidl field names never end in "_": no clash with a field
+    __slots__ = ("_adapted_msg_", "_adapted_values_")
     msg_type: type = type(None)
 
     def to_msg(self):
@@ -134,7 +141,7 @@ def _generate(cls, names: list[str]) -> type:
     default = cls(check_fields=False)
     env: dict = {"_MISSING": _MISSING, "_ro": read_only, "_array": array.array, "_ndarray": np.ndarray,
                  "_b": builder(cls)}
-    init, build = ["    self._adapted_msg_ = None"], ["    _kw = {}"]
+    init, build = ["    self._adapted_msg_ = self._adapted_values_ = None"], ["    _kw = {}"]
     for name, slot_type in zip(names, cls.SLOT_TYPES):
         env[f"_d_{name}"] = (read_only((), name) if _float64_sequence(slot_type)
                              else getattr(default, name))          # shared: nobody modifies a payload

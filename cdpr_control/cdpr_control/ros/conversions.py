@@ -89,6 +89,31 @@ def pose_from_msg(msg: Pose) -> np.ndarray:
         return np.array([p.x, p.y, p.z, *quaternion_to_kardan(q.x, q.y, q.z, q.w)])
 
 
+def setpoint_values(pose: Pose, velocity: Twist, acceleration: Accel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x_d, ẋ_d, ẍ_d) of a set-point's fields as read-only arrays: what a publisher attaches to its
+    payload (adapted.py, ``_adapted_values_``) for every subscriber to share."""
+    values = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
+    for v in values:
+        v.flags.writeable = False
+    return values
+
+
+def setpoint_from_msg(sp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x_d, ẋ_d, ẍ_d) of a cdpr_msgs/OperationalSetpoint (pose, velocity, acceleration): the values
+    its publisher attached (a payload of this process, :func:`setpoint_values`: one conversion per
+    publication, shared by its subscribers, so read only) or else converted here, the same numbers."""
+    values = getattr(sp, "_adapted_values_", None)
+    if values is not None:
+        return values
+    return pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
+
+
+def setpoint_pose(sp) -> np.ndarray:
+    """x_d of a cdpr_msgs/OperationalSetpoint: its pose of :func:`setpoint_from_msg` (read only)."""
+    values = getattr(sp, "_adapted_values_", None)
+    return values[0] if values is not None else pose_from_msg(sp.pose)
+
+
 def vector3(v, msg: Vector3 | None = None) -> Vector3:
     if msg is None:
         msg = bare(Vector3)
