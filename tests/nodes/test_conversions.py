@@ -25,3 +25,37 @@ def test_quaternion_is_the_kardan_rotation_and_round_trips():
         assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-12)
         np.testing.assert_allclose(_quat_matrix(q), rotation_matrix(x[3:]), atol=1e-12)
         np.testing.assert_allclose(pose_from_msg(msg), x, atol=1e-9)
+
+
+def test_a_set_point_payload_carries_its_conversion_for_every_subscriber():
+    """The interpreter converts its set-point once (gcode_interpreter._setpoint_body) and attaches
+    x_d, ẋ_d, ẍ_d to the payload; a subscriber reads those, bit for bit what converting the message
+    gives (a subscriber in another process converts it itself), and cannot write them."""
+    from cdpr_msgs.msg import OperationalSetpoint
+    from std_msgs.msg import Header
+
+    from cdpr_control.nodes.gcode_interpreter import _setpoint_body
+    from cdpr_control.ros.adapted import payload_class
+    from cdpr_control.ros.conversions import accel_from_msg, setpoint_from_msg, setpoint_pose, twist_from_msg
+    q = np.array([0.12, -0.21, 0.33, 0.05, -0.04, 0.03, 0.0, 0.0, 5.0])
+    xd = np.array([0.1, -0.05, 0.02, 0.3, -0.2, 0.1])
+    xdd = np.array([-1.0, 0.5, 2.0, 0.7, 0.1, -0.3])
+    fields, values = _setpoint_body(q, xd, xdd, 7)
+    payload = payload_class(OperationalSetpoint)(header=Header(), **fields)
+    payload._adapted_values_ = values
+    message = payload.to_msg()
+    assert type(message) is OperationalSetpoint and message.line == 7
+    converted = setpoint_from_msg(message)              # a plain message: converted here
+    assert all(type(v) is np.ndarray and v.shape == (6,) for v in converted)
+    assert setpoint_from_msg(payload) is values and setpoint_pose(payload) is values[0]
+    for attached, fresh in zip(values, converted):
+        assert attached.tobytes() == fresh.tobytes()
+        with pytest.raises(ValueError):
+            attached[0] = 1.0                           # shared by every subscriber: read only
+    np.testing.assert_array_equal(setpoint_pose(message), pose_from_msg(message.pose))
+    np.testing.assert_allclose(values[0], q[:6], atol=1e-12)
+    assert converted[1].tobytes() == twist_from_msg(message.velocity).tobytes()
+    assert converted[2].tobytes() == accel_from_msg(message.acceleration).tobytes()
+    # a payload its publisher attached nothing to is converted like a message
+    bare = payload_class(OperationalSetpoint)(header=Header(), **fields)
+    assert setpoint_pose(bare).tobytes() == values[0].tobytes()
