@@ -8,12 +8,15 @@ cleared (miss) or not (hit); the nodes' as the same calls their memo wraps, on o
 
 A hit saves miss - hit per period while the inputs repeat (holding, a pause, a dwell); while they
 change every period (a moving set-point) the memo costs its hit. docs/performance.md ("Memos")
-quotes the figures; the schemes that save under ~2 us a period were dropped.
+quotes the figures; the schemes that save under ~2 us a period were dropped. The five nodes' set-point
+memos (marked dropped) went in session 24: the interpreter's payload carries x_d, ẋ_d, ẍ_d converted
+once (conversions.setpoint_from_msg), which leaves them nothing to keep.
 """
 from __future__ import annotations
 
 import argparse
 import statistics
+import struct
 import time
 
 import numpy as np
@@ -38,30 +41,34 @@ def schemes():
     from cdpr_control.control.hybrid_force_control import parse_state
     from cdpr_control.control.safety import ForceWatch, SafetyConfig, SafetyMonitor, all_finite
     from cdpr_control.model.robot import load_robot
-    from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, pose_from_msg, pose_key, pose_to_msg,
-        twist_from_msg, twist_to_msg, vector3)
-    from cdpr_control.model.kinematics import twist_from_pose_rates
+    from cdpr_control.ros.conversions import (accel_from_msg, accel_to_msg, pose_from_msg, pose_to_msg,
+        twist_from_msg, twist_to_msg)
+    from cdpr_control.nodes.gcode_interpreter import _setpoint_body
 
     robot = load_robot("ipanema3_mini")
     x = robot.home + np.array([0.01, -0.02, 0.03, 0.01, 0.0, -0.01])
     sp = OperationalSetpoint(pose=pose_to_msg(x), velocity=twist_to_msg(np.full(6, 0.01)),
                              acceleration=accel_to_msg(np.full(6, 0.1)))
     pose = sp.pose
+    values = struct.Struct("7d").pack
+
+    def pose_key(pose):    # the dropped nodes' key: the pose's seven values as bytes
+        p, o = pose._position, pose._orientation
+        return values(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
     key = pose_key(pose)
     out = {}
 
     def pose_hit():
         k = pose_key(pose)
         return k is None or k != key
-    out["nodes/ospc _setpoint (x_d, list, finite)"] = (
+    out["nodes/ospc _setpoint (x_d, list, finite; dropped)"] = (
         lambda: (pose_key(pose), (lambda x_d: (x_d, x_d.tolist(), all_finite(x_d.tolist())))(pose_from_msg(pose))),
         pose_hit)
-    out["nodes/forward_kinematics _setpoint_pose (x_d, finite)"] = (
+    out["nodes/forward_kinematics _setpoint_pose (x_d, finite; dropped)"] = (
         lambda: (pose_key(pose), (lambda x_d: all_finite(x_d))(pose_from_msg(pose))), pose_hit)
-    out["nodes/joint_command _setpoint_pose (x_d)"] = (lambda: (pose_key(pose), pose_from_msg(pose)), pose_hit)
-    out["nodes/friction_compensation _wrap_angles (beta of the IK)"] = (
+    out["nodes/joint_command _setpoint_pose (x_d; dropped)"] = (lambda: (pose_key(pose), pose_from_msg(pose)), pose_hit)
+    out["nodes/friction_compensation _wrap_angles (beta of the IK; dropped)"] = (
         lambda: (pose_key(pose), kernels.inverse_kinematics_fields(robot, pose_from_msg(pose), "beta")), pose_hit)
-    import struct
     pack = struct.Struct("19d").pack
 
     def sp_key():
@@ -70,7 +77,7 @@ def schemes():
         return pack(p._x, p._y, p._z, o._x, o._y, o._z, o._w, v._x, v._y, v._z, om._x, om._y, om._z,
                     a._x, a._y, a._z, al._x, al._y, al._z)
     k19 = sp_key()
-    out["nodes/force_distribution _setpoint (x_d, xdot_d, xddot_d)"] = (
+    out["nodes/force_distribution _setpoint (x_d, xdot_d, xddot_d; dropped)"] = (
         lambda: (sp_key(), pose_from_msg(pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)),
         lambda: sp_key() != k19)
     state = ControllerState(controller="hybrid_force_controller:D")
@@ -81,10 +88,8 @@ def schemes():
     gkey = (q.tobytes(), xd.tobytes(), xdd.tobytes(), 3)
 
     def gcode_miss():
-        twist, accel = twist_from_pose_rates(q[:6], xd, xdd)
-        return (q.tobytes(), xd.tobytes(), xdd.tobytes(), 3), dict(
-            pose=pose_to_msg(q[:6]), velocity=twist_to_msg(twist), acceleration=accel_to_msg(accel), force=vector3(q[6:]))
-    out["nodes/gcode_interpreter _setpoint_fields (messages)"] = (
+        return (q.tobytes(), xd.tobytes(), xdd.tobytes(), 3), _setpoint_body(q, xd, xdd, 3)
+    out["nodes/gcode_interpreter _setpoint_fields (messages, x_d, xdot_d, xddot_d)"] = (
         gcode_miss, lambda: (q.tobytes(), xd.tobytes(), xdd.tobytes(), 3) != gkey)
     fs = ForceSetpoint(robot, 1e-3, ForceSetpointParams())
     xdot_d, xddot_d = np.full(6, 0.01), np.full(6, 0.1)

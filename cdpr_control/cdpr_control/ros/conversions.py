@@ -14,7 +14,6 @@ Other messages the nodes build every period come from ``message_builders.builder
 from __future__ import annotations
 
 import math
-import struct
 
 import numpy as np
 from geometry_msgs.msg import Accel, Point, Pose, Quaternion, Twist, Vector3, Wrench
@@ -64,20 +63,6 @@ def pose_to_msg(x, msg: Pose | None = None) -> Pose:
     o = msg.orientation
     o.x, o.y, o.z, o.w = kardan_to_quaternion(float(x[3]), float(x[4]), float(x[5]))
     return msg
-
-
-_POSE_VALUES = struct.Struct("7d").pack
-
-
-def pose_key(pose: Pose) -> bytes | None:
-    """The seven values of a Pose message as bytes, to recognise a repeated pose exactly (a tuple of
-    floats would take -0.0 for 0.0): nodes keep what they derive from a set-point pose while it
-    repeats. None for a message of another reader (rosbags, mcap_ros2), which has no slots."""
-    try:
-        p, o = pose._position, pose._orientation
-    except AttributeError:
-        return None
-    return _POSE_VALUES(p._x, p._y, p._z, o._x, o._y, o._z, o._w)
 
 
 def pose_from_msg(msg: Pose) -> np.ndarray:
