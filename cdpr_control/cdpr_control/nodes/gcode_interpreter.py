@@ -68,8 +68,8 @@ from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
 from cdpr_control.ros.adapted import Payload
-from cdpr_control.ros.conversions import (accel_to_msg, pose_from_msg, pose_to_msg, setpoint_from_msg, setpoint_values,
-    twist_to_msg, vector3)
+from cdpr_control.ros.conversions import (accel_to_msg, pose_from_msg, pose_to_msg, setpoint_values, twist_to_msg,
+    vector3)
 from cdpr_control.ros.intraprocess import IntraProcess
 from cdpr_control.ros.parameters import ParameterSet, ParamSpec
 from cdpr_control.ros.qos import CONTROL, DIAGNOSTICS, STATUS
@@ -526,7 +526,7 @@ class GCodeInterpreterNode(CdprNode):
             g = self.guided
             msg = make(header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
                        acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
-            values = setpoint_from_msg(g) if isinstance(msg, Payload) else None
+            values = setpoint_values(g.pose, g.velocity, g.acceleration) if isinstance(msg, Payload) else None
         else:
             fields, values = self._setpoint_fields()
             msg = make(header=self.header(stamp, self.frame_id), **fields)
