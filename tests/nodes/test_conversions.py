@@ -35,15 +35,17 @@ def test_a_set_point_payload_carries_its_conversion_for_every_subscriber():
     from std_msgs.msg import Header
 
     from cdpr_control.nodes.gcode_interpreter import _setpoint_body
-    from cdpr_control.ros.adapted import payload_class
+    from cdpr_control.ros.adapted import attach_values, attached_values, payload_class
     from cdpr_control.ros.conversions import accel_from_msg, setpoint_from_msg, setpoint_pose, twist_from_msg
     q = np.array([0.12, -0.21, 0.33, 0.05, -0.04, 0.03, 0.0, 0.0, 5.0])
     xd = np.array([0.1, -0.05, 0.02, 0.3, -0.2, 0.1])
     xdd = np.array([-1.0, 0.5, 2.0, 0.7, 0.1, -0.3])
     fields, values = _setpoint_body(q, xd, xdd, 7)
     payload = payload_class(OperationalSetpoint)(header=Header(), **fields)
-    payload._adapted_values_ = values
+    attach_values(payload, values)
     message = payload.to_msg()
+    attach_values(message, values)                      # a message stays as it is (type adaptation off)
+    assert attached_values(message) is None
     assert type(message) is OperationalSetpoint and message.line == 7
     converted = setpoint_from_msg(message)              # a plain message: converted here
     assert all(type(v) is np.ndarray and v.shape == (6,) for v in converted)

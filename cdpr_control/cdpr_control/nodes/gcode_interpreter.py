@@ -67,7 +67,7 @@ from cdpr_control.motion.program_check import check_program
 from cdpr_control.ros.message_builders import builder
 
 from cdpr_control.ros.base import CdprNode, spin_node
-from cdpr_control.ros.adapted import Payload
+from cdpr_control.ros.adapted import attach_values
 from cdpr_control.ros.conversions import (accel_to_msg, pose_from_msg, pose_to_msg, setpoint_values, twist_to_msg,
     vector3)
 from cdpr_control.ros.intraprocess import IntraProcess
@@ -526,12 +526,11 @@ class GCodeInterpreterNode(CdprNode):
             g = self.guided
             msg = make(header=self.header(stamp, self.frame_id), pose=g.pose, velocity=g.velocity,
                        acceleration=g.acceleration, force=vector3(self.q[6:]), line=0)
-            values = setpoint_values(g.pose, g.velocity, g.acceleration) if isinstance(msg, Payload) else None
+            values = setpoint_values(g.pose, g.velocity, g.acceleration)
         else:
             fields, values = self._setpoint_fields()
             msg = make(header=self.header(stamp, self.frame_id), **fields)
-        if isinstance(msg, Payload):
-            msg._adapted_values_ = values
+        attach_values(msg, values)
         self._last_setpoint = msg
         self.setpoint_pub.publish(msg)
 

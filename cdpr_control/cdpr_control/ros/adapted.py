@@ -19,10 +19,10 @@ publication (:meth:`Payload.to_msg`, lazily, cached on the payload):
 - payload and message compare equal when the message built from the payload equals the other.
 
 A publisher may also attach to a payload the values its subscribers convert its nested messages
-to (``_adapted_values_``, read-only arrays): the set-point's x_d, ẋ_d, ẍ_d, which nine nodes read
-(:func:`cdpr_control.ros.conversions.setpoint_from_msg`), are converted once per publication
-rather than once per subscriber. The message built from the payload is the same; a subscriber in
-another process converts it itself, to the same numbers.
+to (:func:`attach_values`, read-only arrays; :func:`attached_values` reads them): the set-point's
+x_d, ẋ_d, ẍ_d, which nine nodes read (:func:`cdpr_control.ros.conversions.setpoint_from_msg`), are
+converted once per publication rather than once per subscriber. The message built from the payload
+is the same; a subscriber in another process converts it itself, to the same numbers.
 
 So the cable forces f go from the simulator to the joint command as the numpy arrays the stages
 compute, where the message path converts them between ``array.array`` and numpy on each of the
@@ -94,6 +94,19 @@ class Payload:
     @classmethod
     def get_fields_and_field_types(cls) -> dict:
         return cls.msg_type.get_fields_and_field_types()
+
+
+def attach_values(obj, values) -> None:
+    """Attach to the payload ``obj``, before it is published, ``values``: what its subscribers would
+    convert its fields to, the same numbers, as read-only arrays (every subscriber shares them). A
+    message (type adaptation off) is left as it is: its subscribers convert it themselves."""
+    if isinstance(obj, Payload):
+        obj._adapted_values_ = values
+
+
+def attached_values(obj):
+    """The values :func:`attach_values` attached to ``obj``, None for a payload without them or a message."""
+    return obj._adapted_values_ if isinstance(obj, Payload) else None
 
 
 def as_message(obj):

@@ -18,6 +18,8 @@ import math
 import numpy as np
 from geometry_msgs.msg import Accel, Point, Pose, Quaternion, Twist, Vector3, Wrench
 
+from cdpr_control.ros.adapted import attached_values
+
 
 
 def bare(cls):
@@ -76,7 +78,7 @@ def pose_from_msg(msg: Pose) -> np.ndarray:
 
 def setpoint_values(pose: Pose, velocity: Twist, acceleration: Accel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x_d, ẋ_d, ẍ_d) of a set-point's fields as read-only arrays: what a publisher attaches to its
-    payload (adapted.py, ``_adapted_values_``) for every subscriber to share."""
+    payload (:func:`cdpr_control.ros.adapted.attach_values`) for every subscriber to share."""
     values = pose_from_msg(pose), twist_from_msg(velocity), accel_from_msg(acceleration)
     for v in values:
         v.flags.writeable = False
@@ -87,7 +89,7 @@ def setpoint_from_msg(sp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x_d, ẋ_d, ẍ_d) of a cdpr_msgs/OperationalSetpoint (pose, velocity, acceleration): the values
     its publisher attached (a payload of this process, :func:`setpoint_values`: one conversion per
     publication, shared by its subscribers, so read only) or else converted here, the same numbers."""
-    values = getattr(sp, "_adapted_values_", None)
+    values = attached_values(sp)
     if values is not None:
         return values
     return pose_from_msg(sp.pose), twist_from_msg(sp.velocity), accel_from_msg(sp.acceleration)
@@ -95,7 +97,7 @@ def setpoint_from_msg(sp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def setpoint_pose(sp) -> np.ndarray:
     """x_d of a cdpr_msgs/OperationalSetpoint: its pose of :func:`setpoint_from_msg` (read only)."""
-    values = getattr(sp, "_adapted_values_", None)
+    values = attached_values(sp)
     return values[0] if values is not None else pose_from_msg(sp.pose)
 
 
