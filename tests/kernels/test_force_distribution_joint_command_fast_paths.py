@@ -1,6 +1,7 @@
 """The per-period fast paths of the force distribution and joint command give the same numbers, bit for
 bit, as the computation they replace: the compiled joint command period (kernels.model.joint_command_period), the model
-wrench handed to ForceSetpoint, and the nodes' values kept while their set-point repeats."""
+wrench handed to ForceSetpoint, and the force distribution node against its stage, fed the set-point
+as a message or as the interpreter's payload with x_d, ẋ_d, ẍ_d attached."""
 import copy
 import numpy as np
 import pytest
@@ -101,7 +102,7 @@ def test_force_setpoint_with_the_loops_AT_equals_the_one_that_takes_its_own(robo
         assert not np.allclose(rc.f, ra.f), f"period {k}"
 
 
-# --- the nodes: values kept while the set-point repeats ------------------------------------------
+# --- the node: its stage, the set-point as a message or the interpreter's payload -------------------
 
 @pytest.fixture(scope="module")
 def context():
@@ -126,14 +127,16 @@ def _signed_zero_pose(pose):
 
 
 def test_force_distribution_node_is_the_stage_period_by_period(context):
-    """The node (set-point values kept while they repeat, the message built field by field) against the
-    stage fed the message conversions every period: the same messages, bit for bit."""
+    """The node (the set-point a message, or in every other period the interpreter's payload with its
+    attached values; the message built field by field) against the stage fed the message conversions
+    every period: the same messages, bit for bit."""
     from cdpr_msgs.msg import ForceDistribution
     from geometry_msgs.msg import Inertia, InertiaStamped, WrenchStamped
     from rclpy.parameter import Parameter
 
-    from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, twist_from_msg, wrench_from_msg,
-        wrench_to_msg)
+    from cdpr_control.ros.adapted import attach_values, payload_of
+    from cdpr_control.ros.conversions import (accel_from_msg, pose_from_msg, setpoint_values, twist_from_msg,
+        wrench_from_msg, wrench_to_msg)
     from cdpr_control.nodes.force_distribution import ForceDistributionNode
 
     node = ForceDistributionNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini"),
@@ -157,7 +160,9 @@ def test_force_distribution_node_is_the_stage_period_by_period(context):
             if k % 11 == 10:
                 _signed_zero_pose(sp.pose)
             w = -weight + rng.normal(0, 0.3, 6)
-            msgs = {"setpoint": sp, "wrench": WrenchStamped(wrench=wrench_to_msg(w))}
+            published = payload_of(sp)
+            attach_values(published, setpoint_values(sp.pose, sp.velocity, sp.acceleration))
+            msgs = {"setpoint": published if k % 2 else sp, "wrench": WrenchStamped(wrench=wrench_to_msg(w))}
             if k not in (17, 31):       # (an optional input: missing while the set-point moves, back unchanged)
                 msgs["payload"] = InertiaStamped(inertia=Inertia(m=mass))
             node._cycle(msgs, k * 1_000_000)
@@ -174,24 +179,5 @@ def test_force_distribution_node_is_the_stage_period_by_period(context):
             got.solve_time = 0.0                           # (a wall-clock measurement)
             assert repr(got) == repr(expected), f"period {k}"
             assert got == expected
-    finally:
-        node.destroy_node()
-
-
-def test_joint_command_node_keeps_x_d_only_for_the_same_bits(context):
-    from rclpy.parameter import Parameter
-
-    from cdpr_control.ros.conversions import pose_from_msg, pose_to_msg
-    from cdpr_control.nodes.joint_command import JointCommandNode
-
-    node = JointCommandNode(parameter_overrides=[Parameter("robot", value="ipanema3_mini")])
-    try:
-        pose = pose_to_msg(np.r_[0.01, 0.0, 0.02, 0.0, 0.0, 0.0])
-        first = node._setpoint_pose(pose)
-        assert node._setpoint_pose(pose_to_msg(np.r_[0.01, 0.0, 0.02, 0.0, 0.0, 0.0])) is first
-        flipped = node._setpoint_pose(_signed_zero_pose(pose))
-        assert flipped is not first and same_bits(flipped, pose_from_msg(pose))
-        pose = pose_to_msg(np.r_[0.01, 0.0, 0.021, 0.0, 0.0, 0.0])
-        assert same_bits(node._setpoint_pose(pose), pose_from_msg(pose))
     finally:
         node.destroy_node()

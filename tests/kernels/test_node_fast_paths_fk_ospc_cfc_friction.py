@@ -1,8 +1,9 @@
 """The per-period fast paths of the friction compensation, forward kinematics, OSPC and cable force
-controller nodes give the same numbers, bit for bit, as the computation they replace: what they keep
-while the set-point pose repeats (x_d, β_np, the pulley IK at x_d) against a node that recomputes it
-every period, the winch command's θ̇_d computed where it is used against the quotient taken on
-arrival, and the messages built in one constructor call."""
+controller nodes give the same numbers, bit for bit, as the computation they replace: the set-point's
+x_d as the interpreter attaches it to its payload (converted once per publication) against a node
+converting the message itself, the pulley IK at x_d kept while it repeats against a fresh one, the
+winch command's θ̇_d computed where it is used against the quotient taken on arrival, and the
+messages built in one constructor call."""
 import array
 import struct
 
@@ -22,7 +23,8 @@ from cdpr_control.model import forward_kinematics as fk  # noqa: E402
 from cdpr_control import kernels  # noqa: E402
 from cdpr_control.model.kinematics import inverse_kinematics  # noqa: E402
 from cdpr_control.nodes.cable_force_controller import CableForceControllerNode  # noqa: E402
-from cdpr_control.ros.conversions import pose_to_msg  # noqa: E402
+from cdpr_control.ros.adapted import attach_values, payload_of  # noqa: E402
+from cdpr_control.ros.conversions import pose_to_msg, setpoint_values  # noqa: E402
 from cdpr_control.nodes.forward_kinematics import ForwardKinematicsNode  # noqa: E402
 from cdpr_control.nodes.friction_compensation import FrictionCompensationNode  # noqa: E402
 from cdpr_control.nodes.ospc import OSPCNode  # noqa: E402
@@ -80,17 +82,27 @@ def _captured(node) -> list:
     return out
 
 
-def _run_pair(make, periods, forget):
-    """The same periods into two fresh nodes, one of them with ``forget(node)`` before each period
-    (its kept values dropped, so it recomputes them) -> both outputs."""
+def _as_published(msgs: dict) -> dict:
+    """The period's inputs with the set-point as the interpreter publishes it in a composed graph: a
+    payload carrying x_d, ẋ_d, ẍ_d (adapted.attach_values, conversions.setpoint_values)."""
+    sp = msgs["setpoint"]
+    payload = payload_of(sp)
+    attach_values(payload, setpoint_values(sp.pose, sp.velocity, sp.acceleration))
+    return {**msgs, "setpoint": payload}
+
+
+def _run_pair(make, periods, before_plain=lambda: None):
+    """The same periods into two fresh nodes, the set-point as the interpreter's payload into one
+    (the values attached to it) and as a message into the other (which converts it), with
+    ``before_plain()`` before each of the latter's periods -> both outputs."""
     with node_graph(lambda: [make(), make()]) as (nodes, _, _):
-        kept, fresh = nodes
-        outs = _captured(kept), _captured(fresh)
+        adapted, plain = nodes
+        outs = _captured(adapted), _captured(plain)
         for k, msgs in enumerate(periods):
             t_ns = k * PERIOD_NS
-            kept._cycle(dict(msgs), t_ns)
-            forget(fresh)
-            fresh._cycle(dict(msgs), t_ns)
+            adapted._cycle(_as_published(msgs), t_ns)
+            before_plain()
+            plain._cycle(dict(msgs), t_ns)
         return outs
 
 
@@ -112,17 +124,14 @@ def _winch_state(robot, k, x, rng) -> JointState:
                       effort=rng.uniform(20.0, 60.0, robot.m).tolist())
 
 
-def test_friction_compensation_keeps_the_wrap_angles_of_a_repeated_pose(robot):
+def test_friction_compensation_reads_the_published_set_point(robot):
     rng = np.random.default_rng(11)
     periods = [{"state": _winch_state(robot, k, robot.home, rng),
                 "setpoint": OperationalSetpoint(header=_stamp(k), pose=pose)}
                for k, pose in enumerate(_set_points(robot)) if k != 9]       # a NaN pose is the IK's to refuse
 
-    def forget(node):
-        node._beta.clear()
-
-    kept, fresh = _run_pair(lambda: FrictionCompensationNode(parameter_overrides=_overrides()), periods, forget)
-    assert len(kept) == len(periods) and kept == fresh
+    adapted, plain = _run_pair(lambda: FrictionCompensationNode(parameter_overrides=_overrides()), periods)
+    assert len(adapted) == len(periods) and adapted == plain
 
 
 def test_friction_compensation_command_velocity_is_the_quotient_on_arrival():
@@ -147,7 +156,7 @@ def test_friction_compensation_command_velocity_is_the_quotient_on_arrival():
         assert got_t == t and bits(got_theta) == bits(ref_theta) and bits(got_rate) == bits(ref_rate)
 
 
-def test_forward_kinematics_keeps_x_d_of_a_repeated_pose(robot):
+def test_forward_kinematics_reads_the_published_set_point(robot):
     rng = np.random.default_rng(13)
     periods = []
     for k, pose in enumerate(_set_points(robot)):
@@ -155,15 +164,12 @@ def test_forward_kinematics_keeps_x_d_of_a_repeated_pose(robot):
         forces = CableForces(header=_stamp(k), f=rng.uniform(20.0, 60.0, robot.m).tolist())
         periods.append({"theta": state, "f": forces, "setpoint": OperationalSetpoint(header=_stamp(k), pose=pose)})
 
-    def forget(node):
-        node._x_d.clear()
-        kernels._packed_memo.clear()
-
-    kept, fresh = _run_pair(lambda: ForwardKinematicsNode(parameter_overrides=_overrides()), periods, forget)
-    for out in (kept, fresh):                       # the wall-clock solve time aside
+    adapted, plain = _run_pair(lambda: ForwardKinematicsNode(parameter_overrides=_overrides()), periods,
+                               kernels._packed_memo.clear)     # the plain node's IK of x_d computed afresh
+    for out in (adapted, plain):                    # the wall-clock solve time aside
         out[:] = [tuple((name, b"" if name == "solve_time" else v) for name, v in msg) if msg[0] != "report"
                   else msg for msg in out]
-    assert kept == fresh
+    assert adapted == plain
 
 
 def test_forward_kinematics_solver_keeps_the_ik_of_a_repeated_x_d(robot):
@@ -186,7 +192,7 @@ def test_forward_kinematics_solver_keeps_the_ik_of_a_repeated_x_d(robot):
         assert bits(float(a.residual_norm)) == bits(float(b.residual_norm))
 
 
-def test_ospc_keeps_x_d_of_a_repeated_pose(robot):
+def test_ospc_reads_the_published_set_point(robot):
     rng = np.random.default_rng(15)
     periods = []
     for k, pose in enumerate(_set_points(robot)):
@@ -196,12 +202,9 @@ def test_ospc_keeps_x_d_of_a_repeated_pose(robot):
                         "hpfc": ControllerState(header=_stamp(k), controller="hybrid_force_controller:I",
                                                 reference=[0.0] * 6, output=[0.0] * 6)})
 
-    def forget(node):
-        node._x_d.clear()
-
     overrides = _overrides(force_controller="hybrid_force_controller")
-    kept, fresh = _run_pair(lambda: OSPCNode(parameter_overrides=overrides), periods, forget)
-    assert len(kept) == len(periods) and kept == fresh
+    adapted, plain = _run_pair(lambda: OSPCNode(parameter_overrides=overrides), periods)
+    assert len(adapted) == len(periods) and adapted == plain
 
 
 def test_cable_force_controller_state_message(robot):
