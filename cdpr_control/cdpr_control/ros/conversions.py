@@ -21,7 +21,6 @@ from geometry_msgs.msg import Accel, Point, Pose, Quaternion, Twist, Vector3, Wr
 from cdpr_control.ros.adapted import attached_values
 
 
-
 def bare(cls):
     """A message instance without any field set (each must be set, through its ``_name`` slot)."""
     msg = cls.__new__(cls)
