@@ -23,8 +23,8 @@ ones (into its cache, so only the first round waits for that).
 
     .venv/bin/python benchmarks/bench_against.py [--against REF] [--rounds N] [--turns N] [--turn S] [--record] [--deliveries]
 
-With ``--deliveries`` each child also times every in-process delivery (its tree's own drain loop
-with a clock around each callback), and the summary gives per node the us per period of both trees
+With ``--deliveries`` each child also times every in-process delivery (a clock around each local
+subscription's callback), and the summary gives per node the us per period of both trees
 in the same turns: which node's period grew, where the ratio alone says only that something did
 (session 24 found the period's IK of x_d computed three times a period with it).
 
@@ -73,9 +73,10 @@ from cdpr_tools.demo_cmd import GRAPH
 from cdpr_tools.launch import Launcher, RecordSpec
 from cdpr_tools.launch_file import load_launch_file
 
-# Time every in-process delivery: totals[subscriber node <- topic] = [ns, deliveries]. The tree's own
-# drain loop with a clock around each callback (the same loop in every tree since 784c4eb); a delivery
-# longer than LONG_NS is left out (a SIGSTOP fell into it).
+# Time every in-process delivery: totals[subscriber node <- topic] = [ns, deliveries]. Each local
+# subscription's callback is wrapped in a clock as it registers (the registry and its LocalSubscription
+# are the same since 784c4eb); taps, called inside publish, count in their publisher's delivery. A
+# delivery longer than LONG_NS is left out (a SIGSTOP fell into it).
 def time_deliveries(totals):
     import importlib
     for name in ("cdpr_control.ros.intraprocess", "cdpr_control.nodes.intraprocess"):
@@ -84,48 +85,28 @@ def time_deliveries(totals):
             break
         except ImportError:
             pass
-    labels, add, clock, LONG_NS = {}, ip.IntraProcess.add_subscription, time.perf_counter_ns, 5_000_000
+    add, clock, LONG_NS = ip.IntraProcess.add_subscription, time.perf_counter_ns, 5_000_000
+
+    def timed(callback, label):
+        def call(msg):
+            t0 = clock()
+            callback(msg)
+            dt = clock() - t0
+            if dt < LONG_NS:
+                entry = totals.get(label)
+                if entry is None:
+                    totals[label] = [dt, 1]
+                else:
+                    entry[0] += dt
+                    entry[1] += 1
+        return call
 
     def add_subscription(self, local):
-        labels[local.callback] = f"{local.node.get_name()} <- {local.topic.name}"
+        if not local.tap:
+            local.callback = timed(local.callback, f"{local.node.get_name()} <- {local.topic.name}")
         add(self, local)
 
-    def _drain(self, budget=ip.BUDGET_S):
-        queue, urgent, deadline = self.queue, self.urgent, time.perf_counter() + budget
-        try:
-            while True:
-                try:
-                    callback, msg = urgent.popleft() if urgent else queue.popleft()
-                except IndexError:
-                    with self.lock:
-                        if not queue and not urgent:
-                            self.busy = False
-                            return
-                    continue
-                self.deliveries += 1
-                t0 = clock()
-                callback(msg)
-                dt = clock() - t0
-                if dt < LONG_NS:
-                    label = labels.get(callback) or getattr(callback, "__qualname__", "other")
-                    entry = totals.get(label)
-                    if entry is None:
-                        totals[label] = [dt, 1]
-                    else:
-                        entry[0] += dt
-                        entry[1] += 1
-                if (queue or urgent) and time.perf_counter() > deadline:
-                    with self.lock:
-                        self.busy = False
-                        if not self.pumped:
-                            self.wake()
-                    return
-        except BaseException:
-            with self.lock:
-                self.busy = False
-            raise
-
-    ip.IntraProcess.add_subscription, ip.IntraProcess._drain = add_subscription, _drain
+    ip.IntraProcess.add_subscription = add_subscription
 
 
 record, sample, per_delivery = sys.argv[1] == "1", float(sys.argv[2]), sys.argv[3] == "1"
@@ -270,7 +251,7 @@ def delivery_table(rounds: list[dict], by_node: bool = True) -> list[dict]:
     difference first. A node computes its period in the delivery that completes its inputs, which
     may be another topic in the other tree: compare nodes, not topics. "(outside the deliveries)"
     is the loop thread's CPU per period less the deliveries' sum: the executor, timers, the lockstep
-    runner (CPU time against the deliveries' wall time: near, not equal)."""
+    runner, the clock's fan-out (CPU time against the deliveries' wall time: near, not equal)."""
     outside = "(outside the deliveries)"
     rows = {}
     for r in rounds:
